@@ -1,0 +1,145 @@
+//! The archived root of a `.qbk` file: everything rendering needs and nothing else.
+//!
+//! Geometry is stored in `f64` world units so that data sets placed far from the origin
+//! (1e6 and beyond) keep sub-cell precision; the viewer moves to a local frame itself.
+//! Values are `f32`: one contiguous array per field, so that the hot loop of the ray caster
+//! (the iso field at every sample) streams through one array and never touches the colour
+//! field (speed) except at visible samples. Inside a brick, cells are ordered x fastest
+//! (`x + nx * (y + ny * z)`), so a brick's values are one slice of each field array.
+
+use rkyv::{Archive, Deserialize, Serialize};
+
+/// Root of the archive.
+#[derive(Archive, Serialize, Deserialize, Debug, Clone, PartialEq)]
+#[rkyv(derive(Debug))]
+pub struct BrickFile {
+    /// Where the data came from and how it was baked.
+    pub provenance: Provenance,
+    /// Union of all brick supports (world units).
+    pub bounds: Aabb,
+    /// Levels by index; level 0 is the finest. A level with no bricks may be present.
+    pub levels: Vec<Level>,
+    /// The baked fields (e.g. `q`, `speed`), each with its values for every leaf cell.
+    pub fields: Vec<Field>,
+    /// Dense boxes of leaf cells of one level.
+    pub bricks: Vec<Brick>,
+    /// Active brick regions: disjoint boxes partitioning the union of supports.
+    pub regions: Vec<Region>,
+    /// Brick ids per region: region `r` owns
+    /// `region_bricks[r.bricks_start .. r.bricks_start + r.bricks_len]`, sorted ascending.
+    pub region_bricks: Vec<u32>,
+    /// Exact value range of every field over every cell that can contribute to a region:
+    /// entry `r * fields.len() + f` is field `f` of region `r`.
+    pub region_ranges: Vec<ValueRange>,
+    /// KD-tree over the regions; node 0 is the root (absent when there are no regions).
+    pub kd_nodes: Vec<KdNode>,
+}
+
+/// Provenance of a baked file.
+#[derive(Archive, Serialize, Deserialize, Debug, Clone, PartialEq)]
+#[rkyv(derive(Debug))]
+pub struct Provenance {
+    /// File name (not the full path) of the source VDB.
+    pub source: String,
+    /// Source grids that were baked, in file order.
+    pub grids: Vec<SourceGrid>,
+    /// Bake options as a JSON object, for display and reproduction.
+    pub bake_options: String,
+    /// `qbricks-bake` version that wrote the file.
+    pub tool_version: String,
+}
+
+/// One source grid of the VDB file.
+#[derive(Archive, Serialize, Deserialize, Debug, Clone, PartialEq)]
+#[rkyv(derive(Debug))]
+pub struct SourceGrid {
+    pub name: String,
+    pub voxel_size: [f64; 3],
+    /// Level this grid was assigned to.
+    pub level: u32,
+}
+
+/// Axis-aligned box in world units; `min <= max` on every axis.
+#[derive(Archive, Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
+#[rkyv(derive(Debug))]
+pub struct Aabb {
+    pub min: [f64; 3],
+    pub max: [f64; 3],
+}
+
+/// A resolution level.
+#[derive(Archive, Serialize, Deserialize, Debug, Clone, PartialEq)]
+#[rkyv(derive(Debug))]
+pub struct Level {
+    /// Cell edge length in world units (cells are cubes).
+    pub cell_width: f64,
+    /// Leaf cells of this level stored in the file.
+    pub cells: u64,
+    /// Bricks of this level.
+    pub bricks: u32,
+}
+
+/// One baked scalar field.
+#[derive(Archive, Serialize, Deserialize, Debug, Clone, PartialEq)]
+#[rkyv(derive(Debug))]
+pub struct Field {
+    /// `q`, `speed`, `velocity_x`, … or the name of a baked scalar grid.
+    pub name: String,
+    /// Range over all finite leaf-cell values.
+    pub min: f32,
+    pub max: f32,
+    /// Histogram of leaf-cell values over `[min, max]` in equal bins.
+    pub histogram: Vec<u64>,
+    /// One value per leaf cell, brick after brick (see [`Brick::first_value`]).
+    pub values: Vec<f32>,
+}
+
+/// A dense box of leaf cells of one level.
+#[derive(Archive, Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
+#[rkyv(derive(Debug))]
+pub struct Brick {
+    pub level: u32,
+    /// Centre of the brick's first cell (lowest x, y, z) in world units.
+    pub origin: [f64; 3],
+    /// Cell edge length (equal to its level's `cell_width`).
+    pub cell_width: f64,
+    /// Cells per axis, each >= 1.
+    pub dims: [u32; 3],
+    /// Index of the brick's first cell in every field's `values`.
+    pub first_value: u64,
+}
+
+/// An active brick region: a box in which the set of overlapping supports is constant.
+#[derive(Archive, Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
+#[rkyv(derive(Debug))]
+pub struct Region {
+    pub bounds: Aabb,
+    pub bricks_start: u32,
+    pub bricks_len: u32,
+    /// Finest level among the region's bricks (sets the local sampling step).
+    pub finest_level: u32,
+}
+
+/// Inclusive value range.
+#[derive(Archive, Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
+#[rkyv(derive(Debug))]
+pub struct ValueRange {
+    pub min: f32,
+    pub max: f32,
+}
+
+/// KD-tree node. Inner nodes split space at `split` on `axis` (0, 1, 2); points with
+/// coordinate `< split` go to `left`. Leaves hold one region or nothing (empty space).
+#[derive(Archive, Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
+#[rkyv(derive(Debug))]
+pub enum KdNode {
+    Inner {
+        axis: u8,
+        split: f64,
+        left: u32,
+        right: u32,
+    },
+    Leaf {
+        region: Option<u32>,
+    },
+}

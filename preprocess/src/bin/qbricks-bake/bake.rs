@@ -1,0 +1,8 @@
+//! `qbricks-bake bake`.
+
+#[derive(clap::Args)]
+pub struct Args {}
+
+pub fn run(_args: Args) -> anyhow::Result<()> {
+    anyhow::bail!("`bake` is not implemented yet")
+}

@@ -1,0 +1,52 @@
+//! `qbricks-bake`: argument parsing and error reporting only; the work is in the library.
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+mod bake;
+mod inspect;
+mod synth;
+
+#[derive(Parser)]
+#[command(name = "qbricks-bake", version, about = "OpenVDB velocity grids → .qbk brick files")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Describe the grids of a VDB file.
+    Inspect(inspect::Args),
+    /// Write an analytic test flow as a multi-grid VDB file.
+    Synth(synth::Args),
+    /// Bake a VDB file into a .qbk brick file.
+    Bake(bake::Args),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Inspect(args) => inspect::run(args),
+        Command::Synth(args) => synth::run(args),
+        Command::Bake(args) => bake::run(args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            if is_broken_pipe(&err) {
+                return ExitCode::SUCCESS;
+            }
+            eprintln!("qbricks-bake: {err:#}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn is_broken_pipe(err: &anyhow::Error) -> bool {
+    err.chain().any(|e| {
+        e.downcast_ref::<std::io::Error>()
+            .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+    })
+}

@@ -1,0 +1,3 @@
+//! qbricks-bake: OpenVDB in, `.qbk` brick file out.
+
+pub mod grid;

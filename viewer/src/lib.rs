@@ -1,0 +1,1 @@
+//! qbricks-view: ray casting of `.qbk` brick files.
