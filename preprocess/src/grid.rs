@@ -50,14 +50,16 @@ impl<V: Copy> Leaf<V> {
 
     /// Active voxels as (index-space coordinate, value), in offset order.
     pub fn active_voxels(&self) -> impl Iterator<Item = ([i32; 3], V)> + '_ {
-        (0..LEAF_VOXELS).filter(|&n| self.is_active(n)).map(move |n| {
-            let ijk = [
-                self.origin[0] + (n >> 6) as i32,
-                self.origin[1] + ((n >> 3) & 7) as i32,
-                self.origin[2] + (n & 7) as i32,
-            ];
-            (ijk, self.values[n])
-        })
+        (0..LEAF_VOXELS)
+            .filter(|&n| self.is_active(n))
+            .map(move |n| {
+                let ijk = [
+                    self.origin[0] + (n >> 6) as i32,
+                    self.origin[1] + ((n >> 3) & 7) as i32,
+                    self.origin[2] + (n & 7) as i32,
+                ];
+                (ijk, self.values[n])
+            })
     }
 
     pub fn active_count(&self) -> u32 {

@@ -1,3 +1,14 @@
 //! qbricks-bake: OpenVDB in, `.qbk` brick file out.
+//!
+//! Data flows one way: VDB → grids → cells → bricks → regions → kd-tree → file.
 
+pub mod analytic;
+pub mod bake;
+pub mod bricks;
+pub mod cells;
+pub mod derive;
 pub mod grid;
+pub mod kdtree;
+pub mod regions;
+pub mod synth;
+pub mod vdb;

@@ -9,7 +9,11 @@ mod inspect;
 mod synth;
 
 #[derive(Parser)]
-#[command(name = "qbricks-bake", version, about = "OpenVDB velocity grids → .qbk brick files")]
+#[command(
+    name = "qbricks-bake",
+    version,
+    about = "OpenVDB velocity grids → .qbk brick files"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,

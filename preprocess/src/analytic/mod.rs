@@ -1,0 +1,1 @@
+//! Closed-form flows with exact velocity gradients (and so exact Q).
