@@ -2,4 +2,9 @@
 //!
 //! Data flows one way: file → volume → traversal → samples → shading → pixels.
 
+pub mod bvh;
+pub mod camera;
+pub mod colormap;
 pub mod info;
+pub mod mesh;
+pub mod shading;
