@@ -26,14 +26,19 @@ use rayon::prelude::*;
 use thiserror::Error;
 
 use crate::analytic::{self, Flow};
-use crate::grid::{leaf_offset, Grid, Leaf, Transform, Vec3, LEAF_DIM, LEAF_VOXELS};
+use crate::grid::{leaf_offset, AnyGrid, Grid, Leaf, Transform, Vec3, LEAF_DIM, LEAF_VOXELS};
+use crate::vdb::write::{
+    write_vdb_with, Compression, MetaMap, MetaValue, WriteError, WriteOptions,
+};
 
 /// Most voxels `scene_grids` will sample (about 12 GB of leaves): beyond that a typo in
 /// `--n0` should not exhaust memory.
 pub const MAX_VOXELS: u64 = 1 << 30;
 
-#[derive(Debug, Error, PartialEq)]
+#[derive(Debug, Error)]
 pub enum SynthError {
+    #[error(transparent)]
+    Write(#[from] WriteError),
     #[error("unknown scene {name:?} (expected one of: {})", analytic::SCENE_NAMES.join(", "))]
     UnknownScene { name: String },
     #[error("{what} must be in {min}..={max}, found {found}")]
@@ -258,6 +263,121 @@ fn sample_leaf(flow: &dyn Flow, layout: &GridLayout, origin: [i64; 3]) -> Leaf<V
         origin: origin.map(|v| v as i32),
         active,
         values,
+    }
+}
+
+/// What `qbricks-bake synth` writes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SynthOptions {
+    pub scene: String,
+    pub n0: u32,
+    pub levels: u32,
+    pub compression: Compression,
+    /// Also write the speed `|u|` of each velocity grid as a float grid named
+    /// `speed` / `speed_l<k>` with the same active voxels (a scalar-grid test input).
+    pub speed_grids: bool,
+}
+
+/// One written grid, for the command's summary.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GridSummary {
+    pub name: String,
+    pub value_type: &'static str,
+    pub voxel_size: f64,
+    pub active_voxels: u64,
+    pub leaves: usize,
+}
+
+/// Samples a scene and writes it as a VDB file. Returns per-grid counts and the file size.
+///
+/// Grid metadata besides what the writer always adds: `scene` (string), `level` (int32,
+/// 0 = finest), `origin` (vec3d, world-space minimum corner of the grid's box) and
+/// `dx` (double, voxel size). File metadata: `scene`, `n0`, `levels`.
+pub fn write_scene(
+    path: &std::path::Path,
+    opts: &SynthOptions,
+) -> Result<(Vec<GridSummary>, u64), SynthError> {
+    let layouts = scene_layout(&opts.scene, opts.n0, opts.levels)?;
+    let velocity = scene_grids(&opts.scene, opts.n0, opts.levels)?;
+    let mut grids: Vec<AnyGrid> = Vec::new();
+    let mut metadata: Vec<MetaMap> = Vec::new();
+    let mut summary = Vec::new();
+    let meta_for = |layout: &GridLayout, level: usize| {
+        let mut m = MetaMap::new();
+        m.insert("scene".into(), MetaValue::String(opts.scene.clone()));
+        m.insert("level".into(), MetaValue::Int32(level as i32));
+        m.insert(
+            "origin".into(),
+            MetaValue::Vec3d(layout.lo.map(|v| v as f64 * layout.voxel_size)),
+        );
+        m.insert("dx".into(), MetaValue::Double(layout.voxel_size));
+        m
+    };
+    for (level, (grid, layout)) in velocity.iter().zip(&layouts).enumerate() {
+        summary.push(GridSummary {
+            name: grid.name.clone(),
+            value_type: "vec3s",
+            voxel_size: layout.voxel_size,
+            active_voxels: grid.active_voxel_count(),
+            leaves: grid.leaves.len(),
+        });
+        metadata.push(meta_for(layout, level));
+    }
+    let speed: Vec<Grid<f32>> = if opts.speed_grids {
+        velocity.iter().map(speed_grid).collect()
+    } else {
+        Vec::new()
+    };
+    grids.extend(velocity.into_iter().map(AnyGrid::Vec3s));
+    for (level, (grid, layout)) in speed.into_iter().zip(&layouts).enumerate() {
+        summary.push(GridSummary {
+            name: grid.name.clone(),
+            value_type: "float",
+            voxel_size: layout.voxel_size,
+            active_voxels: grid.active_voxel_count(),
+            leaves: grid.leaves.len(),
+        });
+        metadata.push(meta_for(layout, level));
+        grids.push(AnyGrid::Float(grid));
+    }
+    let mut options = WriteOptions::new(opts.compression);
+    options.grid_metadata = metadata;
+    options
+        .file_metadata
+        .insert("scene".into(), MetaValue::String(opts.scene.clone()));
+    options
+        .file_metadata
+        .insert("n0".into(), MetaValue::Int32(opts.n0 as i32));
+    options
+        .file_metadata
+        .insert("levels".into(), MetaValue::Int32(opts.levels as i32));
+    let bytes = write_vdb_with(path, &grids, &options)?;
+    Ok((summary, bytes))
+}
+
+/// `|u|` of a velocity grid, same leaves and active masks, named `speed…` for `vel…`.
+pub fn speed_grid(grid: &Grid<Vec3>) -> Grid<f32> {
+    let name = match grid.name.strip_prefix("vel") {
+        Some(rest) => format!("speed{rest}"),
+        None => format!("{}_speed", grid.name),
+    };
+    Grid {
+        name,
+        transform: grid.transform,
+        background: 0.0,
+        leaves: grid
+            .leaves
+            .iter()
+            .map(|l| Leaf {
+                origin: l.origin,
+                active: l.active,
+                values: Box::new(std::array::from_fn(|n| {
+                    let [x, y, z] = l.values[n];
+                    (x * x + y * y + z * z).sqrt()
+                })),
+            })
+            .collect(),
+        tiles: Vec::new(),
     }
 }
 
