@@ -8,3 +8,4 @@ pub mod colormap;
 pub mod info;
 pub mod mesh;
 pub mod shading;
+pub mod view_state;
