@@ -11,8 +11,9 @@
 //! → region → its bricks → cell values):
 //! - Everything is a flat array of fixed-size records addressed by `u32`/`u64` index: no
 //!   pointers to chase inside the archive, and each record type is packed next to its
-//!   neighbours. A `Brick` and a `Region` are 64 bytes each (one cache line: a region's bounds and
-//!   brick range arrive together); a `KdNode` is 24 bytes (tag, axis, split, children).
+//!   neighbours. A `Brick` and a `Region` are 64 bytes each (one cache line: a region's
+//!   bounds and brick range arrive together); a `KdNode` is 24 bytes (tag, axis, split,
+//!   children).
 //! - A region's brick ids are one contiguous run of `region_bricks`, so visiting a region
 //!   reads one short slice instead of a linked list.
 //! - `region_ranges` is region-major (`r * fields.len() + f`): empty-space skipping asks
