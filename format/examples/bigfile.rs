@@ -4,10 +4,11 @@
 //! polluted by the writer.
 //!
 //! ```sh
-//! cargo run --release -p qbricks-format --example bigfile -- [DIR] [GIB]
+//! cargo run --release -p qbricks-format --example bigfile -- [DIR] [GIB] [--cold]
 //! ```
 //! Writes `DIR/bigfile.qbk` (default: the system temp dir, 1 GiB of values), measures,
-//! and deletes it.
+//! and deletes it. `--cold` drops the file's pages from the page cache before each open
+//! (with GNU `dd iflag=nocache`), so the open reads from disk.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -256,7 +257,21 @@ fn main() {
     drop(file);
 
     let exe = std::env::current_exe().expect("exe");
+    let cold = args.iter().any(|a| a == "--cold");
     for verify in ["on", "off", "on"] {
+        if cold {
+            // Drop this file's pages from the page cache (GNU dd: POSIX_FADV_DONTNEED).
+            let dropped = Command::new("dd")
+                .args([
+                    &format!("if={}", path.display()),
+                    "iflag=nocache",
+                    "count=0",
+                    "status=none",
+                ])
+                .status()
+                .is_ok_and(|s| s.success());
+            println!("(page cache for the file dropped: {dropped})");
+        }
         let status = Command::new(&exe)
             .args(["--child", path.to_str().expect("utf8"), verify])
             .status()
