@@ -134,7 +134,7 @@ fn random_grid<V: Copy>(
             1 => neg(background),
             _ => match rng.below(2 + others.len() as u64) {
                 0 => background,
-                1 if mode % 2 == 0 => neg(background),
+                1 if mode.is_multiple_of(2) => neg(background),
                 k => (k as usize)
                     .checked_sub(2)
                     .and_then(|i| others.get(i).copied())
