@@ -253,7 +253,7 @@ fn leaf_cells_bricks_and_counts() {
     for (p, cw, _) in cells(&file, 0) {
         if cw > 0.75 * w {
             assert!(
-                p.iter().any(|&x| x < 0.25 * L || x > 0.75 * L),
+                p.iter().any(|&x| !(0.25 * L..=0.75 * L).contains(&x)),
                 "covered cell at {p:?}"
             );
         }
