@@ -1,1 +1,478 @@
-//! (to be written)
+//! Synthetic scenes: analytic flows sampled onto grids, as `qbricks-bake synth` writes them.
+//!
+//! # Layout
+//! All grids share one world-aligned lattice: a grid of voxel size `h` has voxel `(i, j, k)`
+//! centred at `((i + ½) h, (j + ½) h, (k + ½) h)` (transform: scale `h`, translation `h/2`),
+//! so its cells are `[i h, (i + 1) h)` and every cell of a level is exactly covered by 2³
+//! cells of the next finer level. Index coordinates are negative left of the world origin.
+//!
+//! * `wake`: `levels` nested boxes. The coarsest covers the scene domain
+//!   x ∈ [-2, 6], y, z ∈ [-2, 2] with voxel size `8 / n0` (so `n0` voxels along x, the longest
+//!   axis; the box snaps outward to whole voxels, which adds one voxel per side when 4 does
+//!   not divide `n0`). Each finer level halves the voxel size and covers a box interpolated
+//!   linearly between the domain and the core box x ∈ [-0.75, 5], y, z ∈ [-0.75, 0.75]
+//!   (sphere and ring train), snapped outward to the next coarser level's cells so that
+//!   boxes nest exactly. Grids are named `vel_l0` (finest) … `vel_l{levels-1}` (coarsest)
+//!   and returned in that order.
+//! * `wake-single`, `lamb-oseen`, `burgers`, `abc`: one grid named `vel` over the scene
+//!   domain (`wake-single`: the `wake` domain; the others: [-1, 1]³) with `n0` voxels along
+//!   the longest axis; `levels` is ignored.
+//!
+//! Every voxel whose centre lies in a grid's box is active and holds the exact velocity at
+//! its centre (f32); leaves at box edges have partial active masks, inactive voxels hold the
+//! background (0, 0, 0). No tiles are written. Results are deterministic.
+
+use rayon::prelude::*;
+use thiserror::Error;
+
+use crate::analytic::{self, Flow};
+use crate::grid::{leaf_offset, AnyGrid, Grid, Leaf, Transform, Vec3, LEAF_DIM, LEAF_VOXELS};
+use crate::vdb::write::{
+    write_vdb_with, Compression, MetaMap, MetaValue, WriteError, WriteOptions,
+};
+
+/// Most voxels `scene_grids` will sample (about 12 GB of leaves): beyond that a typo in
+/// `--n0` should not exhaust memory.
+pub const MAX_VOXELS: u64 = 1 << 30;
+
+#[derive(Debug, Error)]
+pub enum SynthError {
+    #[error(transparent)]
+    Write(#[from] WriteError),
+    #[error("unknown scene {name:?} (expected one of: {})", analytic::SCENE_NAMES.join(", "))]
+    UnknownScene { name: String },
+    #[error("{what} must be in {min}..={max}, found {found}")]
+    OutOfRange {
+        what: &'static str,
+        min: u32,
+        max: u32,
+        found: u32,
+    },
+    #[error("scene {name:?} with n0 {n0} and {levels} levels needs {voxels} voxels, more than the limit of {limit}")]
+    TooLarge {
+        name: String,
+        n0: u32,
+        levels: u32,
+        voxels: u64,
+        limit: u64,
+    },
+}
+
+/// An axis-aligned box in world space.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Aabb {
+    pub min: [f64; 3],
+    pub max: [f64; 3],
+}
+
+const WAKE_DOMAIN: Aabb = Aabb {
+    min: [-2.0, -2.0, -2.0],
+    max: [6.0, 2.0, 2.0],
+};
+const WAKE_CORE: Aabb = Aabb {
+    min: [-0.75, -0.75, -0.75],
+    max: [5.0, 0.75, 0.75],
+};
+const UNIT_DOMAIN: Aabb = Aabb {
+    min: [-1.0, -1.0, -1.0],
+    max: [1.0, 1.0, 1.0],
+};
+
+/// One grid of a scene layout: its name, voxel size and active index box (half-open).
+#[derive(Debug, Clone, PartialEq)]
+pub struct GridLayout {
+    pub name: String,
+    pub voxel_size: f64,
+    /// First active voxel index per axis.
+    pub lo: [i64; 3],
+    /// One past the last active voxel index per axis.
+    pub hi: [i64; 3],
+}
+
+impl GridLayout {
+    pub fn voxel_count(&self) -> u64 {
+        (0..3).map(|a| (self.hi[a] - self.lo[a]) as u64).product()
+    }
+
+    pub fn transform(&self) -> Transform {
+        Transform {
+            voxel_size: [self.voxel_size; 3],
+            translation: [0.5 * self.voxel_size; 3],
+        }
+    }
+
+    /// World-space centre of voxel `ijk`.
+    pub fn centre(&self, ijk: [i64; 3]) -> [f64; 3] {
+        ijk.map(|i| (i as f64 + 0.5) * self.voxel_size)
+    }
+}
+
+/// The grids (finest first) that [`scene_grids`] fills, without sampling anything.
+pub fn scene_layout(scene: &str, n0: u32, levels: u32) -> Result<Vec<GridLayout>, SynthError> {
+    let (domain, multi) = match scene {
+        "wake" => (WAKE_DOMAIN, true),
+        "wake-single" => (WAKE_DOMAIN, false),
+        "lamb-oseen" | "burgers" | "abc" => (UNIT_DOMAIN, false),
+        _ => {
+            return Err(SynthError::UnknownScene {
+                name: scene.to_string(),
+            })
+        }
+    };
+    check_range("n0", n0, 2, 1 << 16)?;
+    let levels = if multi {
+        check_range("levels", levels, 1, 10)?;
+        levels
+    } else {
+        1
+    };
+    let extent = (0..3)
+        .map(|a| domain.max[a] - domain.min[a])
+        .fold(0.0, f64::max);
+    let coarse = extent / f64::from(n0);
+    let eps = 1e-9;
+    // Coarsest first; `c` counts levels from the coarsest.
+    let mut out: Vec<GridLayout> = Vec::with_capacity(levels as usize);
+    for c in 0..levels {
+        let h = coarse / f64::from(1u32 << c);
+        let (lo, hi) = if c == 0 {
+            (
+                domain.min.map(|v| (v / h + eps).floor() as i64),
+                domain.max.map(|v| (v / h - eps).ceil() as i64),
+            )
+        } else {
+            let t = f64::from(c) / f64::from(levels - 1);
+            let parent = 2.0 * h;
+            let mut lo = [0i64; 3];
+            let mut hi = [0i64; 3];
+            for a in 0..3 {
+                let bmin = domain.min[a] + t * (WAKE_CORE.min[a] - domain.min[a]);
+                let bmax = domain.max[a] + t * (WAKE_CORE.max[a] - domain.max[a]);
+                lo[a] = 2 * (bmin / parent + eps).floor() as i64;
+                hi[a] = 2 * (bmax / parent - eps).ceil() as i64;
+            }
+            (lo, hi)
+        };
+        let name = if multi {
+            format!("vel_l{}", levels - 1 - c)
+        } else {
+            "vel".to_string()
+        };
+        out.push(GridLayout {
+            name,
+            voxel_size: h,
+            lo,
+            hi,
+        });
+    }
+    out.reverse();
+    let voxels: u64 = out.iter().map(GridLayout::voxel_count).sum();
+    if voxels > MAX_VOXELS {
+        return Err(SynthError::TooLarge {
+            name: scene.to_string(),
+            n0,
+            levels,
+            voxels,
+            limit: MAX_VOXELS,
+        });
+    }
+    Ok(out)
+}
+
+fn check_range(what: &'static str, found: u32, min: u32, max: u32) -> Result<(), SynthError> {
+    if (min..=max).contains(&found) {
+        Ok(())
+    } else {
+        Err(SynthError::OutOfRange {
+            what,
+            min,
+            max,
+            found,
+        })
+    }
+}
+
+/// Samples scene `scene` onto its grids (see the module docs for the layout), finest first.
+pub fn scene_grids(scene: &str, n0: u32, levels: u32) -> Result<Vec<Grid<Vec3>>, SynthError> {
+    let layouts = scene_layout(scene, n0, levels)?;
+    let flow = analytic::scene(scene).ok_or_else(|| SynthError::UnknownScene {
+        name: scene.to_string(),
+    })?;
+    Ok(layouts
+        .iter()
+        .map(|layout| sample_grid(flow.as_ref(), layout))
+        .collect())
+}
+
+/// Samples `flow` at the voxel centres of `layout`'s box.
+pub fn sample_grid(flow: &dyn Flow, layout: &GridLayout) -> Grid<Vec3> {
+    let d = i64::from(LEAF_DIM);
+    let first = layout.lo.map(|v| v.div_euclid(d) * d);
+    let counts: Vec<i64> = (0..3)
+        .map(|a| (layout.hi[a] - first[a] + d - 1).div_euclid(d).max(0))
+        .collect();
+    let mut origins = Vec::with_capacity((counts[0] * counts[1] * counts[2]) as usize);
+    for x in 0..counts[0] {
+        for y in 0..counts[1] {
+            for z in 0..counts[2] {
+                origins.push([first[0] + x * d, first[1] + y * d, first[2] + z * d]);
+            }
+        }
+    }
+    let leaves = origins
+        .par_iter()
+        .map(|&origin| sample_leaf(flow, layout, origin))
+        .collect();
+    Grid {
+        name: layout.name.clone(),
+        transform: layout.transform(),
+        background: [0.0; 3],
+        leaves,
+        tiles: Vec::new(),
+    }
+}
+
+fn sample_leaf(flow: &dyn Flow, layout: &GridLayout, origin: [i64; 3]) -> Leaf<Vec3> {
+    let mut active = [0u64; 8];
+    let mut values = Box::new([[0.0f32; 3]; LEAF_VOXELS]);
+    let inside = |a: usize, v: i64| v >= layout.lo[a] && v < layout.hi[a];
+    for x in 0..8usize {
+        let i = origin[0] + x as i64;
+        if !inside(0, i) {
+            continue;
+        }
+        for y in 0..8usize {
+            let j = origin[1] + y as i64;
+            if !inside(1, j) {
+                continue;
+            }
+            for z in 0..8usize {
+                let k = origin[2] + z as i64;
+                if !inside(2, k) {
+                    continue;
+                }
+                let n = leaf_offset(x, y, z);
+                let u = flow.velocity(layout.centre([i, j, k]));
+                values[n] = [u[0] as f32, u[1] as f32, u[2] as f32];
+                active[n >> 6] |= 1u64 << (n & 63);
+            }
+        }
+    }
+    Leaf {
+        // Index boxes stay far inside i32 (checked by MAX_VOXELS and the n0 range).
+        origin: origin.map(|v| v as i32),
+        active,
+        values,
+    }
+}
+
+/// What `qbricks-bake synth` writes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SynthOptions {
+    pub scene: String,
+    pub n0: u32,
+    pub levels: u32,
+    pub compression: Compression,
+    /// Also write the speed `|u|` of each velocity grid as a float grid named
+    /// `speed` / `speed_l<k>` with the same active voxels (a scalar-grid test input).
+    pub speed_grids: bool,
+}
+
+/// One written grid, for the command's summary.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GridSummary {
+    pub name: String,
+    pub value_type: &'static str,
+    pub voxel_size: f64,
+    pub active_voxels: u64,
+    pub leaves: usize,
+}
+
+/// Samples a scene and writes it as a VDB file. Returns per-grid counts and the file size.
+///
+/// Grid metadata besides what the writer always adds: `scene` (string), `level` (int32,
+/// 0 = finest), `origin` (vec3d, world-space minimum corner of the grid's box) and
+/// `dx` (double, voxel size). File metadata: `scene`, `n0`, `levels`.
+pub fn write_scene(
+    path: &std::path::Path,
+    opts: &SynthOptions,
+) -> Result<(Vec<GridSummary>, u64), SynthError> {
+    let layouts = scene_layout(&opts.scene, opts.n0, opts.levels)?;
+    let velocity = scene_grids(&opts.scene, opts.n0, opts.levels)?;
+    let mut grids: Vec<AnyGrid> = Vec::new();
+    let mut metadata: Vec<MetaMap> = Vec::new();
+    let mut summary = Vec::new();
+    let meta_for = |layout: &GridLayout, level: usize| {
+        let mut m = MetaMap::new();
+        m.insert("scene".into(), MetaValue::String(opts.scene.clone()));
+        m.insert("level".into(), MetaValue::Int32(level as i32));
+        m.insert(
+            "origin".into(),
+            MetaValue::Vec3d(layout.lo.map(|v| v as f64 * layout.voxel_size)),
+        );
+        m.insert("dx".into(), MetaValue::Double(layout.voxel_size));
+        m
+    };
+    for (level, (grid, layout)) in velocity.iter().zip(&layouts).enumerate() {
+        summary.push(GridSummary {
+            name: grid.name.clone(),
+            value_type: "vec3s",
+            voxel_size: layout.voxel_size,
+            active_voxels: grid.active_voxel_count(),
+            leaves: grid.leaves.len(),
+        });
+        metadata.push(meta_for(layout, level));
+    }
+    let speed: Vec<Grid<f32>> = if opts.speed_grids {
+        velocity.iter().map(speed_grid).collect()
+    } else {
+        Vec::new()
+    };
+    grids.extend(velocity.into_iter().map(AnyGrid::Vec3s));
+    for (level, (grid, layout)) in speed.into_iter().zip(&layouts).enumerate() {
+        summary.push(GridSummary {
+            name: grid.name.clone(),
+            value_type: "float",
+            voxel_size: layout.voxel_size,
+            active_voxels: grid.active_voxel_count(),
+            leaves: grid.leaves.len(),
+        });
+        metadata.push(meta_for(layout, level));
+        grids.push(AnyGrid::Float(grid));
+    }
+    let mut options = WriteOptions::new(opts.compression);
+    options.grid_metadata = metadata;
+    options
+        .file_metadata
+        .insert("scene".into(), MetaValue::String(opts.scene.clone()));
+    options
+        .file_metadata
+        .insert("n0".into(), MetaValue::Int32(opts.n0 as i32));
+    options
+        .file_metadata
+        .insert("levels".into(), MetaValue::Int32(opts.levels as i32));
+    let bytes = write_vdb_with(path, &grids, &options)?;
+    Ok((summary, bytes))
+}
+
+/// `|u|` of a velocity grid, same leaves and active masks, named `speed…` for `vel…`.
+pub fn speed_grid(grid: &Grid<Vec3>) -> Grid<f32> {
+    let name = match grid.name.strip_prefix("vel") {
+        Some(rest) => format!("speed{rest}"),
+        None => format!("{}_speed", grid.name),
+    };
+    Grid {
+        name,
+        transform: grid.transform,
+        background: 0.0,
+        leaves: grid
+            .leaves
+            .iter()
+            .map(|l| Leaf {
+                origin: l.origin,
+                active: l.active,
+                values: Box::new(std::array::from_fn(|n| {
+                    let [x, y, z] = l.values[n];
+                    (x * x + y * y + z * z).sqrt()
+                })),
+            })
+            .collect(),
+        tiles: Vec::new(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn wake_layout_nests_and_refines_by_two() {
+        let l = scene_layout("wake", 64, 3).expect("layout");
+        assert_eq!(l.len(), 3);
+        assert_eq!(
+            l.iter().map(|g| g.name.as_str()).collect::<Vec<_>>(),
+            ["vel_l0", "vel_l1", "vel_l2"]
+        );
+        let coarse = &l[2];
+        assert!((coarse.voxel_size - 0.125).abs() < 1e-15);
+        assert_eq!(coarse.hi[0] - coarse.lo[0], 64);
+        assert_eq!(coarse.lo, [-16, -16, -16]);
+        for w in l.windows(2) {
+            let (fine, parent) = (&w[0], &w[1]);
+            assert!((parent.voxel_size - 2.0 * fine.voxel_size).abs() < 1e-15);
+            for a in 0..3 {
+                // Fine box on the parent's cell boundaries, and inside the parent box.
+                assert_eq!(fine.lo[a] % 2, 0);
+                assert_eq!(fine.hi[a] % 2, 0);
+                assert!(fine.lo[a] >= 2 * parent.lo[a] && fine.hi[a] <= 2 * parent.hi[a]);
+                assert!(fine.hi[a] - fine.lo[a] < 2 * (parent.hi[a] - parent.lo[a]));
+            }
+        }
+        // The finest box holds the sphere and the rings.
+        let f = &l[0];
+        for a in 0..3 {
+            assert!(f.lo[a] as f64 * f.voxel_size <= WAKE_CORE.min[a]);
+            assert!(f.hi[a] as f64 * f.voxel_size >= WAKE_CORE.max[a]);
+        }
+    }
+
+    #[test]
+    fn grids_hold_exact_velocities_at_voxel_centres() {
+        let grids = scene_grids("wake", 16, 2).expect("grids");
+        let layouts = scene_layout("wake", 16, 2).expect("layout");
+        let flow = analytic::scene("wake").expect("wake");
+        for (g, l) in grids.iter().zip(&layouts) {
+            assert_eq!(g.active_voxel_count(), l.voxel_count());
+            assert_eq!(g.transform, l.transform());
+            for leaf in &g.leaves {
+                for (ijk, v) in leaf.active_voxels() {
+                    let p = g.transform.index_to_world(ijk.map(f64::from));
+                    let u = flow.velocity(p);
+                    for a in 0..3 {
+                        assert_eq!(v[a], u[a] as f32);
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn single_grid_scenes_and_partial_leaves() {
+        let grids = scene_grids("lamb-oseen", 20, 3).expect("grids");
+        assert_eq!(grids.len(), 1);
+        assert_eq!(grids[0].name, "vel");
+        assert_eq!(grids[0].active_voxel_count(), 20 * 20 * 20);
+        // -10..10 spans leaves -16..-8, -8..0, 0..8, 8..16: partial masks at both ends.
+        assert_eq!(grids[0].leaves.len(), 4 * 4 * 4);
+        let counts: Vec<u32> = grids[0].leaves.iter().map(Leaf::active_count).collect();
+        assert!(counts.contains(&512) && counts.contains(&8));
+    }
+
+    #[test]
+    fn bad_parameters_are_refused() {
+        assert!(matches!(
+            scene_grids("nope", 16, 2),
+            Err(SynthError::UnknownScene { .. })
+        ));
+        assert!(matches!(
+            scene_layout("wake", 1, 2),
+            Err(SynthError::OutOfRange { what: "n0", .. })
+        ));
+        assert!(matches!(
+            scene_layout("wake", 16, 0),
+            Err(SynthError::OutOfRange { what: "levels", .. })
+        ));
+        assert!(matches!(
+            scene_layout("wake", 4096, 10),
+            Err(SynthError::TooLarge { .. })
+        ));
+    }
+
+    #[test]
+    fn deterministic() {
+        assert_eq!(
+            scene_grids("wake", 16, 2).expect("a"),
+            scene_grids("wake", 16, 2).expect("b")
+        );
+    }
+}
