@@ -1,3 +1,451 @@
 //! OpenVDB files: the subset qbricks reads, and a small writer for synthetic scenes.
+//!
+//! The reader handles file format versions 222 to 225 (OpenVDB 6 to 12) holding
+//! `Tree_{float,double,vec3s,vec3d}_5_4_3` grids, with zip, blosc (LZ4) or no compression,
+//! active-mask compression, half-float storage, active tiles at every level, instanced grids
+//! and duplicate names. It works on the whole file in memory through a bounds-checked cursor:
+//! every count or size read from the file is checked against the bytes left before anything
+//! is allocated from it.
+//!
+//! ```no_run
+//! # fn main() -> Result<(), qbricks_preprocess::vdb::VdbError> {
+//! let file = qbricks_preprocess::vdb::VdbFile::open("wake.vdb")?;
+//! for (i, g) in file.grids().iter().enumerate() {
+//!     println!("{} {:?} {:?}", g.name, g.value_type, g.transform);
+//!     let grid = file.read_grid(i)?;
+//! #   let _ = grid;
+//! }
+//! # Ok(()) }
+//! ```
 
+pub mod compress;
+mod cursor;
+pub mod error;
+pub mod inspect;
+pub mod metadata;
+mod transform;
+pub mod tree;
 pub mod write;
+
+use std::path::Path;
+
+pub use error::{ErrorKind, VdbError};
+pub use metadata::{MetaValue, Metadata};
+
+use crate::grid::{AnyGrid, Grid, Transform};
+use cursor::Cursor;
+use error::{RawError, RawResult};
+use tree::{Codec, VdbValue};
+
+/// OpenVDB's magic number (" BDV" followed by four zero bytes, little endian).
+pub const MAGIC: u64 = 0x5644_4220;
+/// Oldest supported file format version (node mask compression, OpenVDB 3+).
+pub const MIN_FILE_VERSION: u32 = 222;
+/// Newest supported file format version (OpenVDB 12).
+pub const MAX_FILE_VERSION: u32 = 225;
+
+/// Grid value type, from the grid type name.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ValueType {
+    Float,
+    Double,
+    Vec3s,
+    Vec3d,
+    /// Any other grid type (points, bool, int...): listed but not readable.
+    Unsupported(String),
+}
+
+impl ValueType {
+    fn from_grid_type(t: &str) -> Self {
+        match t {
+            "Tree_float_5_4_3" => ValueType::Float,
+            "Tree_double_5_4_3" => ValueType::Double,
+            "Tree_vec3s_5_4_3" => ValueType::Vec3s,
+            "Tree_vec3d_5_4_3" => ValueType::Vec3d,
+            other => ValueType::Unsupported(other.to_string()),
+        }
+    }
+
+    /// `float`, `double`, `vec3s`, `vec3d`, or the grid type name.
+    pub fn name(&self) -> &str {
+        match self {
+            ValueType::Float => "float",
+            ValueType::Double => "double",
+            ValueType::Vec3s => "vec3s",
+            ValueType::Vec3d => "vec3d",
+            ValueType::Unsupported(t) => t,
+        }
+    }
+
+    pub fn is_vector(&self) -> bool {
+        matches!(self, ValueType::Vec3s | ValueType::Vec3d)
+    }
+}
+
+/// What the file says about one grid, read when the file is opened (no tree data).
+#[derive(Debug, Clone, PartialEq)]
+pub struct GridDescriptor {
+    /// Grid name (duplicate names are kept; see `unique_name`).
+    pub name: String,
+    /// Name as stored, with OpenVDB's `\x1e<n>` suffix for duplicates.
+    pub unique_name: String,
+    /// Grid type name as stored, without the `_HalfFloat` suffix.
+    pub grid_type: String,
+    pub value_type: ValueType,
+    /// Map type name (e.g. `UniformScaleTranslateMap`).
+    pub map_type: String,
+    /// `None` when the map rotates or shears (reading the grid then fails).
+    pub transform: Option<Transform>,
+    /// Compression flags (see [`compress`]); names via [`compress::flag_names`].
+    pub compression: u32,
+    /// Values stored as 16-bit floats.
+    pub half_float: bool,
+    /// Grid metadata (name → value).
+    pub metadata: Metadata,
+    /// Index of the grid whose tree this one shares, for instanced grids.
+    pub instance_of: Option<usize>,
+    /// Byte offsets from the grid descriptor: grid start, tree buffers, end.
+    pub grid_pos: u64,
+    pub block_pos: u64,
+    pub end_pos: u64,
+    /// Where the tree topology starts (after compression flags, metadata and transform).
+    tree_pos: usize,
+    transform_error: Option<RawError>,
+}
+
+/// An opened VDB file: header, file metadata and grid descriptors. Grids are decoded on
+/// demand with [`VdbFile::read_grid`].
+#[derive(Debug, Clone)]
+pub struct VdbFile {
+    name: String,
+    data: Vec<u8>,
+    pub file_version: u32,
+    pub library_version: (u32, u32),
+    pub uuid: String,
+    pub metadata: Metadata,
+    grids: Vec<GridDescriptor>,
+}
+
+impl VdbFile {
+    /// Reads the whole file and parses its header and grid descriptors.
+    pub fn open(path: impl AsRef<Path>) -> Result<VdbFile, VdbError> {
+        let path = path.as_ref();
+        let name = path.display().to_string();
+        let data = std::fs::read(path).map_err(|e| VdbError {
+            file: name.clone(),
+            grid: None,
+            offset: 0,
+            what: "file",
+            kind: ErrorKind::Io(e.to_string()),
+        })?;
+        Self::from_bytes(name, data)
+    }
+
+    /// Parses a file held in memory; `name` is used in error messages.
+    pub fn from_bytes(name: impl Into<String>, data: Vec<u8>) -> Result<VdbFile, VdbError> {
+        let name = name.into();
+        let mut file = VdbFile {
+            name,
+            data,
+            file_version: 0,
+            library_version: (0, 0),
+            uuid: String::new(),
+            metadata: Metadata::new(),
+            grids: Vec::new(),
+        };
+        file.parse_header()
+            .map_err(|e| e.locate(&file.name, None))?;
+        Ok(file)
+    }
+
+    /// The file name given at open.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Size of the file in bytes.
+    pub fn len(&self) -> usize {
+        self.data.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.data.is_empty()
+    }
+
+    /// Grid descriptors in file order.
+    pub fn grids(&self) -> &[GridDescriptor] {
+        &self.grids
+    }
+
+    fn parse_header(&mut self) -> RawResult<()> {
+        let data = std::mem::take(&mut self.data);
+        let result = self.parse_header_in(&data);
+        self.data = data;
+        result
+    }
+
+    fn parse_header_in(&mut self, data: &[u8]) -> RawResult<()> {
+        let mut cur = Cursor::new(data, 0);
+        // Header: magic, format version, library version, offsets flag, UUID.
+        let magic = cur.i64("file header")? as u64;
+        if magic != MAGIC {
+            return Err(RawError::new(0, "file header", ErrorKind::BadMagic(magic)));
+        }
+        let version = cur.u32("file version")?;
+        if !(MIN_FILE_VERSION..=MAX_FILE_VERSION).contains(&version) {
+            return Err(RawError::new(
+                8,
+                "file version",
+                ErrorKind::UnsupportedVersion(version),
+            ));
+        }
+        self.file_version = version;
+        self.library_version = (cur.u32("library version")?, cur.u32("library version")?);
+        let offsets_at = cur.pos();
+        let has_offsets = cur.u8("file header")? != 0;
+        self.uuid = String::from_utf8_lossy(cur.take(36, "file UUID")?).into_owned();
+        self.metadata = metadata::read_metadata(&mut cur)?;
+        if !has_offsets {
+            return Err(RawError::new(
+                offsets_at,
+                "file header",
+                ErrorKind::Unsupported(
+                    "grids written to a stream without offsets are not supported".into(),
+                ),
+            ));
+        }
+
+        // Grid descriptors: name, type, instance parent, three offsets.
+        let count_at = cur.pos();
+        let count = cur.i32("grid count")?;
+        // A descriptor takes at least three strings and three offsets (36 bytes).
+        if count < 0 || count as usize > cur.left() / 36 {
+            return Err(RawError::invalid(
+                count_at,
+                "grid count",
+                format!("{count} grids cannot fit in {} bytes", cur.left()),
+            ));
+        }
+        let mut parents = Vec::new();
+        for _ in 0..count {
+            let at = cur.pos();
+            let unique_name = cur.string("grid descriptor")?;
+            let mut grid_type = cur.string("grid descriptor")?;
+            let half_float = grid_type.ends_with("_HalfFloat");
+            if half_float {
+                grid_type.truncate(grid_type.len() - "_HalfFloat".len());
+            }
+            let parent = cur.string("grid descriptor")?;
+            let pos = |c: &mut Cursor<'_>| -> RawResult<u64> {
+                let p = c.i64("grid descriptor")?;
+                u64::try_from(p)
+                    .ok()
+                    .filter(|&p| p <= data.len() as u64)
+                    .ok_or_else(|| {
+                        RawError::invalid(
+                            at,
+                            "grid descriptor",
+                            format!("offset {p} is outside the {}-byte file", data.len()),
+                        )
+                    })
+            };
+            let grid_pos = pos(&mut cur)?;
+            let block_pos = pos(&mut cur)?;
+            let end_pos = pos(&mut cur)?;
+            let name = match unique_name.find('\u{1e}') {
+                Some(i) => unique_name[..i].to_string(),
+                None => unique_name.clone(),
+            };
+            parents.push(parent);
+            self.grids.push(GridDescriptor {
+                name,
+                unique_name,
+                value_type: ValueType::from_grid_type(&grid_type),
+                grid_type,
+                map_type: String::new(),
+                transform: None,
+                compression: 0,
+                half_float,
+                metadata: Metadata::new(),
+                instance_of: None,
+                grid_pos,
+                block_pos,
+                end_pos,
+                tree_pos: 0,
+                transform_error: None,
+            });
+            // The next descriptor follows this grid's data.
+            cur = Cursor::new(data, end_pos as usize);
+        }
+
+        // Per grid: compression flags, metadata, transform.
+        for (i, parent) in parents.iter().enumerate() {
+            let g = &self.grids[i];
+            let name = g.name.clone();
+            let mut cur = Cursor::new(data, g.grid_pos as usize);
+            let compression = cur.u32("grid compression flags")?;
+            if compression & !0x7 != 0 {
+                return Err(RawError::invalid(
+                    g.grid_pos as usize,
+                    "grid compression flags",
+                    format!("unknown flags {compression:#x} for grid {name:?}"),
+                ));
+            }
+            let meta = metadata::read_metadata(&mut cur)?;
+            let (map_type, transform, transform_error) = match transform::read_transform(&mut cur) {
+                Ok((m, t)) => (m, Some(t), None),
+                Err(
+                    e @ RawError {
+                        kind: ErrorKind::UnsupportedTransform(_),
+                        ..
+                    },
+                ) => {
+                    let map = match &e.kind {
+                        ErrorKind::UnsupportedTransform(m) => m.clone(),
+                        _ => String::new(),
+                    };
+                    (map, None, Some(e))
+                }
+                Err(e) => return Err(e),
+            };
+            let instance_of = if parent.is_empty() {
+                None
+            } else {
+                let p = self
+                    .grids
+                    .iter()
+                    .position(|o| &o.unique_name == parent)
+                    .ok_or_else(|| {
+                        RawError::invalid(
+                            g.grid_pos as usize,
+                            "grid descriptor",
+                            format!(
+                                "grid {name:?} is an instance of missing grid {:?}",
+                                parent
+                            ),
+                        )
+                    })?;
+                Some(p)
+            };
+            let g = &mut self.grids[i];
+            g.compression = compression;
+            g.metadata = meta;
+            g.map_type = map_type;
+            g.transform = transform;
+            g.transform_error = transform_error;
+            g.instance_of = instance_of;
+            g.tree_pos = if transform.is_some() { cur.pos() } else { 0 };
+        }
+        // An instance must point at a grid that holds a tree itself.
+        for (i, g) in self.grids.iter().enumerate() {
+            if let Some(p) = g.instance_of {
+                if self.grids[p].instance_of.is_some() || p == i {
+                    return Err(RawError::invalid(
+                        g.grid_pos as usize,
+                        "grid descriptor",
+                        format!("grid {:?} is an instance of an instance", g.name),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Decodes grid `index` (voxels and tiles).
+    pub fn read_grid(&self, index: usize) -> Result<AnyGrid, VdbError> {
+        let g = self.grids.get(index).ok_or_else(|| VdbError {
+            file: self.name.clone(),
+            grid: None,
+            offset: 0,
+            what: "grid index",
+            kind: ErrorKind::NoSuchGrid {
+                index,
+                count: self.grids.len(),
+            },
+        })?;
+        self.read_grid_raw(g)
+            .map_err(|e| e.locate(&self.name, Some(&g.name)))
+    }
+
+    /// Decodes every grid, in file order.
+    pub fn read_all(&self) -> Result<Vec<AnyGrid>, VdbError> {
+        (0..self.grids.len()).map(|i| self.read_grid(i)).collect()
+    }
+
+    fn read_grid_raw(&self, g: &GridDescriptor) -> RawResult<AnyGrid> {
+        if let ValueType::Unsupported(t) = &g.value_type {
+            return Err(RawError::new(
+                g.grid_pos as usize,
+                "grid descriptor",
+                ErrorKind::UnsupportedGridType(t.clone()),
+            ));
+        }
+        let transform = match (g.transform, &g.transform_error) {
+            (Some(t), _) => t,
+            (None, Some(e)) => return Err(e.clone()),
+            (None, None) => {
+                return Err(RawError::invalid(
+                    g.grid_pos as usize,
+                    "transform",
+                    "missing",
+                ))
+            }
+        };
+        // An instance reads its parent's tree with the parent's settings.
+        let tree_owner = match g.instance_of {
+            Some(p) => &self.grids[p],
+            None => g,
+        };
+        if tree_owner.value_type != g.value_type {
+            return Err(RawError::invalid(
+                g.grid_pos as usize,
+                "grid descriptor",
+                format!(
+                    "instance of a {} grid has type {}",
+                    tree_owner.value_type.name(),
+                    g.value_type.name()
+                ),
+            ));
+        }
+        if tree_owner.tree_pos == 0 {
+            if let Some(e) = &tree_owner.transform_error {
+                return Err(e.clone());
+            }
+        }
+        let codec = Codec {
+            flags: tree_owner.compression,
+            half: tree_owner.half_float,
+        };
+        let mut cur = Cursor::new(&self.data, tree_owner.tree_pos);
+        let name = g.name.clone();
+        Ok(match &g.value_type {
+            ValueType::Float => AnyGrid::Float(read::<f32>(&mut cur, codec, name, transform)?),
+            ValueType::Double => AnyGrid::Double(read::<f64>(&mut cur, codec, name, transform)?),
+            ValueType::Vec3s => AnyGrid::Vec3s(read::<[f32; 3]>(&mut cur, codec, name, transform)?),
+            ValueType::Vec3d => AnyGrid::Vec3d(read::<[f64; 3]>(&mut cur, codec, name, transform)?),
+            ValueType::Unsupported(t) => {
+                return Err(RawError::new(
+                    g.grid_pos as usize,
+                    "grid descriptor",
+                    ErrorKind::UnsupportedGridType(t.clone()),
+                ))
+            }
+        })
+    }
+}
+
+fn read<V: VdbValue>(
+    cur: &mut Cursor<'_>,
+    codec: Codec,
+    name: String,
+    transform: Transform,
+) -> RawResult<Grid<V>> {
+    let t = tree::read_tree::<V>(cur, codec)?;
+    Ok(Grid {
+        name,
+        transform,
+        background: t.background,
+        leaves: t.leaves,
+        tiles: t.tiles,
+    })
+}

@@ -1,0 +1,429 @@
+//! The 5-4-3 tree: root (background, tiles, children), two levels of internal nodes (32³ and
+//! 16³ entries, with child and value masks and one value per entry) and 8³ leaves.
+//!
+//! A tree is stored as *topology* (all nodes depth first, internal-node values included,
+//! leaves only as their value masks) followed by *buffers* (leaf values, in the same
+//! depth-first order, root children visited in sorted-coordinate order).
+
+use super::compress::{read_chunk, COMPRESS_ACTIVE_MASK};
+use super::cursor::Cursor;
+use super::error::{ErrorKind, RawError, RawResult};
+use crate::grid::{Leaf, Tile, LEAF_VOXELS};
+
+/// A value type that can be stored in a grid file.
+pub trait VdbValue: Copy + Default + PartialEq + std::fmt::Debug + Send + Sync + 'static {
+    /// Bytes per value at full precision.
+    const SIZE: usize;
+    /// Bytes per value when the grid is saved as half floats.
+    const HALF_SIZE: usize;
+    fn from_bytes(b: &[u8]) -> Self;
+    fn from_half_bytes(b: &[u8]) -> Self;
+    fn negate(self) -> Self;
+}
+
+fn f32_at(b: &[u8], i: usize) -> f32 {
+    f32::from_le_bytes([b[4 * i], b[4 * i + 1], b[4 * i + 2], b[4 * i + 3]])
+}
+
+fn f64_at(b: &[u8], i: usize) -> f64 {
+    let mut a = [0u8; 8];
+    a.copy_from_slice(&b[8 * i..8 * i + 8]);
+    f64::from_le_bytes(a)
+}
+
+fn half_at(b: &[u8], i: usize) -> half::f16 {
+    half::f16::from_le_bytes([b[2 * i], b[2 * i + 1]])
+}
+
+impl VdbValue for f32 {
+    const SIZE: usize = 4;
+    const HALF_SIZE: usize = 2;
+    fn from_bytes(b: &[u8]) -> Self {
+        f32_at(b, 0)
+    }
+    fn from_half_bytes(b: &[u8]) -> Self {
+        half_at(b, 0).to_f32()
+    }
+    fn negate(self) -> Self {
+        -self
+    }
+}
+
+impl VdbValue for f64 {
+    const SIZE: usize = 8;
+    const HALF_SIZE: usize = 2;
+    fn from_bytes(b: &[u8]) -> Self {
+        f64_at(b, 0)
+    }
+    fn from_half_bytes(b: &[u8]) -> Self {
+        half_at(b, 0).to_f64()
+    }
+    fn negate(self) -> Self {
+        -self
+    }
+}
+
+impl VdbValue for [f32; 3] {
+    const SIZE: usize = 12;
+    const HALF_SIZE: usize = 6;
+    fn from_bytes(b: &[u8]) -> Self {
+        [f32_at(b, 0), f32_at(b, 1), f32_at(b, 2)]
+    }
+    fn from_half_bytes(b: &[u8]) -> Self {
+        [
+            half_at(b, 0).to_f32(),
+            half_at(b, 1).to_f32(),
+            half_at(b, 2).to_f32(),
+        ]
+    }
+    fn negate(self) -> Self {
+        [-self[0], -self[1], -self[2]]
+    }
+}
+
+impl VdbValue for [f64; 3] {
+    const SIZE: usize = 24;
+    const HALF_SIZE: usize = 6;
+    fn from_bytes(b: &[u8]) -> Self {
+        [f64_at(b, 0), f64_at(b, 1), f64_at(b, 2)]
+    }
+    fn from_half_bytes(b: &[u8]) -> Self {
+        [
+            half_at(b, 0).to_f64(),
+            half_at(b, 1).to_f64(),
+            half_at(b, 2).to_f64(),
+        ]
+    }
+    fn negate(self) -> Self {
+        [-self[0], -self[1], -self[2]]
+    }
+}
+
+/// Decoding settings shared by every node of one grid.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Codec {
+    pub flags: u32,
+    pub half: bool,
+}
+
+/// Everything read from one tree.
+#[derive(Debug)]
+pub(crate) struct TreeData<V> {
+    pub background: V,
+    pub tiles: Vec<Tile<V>>,
+    pub leaves: Vec<Leaf<V>>,
+}
+
+const ROOT_CHILD_LOG2: u32 = 12; // 4096 voxels per root child
+const INT1_LOG2: u32 = 5; // 32³ entries in an upper internal node
+const INT2_LOG2: u32 = 4; // 16³ entries in a lower internal node
+const LEAF_LOG2: u32 = 3;
+
+fn mask_is_on(mask: &[u64], n: usize) -> bool {
+    (mask[n >> 6] >> (n & 63)) & 1 == 1
+}
+
+fn read_mask(cur: &mut Cursor<'_>, bits: usize, what: &'static str) -> RawResult<Vec<u64>> {
+    let bytes = cur.take(bits / 8, what)?;
+    Ok(bytes
+        .chunks_exact(8)
+        .map(|c| {
+            let mut a = [0u8; 8];
+            a.copy_from_slice(c);
+            u64::from_le_bytes(a)
+        })
+        .collect())
+}
+
+/// OpenVDB `readCompressedValues`: a metadata byte saying how inactive values are encoded,
+/// up to two inactive values and a selection mask, then the (possibly only active) values.
+/// Fills `out` (length = number of node entries) completely.
+pub(crate) fn read_values<V: VdbValue>(
+    cur: &mut Cursor<'_>,
+    codec: Codec,
+    background: V,
+    value_mask: &[u64],
+    out: &mut [V],
+    what: &'static str,
+) -> RawResult<()> {
+    let count = out.len();
+    let start = cur.pos();
+    let meta = cur.u8(what)?;
+    if meta > 6 {
+        return Err(RawError::invalid(
+            start,
+            what,
+            format!("mask-compression code {meta} is not one of 0 to 6"),
+        ));
+    }
+    let mut inactive0 = if meta == 0 {
+        background
+    } else {
+        background.negate()
+    };
+    let mut inactive1 = background;
+    if matches!(meta, 2 | 4 | 5) {
+        inactive0 = V::from_bytes(cur.take(V::SIZE, what)?);
+        if meta == 5 {
+            inactive1 = V::from_bytes(cur.take(V::SIZE, what)?);
+        }
+    }
+    let selection = if matches!(meta, 3..=5) {
+        Some(read_mask(cur, count, what)?)
+    } else {
+        None
+    };
+    let mask_compressed = codec.flags & COMPRESS_ACTIVE_MASK != 0 && meta != 6;
+    let stored = if mask_compressed {
+        value_mask.iter().map(|w| w.count_ones() as usize).sum()
+    } else {
+        count
+    };
+    let value_size = if codec.half { V::HALF_SIZE } else { V::SIZE };
+    // Half-float writers write nothing at all for an empty buffer.
+    let bytes = if codec.half && stored == 0 {
+        std::borrow::Cow::Borrowed(&[][..])
+    } else {
+        read_chunk(cur, codec.flags, stored * value_size, what, stored)?
+    };
+    let decode = |i: usize| -> V {
+        let b = &bytes[i * value_size..(i + 1) * value_size];
+        if codec.half {
+            V::from_half_bytes(b)
+        } else {
+            V::from_bytes(b)
+        }
+    };
+    if stored == count {
+        for (i, v) in out.iter_mut().enumerate() {
+            *v = decode(i);
+        }
+    } else {
+        let mut next = 0;
+        for (n, v) in out.iter_mut().enumerate() {
+            if mask_is_on(value_mask, n) {
+                *v = decode(next);
+                next += 1;
+            } else if selection.as_deref().is_some_and(|s| mask_is_on(s, n)) {
+                *v = inactive1;
+            } else {
+                *v = inactive0;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Leaf topology kept between the topology and buffer passes.
+struct LeafTopo {
+    origin: [i32; 3],
+    mask: [u64; 8],
+}
+
+fn child_origin(parent: [i32; 3], n: usize, log2: u32, child_log2: u32) -> [i32; 3] {
+    let m = (1usize << log2) - 1;
+    let x = (n >> (2 * log2)) as i32;
+    let y = ((n >> log2) & m) as i32;
+    let z = (n & m) as i32;
+    [
+        parent[0] + (x << child_log2),
+        parent[1] + (y << child_log2),
+        parent[2] + (z << child_log2),
+    ]
+}
+
+struct TopoReader<V> {
+    codec: Codec,
+    background: V,
+    tiles: Vec<Tile<V>>,
+    leaves: Vec<LeafTopo>,
+    scratch: Vec<V>,
+}
+
+impl<V: VdbValue> TopoReader<V> {
+    /// One internal node: child mask, value mask, values, then its children.
+    fn internal(&mut self, cur: &mut Cursor<'_>, origin: [i32; 3], log2: u32) -> RawResult<()> {
+        let entries = 1usize << (3 * log2);
+        let child_log2 = if log2 == INT1_LOG2 {
+            INT2_LOG2 + LEAF_LOG2
+        } else {
+            LEAF_LOG2
+        };
+        let what = "internal node";
+        let child_mask = read_mask(cur, entries, what)?;
+        let value_mask = read_mask(cur, entries, what)?;
+        self.scratch.resize(entries, V::default());
+        let mut values = std::mem::take(&mut self.scratch);
+        read_values(
+            cur,
+            self.codec,
+            self.background,
+            &value_mask,
+            &mut values,
+            what,
+        )?;
+        for (w, (&c, &a)) in child_mask.iter().zip(&value_mask).enumerate() {
+            let mut tiles = a & !c;
+            while tiles != 0 {
+                let n = w * 64 + tiles.trailing_zeros() as usize;
+                tiles &= tiles - 1;
+                self.tiles.push(Tile {
+                    origin: child_origin(origin, n, log2, child_log2),
+                    size: 1 << child_log2,
+                    value: values[n],
+                });
+            }
+        }
+        self.scratch = values;
+        for (w, &c) in child_mask.iter().enumerate() {
+            let mut children = c;
+            while children != 0 {
+                let n = w * 64 + children.trailing_zeros() as usize;
+                children &= children - 1;
+                let child = child_origin(origin, n, log2, child_log2);
+                if log2 == INT1_LOG2 {
+                    self.internal(cur, child, INT2_LOG2)?;
+                } else {
+                    let bytes = cur.take(64, "leaf topology")?;
+                    let mut mask = [0u64; 8];
+                    for (m, c) in mask.iter_mut().zip(bytes.chunks_exact(8)) {
+                        let mut a = [0u8; 8];
+                        a.copy_from_slice(c);
+                        *m = u64::from_le_bytes(a);
+                    }
+                    self.leaves.push(LeafTopo {
+                        origin: child,
+                        mask,
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+fn aligned(c: [i32; 3], log2: u32) -> bool {
+    c.iter().all(|v| v & ((1 << log2) - 1) == 0)
+}
+
+/// Reads a whole tree (topology then buffers) starting at the buffer count.
+pub(crate) fn read_tree<V: VdbValue>(cur: &mut Cursor<'_>, codec: Codec) -> RawResult<TreeData<V>> {
+    // Topology: buffer count, root background, root tiles and children.
+    let start = cur.pos();
+    let buffers = cur.i32("tree buffer count")?;
+    if buffers != 1 {
+        return Err(RawError::invalid(
+            start,
+            "tree buffer count",
+            format!("expected 1 buffer per node, found {buffers}"),
+        ));
+    }
+    let background = V::from_bytes(cur.take(V::SIZE, "background value")?);
+    let counts_at = cur.pos();
+    let num_tiles = cur.u32("root tile count")? as usize;
+    let num_children = cur.u32("root child count")? as usize;
+    let tile_bytes = 12 + V::SIZE + 1;
+    // A child takes at least its coordinate and two 4 KiB masks.
+    let child_bytes = 12 + 2 * 4096;
+    if num_tiles.saturating_mul(tile_bytes) > cur.left()
+        || num_children.saturating_mul(child_bytes) > cur.left()
+    {
+        return Err(RawError::new(
+            counts_at,
+            "root node",
+            ErrorKind::Truncated {
+                expected: format!("{num_tiles} tiles and {num_children} child nodes"),
+                left: cur.left() as u64,
+            },
+        ));
+    }
+    let mut reader = TopoReader {
+        codec,
+        background,
+        tiles: Vec::new(),
+        leaves: Vec::new(),
+        scratch: Vec::new(),
+    };
+    let mut keys = Vec::with_capacity(num_tiles + num_children);
+    for _ in 0..num_tiles {
+        let at = cur.pos();
+        let origin = cur.vec3i("root tile")?;
+        let value = V::from_bytes(cur.take(V::SIZE, "root tile")?);
+        let active = cur.u8("root tile")? != 0;
+        if !aligned(origin, ROOT_CHILD_LOG2) {
+            return Err(RawError::invalid(
+                at,
+                "root tile",
+                format!("origin {origin:?} is not a multiple of 4096"),
+            ));
+        }
+        keys.push((origin, at));
+        if active {
+            reader.tiles.push(Tile {
+                origin,
+                size: 1 << ROOT_CHILD_LOG2,
+                value,
+            });
+        }
+    }
+    // Per root child: origin and the range of its leaves in `reader.leaves`.
+    let mut children = Vec::with_capacity(num_children);
+    for _ in 0..num_children {
+        let at = cur.pos();
+        let origin = cur.vec3i("root child")?;
+        if !aligned(origin, ROOT_CHILD_LOG2) {
+            return Err(RawError::invalid(
+                at,
+                "root child",
+                format!("origin {origin:?} is not a multiple of 4096"),
+            ));
+        }
+        keys.push((origin, at));
+        let first = reader.leaves.len();
+        reader.internal(cur, origin, INT1_LOG2)?;
+        children.push((origin, first..reader.leaves.len()));
+    }
+    keys.sort_unstable();
+    if let Some(w) = keys.windows(2).find(|w| w[0].0 == w[1].0) {
+        return Err(RawError::invalid(
+            w[1].1,
+            "root node",
+            format!("two entries at origin {:?}", w[1].0),
+        ));
+    }
+
+    // Buffers: leaf values, root children in sorted order (OpenVDB's root table is a
+    // sorted map).
+    children.sort_unstable_by_key(|c| c.0);
+    let TopoReader {
+        tiles,
+        leaves: topo,
+        ..
+    } = reader;
+    let mut leaves = Vec::with_capacity(topo.len());
+    for (_, range) in children {
+        for t in &topo[range] {
+            // The value mask is stored again; OpenVDB ignores the copy when seeking.
+            cur.skip(64, "leaf buffer")?;
+            let mut values = Box::new([V::default(); LEAF_VOXELS]);
+            read_values(
+                cur,
+                codec,
+                background,
+                &t.mask,
+                &mut values[..],
+                "leaf buffer",
+            )?;
+            leaves.push(Leaf {
+                origin: t.origin,
+                active: t.mask,
+                values,
+            });
+        }
+    }
+    Ok(TreeData {
+        background,
+        tiles,
+        leaves,
+    })
+}
