@@ -1,17 +1,46 @@
 //! Opens and validates a `.qbk` file.
-//! (Provisional: reads into memory; the real reader memory-maps and checks the header.)
+//!
+//! [`BrickFileView::open`] memory-maps the file and, in this order, checks the header
+//! (magic, version, flags, reserved bytes — see [`crate::header`]), the file length against
+//! the header's payload length, the payload checksum (unless
+//! [`OpenOptions::verify_checksum`] is off), rkyv's structural validation (bytecheck) and
+//! the schema invariants ([`crate::validate`]). Only then is the archived root handed out.
+//! The validated reference is stored next to the mapping (a self-referential pair built
+//! with `self_cell`), so [`BrickFileView::file`] costs nothing: callers can fetch
+//! `&ArchivedBrickFile` once per frame, or per ray, without re-validating.
+//!
+//! # If the file changes while it is mapped
+//!
+//! The mapping shows the file's current contents; it is not a snapshot.
+//! - `qbricks-bake` never modifies a `.qbk` in place: it writes a new file and renames it
+//!   over the old one, so a running viewer keeps the old, complete, validated inode.
+//! - If another process **truncates** the mapped file, any later read of a page past the
+//!   new end raises `SIGBUS` and the process is killed. This cannot be caught safely in
+//!   Rust, and the checksum (verified at open) cannot help after open. If files may be
+//!   truncated or rewritten in place while viewed (network shares, other tools), copy the
+//!   file first or open it with [`BrickFileView::open_in_memory`], which reads it into
+//!   memory instead of mapping it.
+//! - If another process **overwrites** bytes in place, reads see the new bytes; they were
+//!   not validated, but all archive accesses in this crate are bounds-checked slices of
+//!   the mapping, so the result is wrong numbers (or a panic on an index derived from
+//!   them), never an access outside the mapping.
 
+use std::fs::File;
 use std::path::{Path, PathBuf};
 
+use memmap2::Mmap;
+use rkyv::rancor;
 use rkyv::util::AlignedVec;
 
-use crate::error::{FormatError, FormatErrorKind};
-use crate::schema::ArchivedBrickFile;
+use crate::error::{one_line, FormatError, FormatErrorKind};
+use crate::header::{Header, HEADER_LEN, PAYLOAD_ALIGN};
+use crate::schema::{ArchivedBrickFile, BrickFile};
 
 /// Options for [`BrickFileView::open_with`].
 #[derive(Debug, Clone)]
 pub struct OpenOptions {
-    /// Verify the payload checksum (validation of the archive always runs).
+    /// Verify the payload checksum (reads every byte once at open). Validation of the
+    /// archive always runs; skipping the checksum only saves the hashing of huge files.
     pub verify_checksum: bool,
 }
 
@@ -23,38 +52,126 @@ impl Default for OpenOptions {
     }
 }
 
+/// The bytes a view borrows from: a read-only map of the whole file, or an aligned copy
+/// of the payload.
+enum Backing {
+    Mapped(Mmap),
+    Owned(AlignedVec<PAYLOAD_ALIGN>),
+}
+
+impl Backing {
+    fn payload(&self) -> &[u8] {
+        match self {
+            Backing::Mapped(map) => map.get(HEADER_LEN..).unwrap_or_default(),
+            Backing::Owned(bytes) => bytes.as_slice(),
+        }
+    }
+}
+
+type FileRef<'a> = &'a ArchivedBrickFile;
+
+self_cell::self_cell!(
+    struct ValidatedArchive {
+        owner: Backing,
+        #[covariant]
+        dependent: FileRef,
+    }
+);
+
 /// A validated `.qbk` file.
 pub struct BrickFileView {
     path: PathBuf,
-    bytes: AlignedVec<16>,
+    header: Header,
+    checksum_verified: bool,
+    archive: ValidatedArchive,
+}
+
+// The viewer renders from many threads through one shared view.
+const _: fn() = || {
+    fn shared<T: Send + Sync>() {}
+    shared::<BrickFileView>();
+};
+
+/// Maps `file` read-only.
+///
+/// This is the only `unsafe` code in the workspace.
+#[allow(unsafe_code)]
+fn map_read_only(file: &File) -> std::io::Result<Mmap> {
+    // SAFETY: `Mmap::map` is unsafe because the mapped bytes may change under us if the
+    // file is modified or truncated by another process, which breaks the immutability a
+    // `&[u8]` promises. We accept that documented risk (see the module docs: our writer
+    // never modifies a file in place; truncation gives SIGBUS, not a bad read). The bytes
+    // are never trusted: every read of them goes through the header checks and rkyv's
+    // validation first.
+    unsafe { Mmap::map(file) }
 }
 
 impl BrickFileView {
+    /// Opens `path` with the default options (checksum verified).
     pub fn open(path: &Path) -> Result<Self, FormatError> {
         Self::open_with(path, &OpenOptions::default())
     }
 
-    pub fn open_with(path: &Path, _options: &OpenOptions) -> Result<Self, FormatError> {
-        let data = std::fs::read(path).map_err(|e| FormatError {
-            path: path.to_path_buf(),
-            kind: e.into(),
-        })?;
-        Self::from_bytes(path, &data)
+    /// Memory-maps `path` and validates it; see the module docs for the checks.
+    pub fn open_with(path: &Path, options: &OpenOptions) -> Result<Self, FormatError> {
+        let err = |kind| FormatError::new(path, kind);
+        let file = File::open(path).map_err(|e| err(e.into()))?;
+        let len = file.metadata().map_err(|e| err(e.into()))?.len();
+        if len < HEADER_LEN as u64 {
+            return Err(err(FormatErrorKind::TooShort {
+                expected: HEADER_LEN as u64,
+                found: len,
+            }));
+        }
+        let map = map_read_only(&file).map_err(|e| err(e.into()))?;
+        let (header, verified) = check_frame(&map, options).map_err(err)?;
+        Self::validate(path, header, verified, Backing::Mapped(map))
     }
 
-    /// Validates an in-memory copy of a file (tests, fuzzing); `path` names it in errors.
+    /// Reads `path` into memory (no mapping) and validates it. Immune to the file being
+    /// truncated later, at the cost of reading and holding the whole file.
+    pub fn open_in_memory(path: &Path, options: &OpenOptions) -> Result<Self, FormatError> {
+        let data = std::fs::read(path).map_err(|e| FormatError::new(path, e.into()))?;
+        Self::from_bytes_with(path, &data, options)
+    }
+
+    /// Validates an in-memory copy of a whole file (tests, fuzzing); `path` names it in
+    /// errors. The payload is copied once into an aligned buffer.
     pub fn from_bytes(path: &Path, data: &[u8]) -> Result<Self, FormatError> {
-        let mut bytes = AlignedVec::<16>::new();
-        bytes.extend_from_slice(data);
-        rkyv::access::<ArchivedBrickFile, rkyv::rancor::Error>(&bytes).map_err(|e| {
-            FormatError {
-                path: path.to_path_buf(),
-                kind: FormatErrorKind::Invalid(e.to_string()),
-            }
-        })?;
+        Self::from_bytes_with(path, data, &OpenOptions::default())
+    }
+
+    /// [`BrickFileView::from_bytes`] with options.
+    pub fn from_bytes_with(
+        path: &Path,
+        data: &[u8],
+        options: &OpenOptions,
+    ) -> Result<Self, FormatError> {
+        let (header, verified) =
+            check_frame(data, options).map_err(|k| FormatError::new(path, k))?;
+        let mut bytes = AlignedVec::<PAYLOAD_ALIGN>::new();
+        bytes.extend_from_slice(data.get(HEADER_LEN..).unwrap_or_default());
+        Self::validate(path, header, verified, Backing::Owned(bytes))
+    }
+
+    fn validate(
+        path: &Path,
+        header: Header,
+        checksum_verified: bool,
+        backing: Backing,
+    ) -> Result<Self, FormatError> {
+        let archive = ValidatedArchive::try_new(backing, |b| {
+            let file = rkyv::access::<ArchivedBrickFile, rancor::Error>(b.payload())
+                .map_err(|e| FormatErrorKind::Invalid(one_line(e)))?;
+            crate::validate::check(file).map_err(FormatErrorKind::Invalid)?;
+            Ok::<_, FormatErrorKind>(file)
+        })
+        .map_err(|k| FormatError::new(path, k))?;
         Ok(Self {
             path: path.to_path_buf(),
-            bytes,
+            header,
+            checksum_verified,
+            archive,
         })
     }
 
@@ -62,14 +179,57 @@ impl BrickFileView {
         &self.path
     }
 
-    /// Size of the whole file in bytes.
+    /// Size of the whole file in bytes (header + payload).
     pub fn byte_len(&self) -> u64 {
-        self.bytes.len() as u64
+        HEADER_LEN as u64 + self.header.payload_len
     }
 
-    pub fn file(&self) -> &ArchivedBrickFile {
-        // Validated in `from_bytes`; access again checks nothing new but stays safe.
-        rkyv::access::<ArchivedBrickFile, rkyv::rancor::Error>(&self.bytes)
-            .expect("validated at open")
+    /// The decoded header.
+    pub fn header(&self) -> &Header {
+        &self.header
     }
+
+    /// Whether the payload checksum was verified at open.
+    pub fn checksum_verified(&self) -> bool {
+        self.checksum_verified
+    }
+
+    /// Whether the view is backed by a memory map (rather than a copy in memory).
+    pub fn is_mapped(&self) -> bool {
+        matches!(self.archive.borrow_owner(), Backing::Mapped(_))
+    }
+
+    /// The validated archive root. Free: validation ran once at open.
+    pub fn file(&self) -> &ArchivedBrickFile {
+        self.archive.borrow_dependent()
+    }
+
+    /// The archive's bytes (payload after the header).
+    pub fn payload(&self) -> &[u8] {
+        self.archive.borrow_owner().payload()
+    }
+
+    /// Deserialises the whole file into owned memory.
+    pub fn to_brick_file(&self) -> Result<BrickFile, FormatError> {
+        rkyv::deserialize::<BrickFile, rancor::Error>(self.file())
+            .map_err(|e| FormatError::new(&self.path, FormatErrorKind::Invalid(one_line(e))))
+    }
+}
+
+impl std::fmt::Debug for BrickFileView {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("BrickFileView")
+            .field("path", &self.path)
+            .field("header", &self.header)
+            .field("checksum_verified", &self.checksum_verified)
+            .field("mapped", &self.is_mapped())
+            .finish_non_exhaustive()
+    }
+}
+
+/// Header, length and (optionally) checksum of a whole file's bytes.
+fn check_frame(data: &[u8], options: &OpenOptions) -> Result<(Header, bool), FormatErrorKind> {
+    let header = Header::parse(data)?;
+    header.payload(data, options.verify_checksum)?;
+    Ok((header, options.verify_checksum))
 }

@@ -1,0 +1,214 @@
+//! Checks of the schema's invariants, run after rkyv's structural validation (bytecheck).
+//!
+//! bytecheck proves that every pointer, length and enum tag in the archive is in bounds
+//! and well-formed, so reading the archive cannot go wrong in a memory-safety sense. It
+//! does not know what the numbers mean: a brick may still point past the end of the
+//! value arrays, a KD node at a node that does not exist, or the KD "tree" may have a
+//! cycle. This module checks exactly the invariants the queries and the viewer index
+//! with, so that after [`check`] they can slice without further range checks failing
+//! (they still use checked access, returning nothing rather than panicking, so that an
+//! archive obtained without this check cannot crash them either).
+//!
+//! Errors name the element, e.g. `regions[12].bricks[3]: brick 9001 out of range (512 bricks)`.
+
+use crate::schema::{ArchivedBrickFile, ArchivedKdNode};
+
+/// Checks the invariants of a structurally valid archive. Cost is linear in the number
+/// of bricks, regions, region brick entries and KD nodes; the value arrays are not read.
+pub fn check(file: &ArchivedBrickFile) -> Result<(), String> {
+    let n_levels = file.levels.len();
+    let n_bricks = file.bricks.len();
+    let n_regions = file.regions.len();
+    let n_fields = file.fields.len();
+
+    // Bounds.
+    check_box("bounds", &file.bounds.min, &file.bounds.max)?;
+
+    // Levels.
+    for (i, level) in file.levels.iter().enumerate() {
+        let w = level.cell_width.to_native();
+        if !(w.is_finite() && w > 0.0) {
+            return Err(format!("levels[{i}].cell_width: expected > 0, found {w}"));
+        }
+    }
+
+    // Fields: one value per leaf cell in every field.
+    let n_values = file.fields.first().map_or(0, |f| f.values.len() as u64);
+    for (i, field) in file.fields.iter().enumerate() {
+        if field.values.len() as u64 != n_values {
+            return Err(format!(
+                "fields[{i}].values: expected {n_values} values (as fields[0]), found {}",
+                field.values.len()
+            ));
+        }
+    }
+
+    // Bricks.
+    for (i, brick) in file.bricks.iter().enumerate() {
+        let level = brick.level.to_native();
+        if level as usize >= n_levels {
+            return Err(format!(
+                "bricks[{i}].level: level {level} out of range ({n_levels} levels)"
+            ));
+        }
+        let dims = brick.dims.map(|d| d.to_native());
+        if dims.contains(&0) {
+            return Err(format!(
+                "bricks[{i}].dims: expected >= 1 cells per axis, found {dims:?}"
+            ));
+        }
+        let w = brick.cell_width.to_native();
+        if !(w.is_finite() && w > 0.0) {
+            return Err(format!("bricks[{i}].cell_width: expected > 0, found {w}"));
+        }
+        if brick.origin.iter().any(|c| !c.to_native().is_finite()) {
+            return Err(format!("bricks[{i}].origin: not finite"));
+        }
+        if n_fields > 0 {
+            let cells = dims.iter().map(|&d| u64::from(d)).product::<u64>();
+            let first = brick.first_value.to_native();
+            let end = first.checked_add(cells);
+            if end.is_none_or(|e| e > n_values) {
+                return Err(format!(
+                    "bricks[{i}]: values {first}..{first}+{cells} out of range ({n_values} values per field)"
+                ));
+            }
+        }
+    }
+
+    // Regions and their brick lists.
+    let n_entries = file.region_bricks.len() as u64;
+    for (i, region) in file.regions.iter().enumerate() {
+        check_box(
+            &format!("regions[{i}].bounds"),
+            &region.bounds.min,
+            &region.bounds.max,
+        )?;
+        let start = u64::from(region.bricks_start.to_native());
+        let len = u64::from(region.bricks_len.to_native());
+        if start + len > n_entries {
+            return Err(format!(
+                "regions[{i}]: bricks {start}..{start}+{len} out of range ({n_entries} region_bricks entries)"
+            ));
+        }
+        if len > 0 {
+            let finest = region.finest_level.to_native();
+            if finest as usize >= n_levels {
+                return Err(format!(
+                    "regions[{i}].finest_level: level {finest} out of range ({n_levels} levels)"
+                ));
+            }
+        }
+        let ids = file
+            .region_bricks
+            .get(start as usize..(start + len) as usize)
+            .unwrap_or_default();
+        for (j, id) in ids.iter().enumerate() {
+            let id = id.to_native();
+            if id as usize >= n_bricks {
+                return Err(format!(
+                    "regions[{i}].bricks[{j}]: brick {id} out of range ({n_bricks} bricks)"
+                ));
+            }
+        }
+    }
+    let expected_ranges = n_regions as u64 * n_fields as u64;
+    if file.region_ranges.len() as u64 != expected_ranges {
+        return Err(format!(
+            "region_ranges: expected {expected_ranges} entries ({n_regions} regions x {n_fields} fields), found {}",
+            file.region_ranges.len()
+        ));
+    }
+
+    check_kd(file)
+}
+
+fn check_box(
+    what: &str,
+    min: &[rkyv::Archived<f64>; 3],
+    max: &[rkyv::Archived<f64>; 3],
+) -> Result<(), String> {
+    for a in 0..3 {
+        let (lo, hi) = (min[a].to_native(), max[a].to_native());
+        if lo.is_nan() || hi.is_nan() || lo > hi {
+            return Err(format!(
+                "{what}: expected min <= max on axis {a}, found {lo} > {hi}"
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The KD nodes reachable from node 0 form a tree (no node has two parents, no cycles),
+/// every index is in range and every region sits in at least one leaf.
+fn check_kd(file: &ArchivedBrickFile) -> Result<(), String> {
+    let nodes = &file.kd_nodes;
+    let n_regions = file.regions.len();
+    if nodes.is_empty() {
+        if n_regions > 0 {
+            return Err(format!(
+                "kd_nodes: empty, but there are {n_regions} regions"
+            ));
+        }
+        return Ok(());
+    }
+    // Sized by counts that bytecheck has proven to be backed by bytes of the file.
+    let mut seen = vec![false; nodes.len()];
+    let mut region_in_leaf = vec![false; n_regions];
+    let mut stack = vec![0u32];
+    seen[0] = true;
+    while let Some(i) = stack.pop() {
+        let Some(node) = nodes.get(i as usize) else {
+            continue;
+        };
+        match node {
+            ArchivedKdNode::Inner {
+                axis,
+                split,
+                left,
+                right,
+            } => {
+                if *axis > 2 {
+                    return Err(format!(
+                        "kd_nodes[{i}].axis: expected 0, 1 or 2, found {axis}"
+                    ));
+                }
+                if split.to_native().is_nan() {
+                    return Err(format!("kd_nodes[{i}].split: NaN"));
+                }
+                for child in [left.to_native(), right.to_native()] {
+                    let Some(flag) = seen.get_mut(child as usize) else {
+                        return Err(format!(
+                            "kd_nodes[{i}]: child {child} out of range ({} nodes)",
+                            nodes.len()
+                        ));
+                    };
+                    if *flag {
+                        return Err(format!(
+                            "kd_nodes[{i}]: child {child} is reached twice (not a tree)"
+                        ));
+                    }
+                    *flag = true;
+                    stack.push(child);
+                }
+            }
+            ArchivedKdNode::Leaf { region } => {
+                if let Some(r) = region.as_ref() {
+                    let r = r.to_native();
+                    match region_in_leaf.get_mut(r as usize) {
+                        Some(flag) => *flag = true,
+                        None => {
+                            return Err(format!(
+                                "kd_nodes[{i}]: region {r} out of range ({n_regions} regions)"
+                            ))
+                        }
+                    }
+                }
+            }
+        }
+    }
+    if let Some(r) = region_in_leaf.iter().position(|&s| !s) {
+        return Err(format!("regions[{r}]: in no KD-tree leaf"));
+    }
+    Ok(())
+}

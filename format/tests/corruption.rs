@@ -1,0 +1,132 @@
+//! Damaged files: every truncation and random byte flips give an error or a valid view,
+//! never a panic. Uses `from_bytes` only, so it also runs under miri.
+
+mod common;
+
+use std::path::Path;
+
+use proptest::prelude::*;
+use qbricks_format::header::{checksum, Header, HEADER_LEN};
+use qbricks_format::{query, writer, BrickFileView, FormatErrorKind, OpenOptions};
+
+const NO_CHECKSUM: OpenOptions = OpenOptions {
+    verify_checksum: false,
+};
+
+fn small_file() -> Vec<u8> {
+    // Seed chosen for a file with bricks, regions and a KD tree of several nodes.
+    let file = (0..200)
+        .map(common::random_file)
+        .find(|f| f.bricks.len() >= 2 && f.kd_nodes.len() >= 3 && f.regions.len() >= 2)
+        .expect("some seed gives a non-trivial file");
+    writer::to_bytes(&file).expect("to_bytes")
+}
+
+/// Rewrites the header so that length and checksum match `bytes` again: what a buggy
+/// writer could produce; only rkyv validation and the schema checks stand in the way.
+fn reseal(bytes: &mut [u8]) {
+    if bytes.len() < HEADER_LEN {
+        return;
+    }
+    let payload_len = (bytes.len() - HEADER_LEN) as u64;
+    let sum = checksum(&bytes[HEADER_LEN..]);
+    bytes[16..24].copy_from_slice(&payload_len.to_le_bytes());
+    bytes[24..32].copy_from_slice(&sum.to_le_bytes());
+}
+
+/// Everything a program might do with an open view; must not panic on a view that
+/// passed validation, whatever its numbers are.
+fn exercise(view: &BrickFileView) {
+    let file = view.file();
+    let _ = view.to_brick_file();
+    qbricks_format::validate::check(file).expect("a view is valid");
+    let b = query::bounds(file);
+    let centre: [f64; 3] = std::array::from_fn(|a| 0.5 * (b.min[a] + b.max[a]));
+    let _ = query::region_at(file, centre);
+    let segs = query::ray_regions(file, b.min, [1.0, 0.7, 0.3], 0.0, f64::INFINITY);
+    for s in segs {
+        for &id in query::region_bricks(file, s.region) {
+            let _ = query::brick_values(file, id.to_native(), 0).expect("validated brick");
+        }
+    }
+}
+
+#[test]
+fn every_truncation_is_an_error() {
+    let bytes = small_file();
+    for len in 0..bytes.len() {
+        let cut = &bytes[..len];
+        let err = BrickFileView::from_bytes_with(Path::new("t.qbk"), cut, &NO_CHECKSUM)
+            .expect_err("truncated file must not open");
+        let ok_kind = matches!(
+            err.kind,
+            FormatErrorKind::TooShort { .. } | FormatErrorKind::LengthMismatch { .. }
+        );
+        assert!(ok_kind, "len {len}: {err}");
+    }
+}
+
+#[test]
+fn every_resealed_truncation_is_an_error_or_valid() {
+    // With the header patched to the short length, validation is what must catch it.
+    let bytes = small_file();
+    let mut opened = 0;
+    let step = if cfg!(miri) { 37 } else { 1 };
+    for len in (HEADER_LEN..bytes.len()).step_by(step) {
+        let mut cut = bytes[..len].to_vec();
+        reseal(&mut cut);
+        if let Ok(view) = BrickFileView::from_bytes(Path::new("t.qbk"), &cut) {
+            exercise(&view);
+            opened += 1;
+        }
+    }
+    // The root is at the end of an rkyv archive: cutting it off can never validate
+    // (a prefix might in principle, so this is a count, not a rule).
+    assert!(opened < 4, "{opened} truncations opened");
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(if cfg!(miri) { 4 } else { 256 }))]
+
+    #[test]
+    fn byte_flips_give_error_or_valid_view(
+        flips in proptest::collection::vec((any::<prop::sample::Index>(), 1u8..=255), 1..4),
+    ) {
+        let mut bytes = small_file();
+        let n = bytes.len();
+        for (at, x) in &flips {
+            bytes[at.index(n)] ^= x;
+        }
+        // With the checksum the damage is always caught.
+        let checked = BrickFileView::from_bytes(Path::new("f.qbk"), &bytes);
+        prop_assert!(checked.is_err());
+        // Without it (and with a resealed header) it is caught or harmless.
+        if let Ok(view) = BrickFileView::from_bytes_with(Path::new("f.qbk"), &bytes, &NO_CHECKSUM) {
+            exercise(&view);
+        }
+        reseal(&mut bytes);
+        if let Ok(view) = BrickFileView::from_bytes(Path::new("f.qbk"), &bytes) {
+            exercise(&view);
+        }
+    }
+}
+
+#[test]
+fn intact_file_opens_and_is_exercisable() {
+    let bytes = small_file();
+    let view = BrickFileView::from_bytes(Path::new("ok.qbk"), &bytes).expect("open");
+    exercise(&view);
+    let header = Header::parse(&bytes).expect("header");
+    assert_eq!(header.payload_len as usize + HEADER_LEN, bytes.len());
+}
+
+#[test]
+fn appended_bytes_are_an_error() {
+    let mut bytes = small_file();
+    bytes.extend_from_slice(&[0; 16]);
+    let err = BrickFileView::from_bytes(Path::new("long.qbk"), &bytes).expect_err("too long");
+    assert!(
+        matches!(err.kind, FormatErrorKind::LengthMismatch { .. }),
+        "{err}"
+    );
+}

@@ -1,0 +1,233 @@
+//! The KD-tree queries agree with brute force over all regions on random configurations.
+
+mod common;
+
+use std::path::Path;
+
+use common::Rng;
+use proptest::prelude::*;
+use qbricks_format::query::{self, RayRegions, RegionSegment};
+use qbricks_format::{writer, Aabb, ArchivedBrickFile, BrickFileView};
+
+fn open(seed: u64) -> BrickFileView {
+    let bytes = writer::to_bytes(&common::random_file(seed)).expect("to_bytes");
+    BrickFileView::from_bytes(Path::new("q.qbk"), &bytes).expect("open")
+}
+
+fn brute_region_at(file: &ArchivedBrickFile, p: [f64; 3]) -> Option<u32> {
+    let hits: Vec<u32> = (0..file.regions.len() as u32)
+        .filter(|&r| query::contains(&file.regions[r as usize].bounds, p))
+        .collect();
+    assert!(hits.len() <= 1, "regions overlap at {p:?}: {hits:?}");
+    hits.first().copied()
+}
+
+fn brute_ray(
+    file: &ArchivedBrickFile,
+    o: [f64; 3],
+    d: [f64; 3],
+    t0: f64,
+    t1: f64,
+) -> Vec<RegionSegment> {
+    let mut v: Vec<RegionSegment> = file
+        .regions
+        .iter()
+        .enumerate()
+        .filter_map(|(i, r)| {
+            query::ray_box(&r.bounds, o, d, t0, t1).map(|(a, b)| RegionSegment {
+                region: i as u32,
+                t_enter: a,
+                t_exit: b,
+            })
+        })
+        .collect();
+    v.sort_by(|a, b| a.t_enter.total_cmp(&b.t_enter));
+    v
+}
+
+fn close(a: f64, b: f64) -> bool {
+    a == b || (a - b).abs() <= 1e-9 * (1.0 + a.abs().max(b.abs()))
+}
+
+fn random_point(rng: &mut Rng, b: &Aabb) -> [f64; 3] {
+    // A little outside the bounds too.
+    std::array::from_fn(|a| {
+        let w = b.max[a] - b.min[a];
+        rng.range(b.min[a] - 0.2 * w, b.max[a] + 0.2 * w)
+    })
+}
+
+fn random_dir(rng: &mut Rng) -> [f64; 3] {
+    let mut d: [f64; 3] = std::array::from_fn(|_| rng.range(-1.0, 1.0));
+    // Sometimes axis-parallel or in an axis plane.
+    if rng.chance(0.2) {
+        d[rng.below(3) as usize] = 0.0;
+    }
+    if rng.chance(0.1) {
+        let keep = rng.below(3) as usize;
+        for (a, c) in d.iter_mut().enumerate() {
+            if a != keep {
+                *c = 0.0;
+            }
+        }
+    }
+    d
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    #[test]
+    fn region_at_matches_brute_force(seed in any::<u64>()) {
+        let view = open(seed);
+        let file = view.file();
+        let b = query::bounds(file);
+        let mut rng = Rng::new(seed ^ 0xABCD);
+        for _ in 0..200 {
+            let p = random_point(&mut rng, &b);
+            prop_assert_eq!(query::region_at(file, p), brute_region_at(file, p), "at {:?}", p);
+        }
+        // Region corners are on faces: the half-open rule must agree there too.
+        for r in file.regions.iter() {
+            let lo = r.bounds.min.map(|v| v.to_native());
+            prop_assert_eq!(query::region_at(file, lo), brute_region_at(file, lo));
+        }
+    }
+
+    #[test]
+    fn ray_regions_match_brute_force(seed in any::<u64>()) {
+        let view = open(seed);
+        let file = view.file();
+        let b = query::bounds(file);
+        let mut rng = Rng::new(seed ^ 0x1234);
+        for _ in 0..100 {
+            let mut o = random_point(&mut rng, &b);
+            let d = random_dir(&mut rng);
+            // A ray in a face plane of some region: tests the half-open rule for rays
+            // parallel to a split plane.
+            if !file.regions.is_empty() && rng.chance(0.5) {
+                let r = &file.regions[rng.below(file.regions.len() as u64) as usize];
+                for a in 0..3 {
+                    if d[a] == 0.0 {
+                        let face = if rng.chance(0.5) { &r.bounds.min } else { &r.bounds.max };
+                        o[a] = face[a].to_native();
+                    }
+                }
+            }
+            let (t0, t1) = if rng.chance(0.5) {
+                (0.0, f64::INFINITY)
+            } else {
+                let a = rng.range(-5.0, 10.0);
+                (a, a + rng.range(0.0, 10.0))
+            };
+            let kd = query::ray_regions(file, o, d, t0, t1);
+            let bf = brute_ray(file, o, d, t0, t1);
+            prop_assert_eq!(kd.len(), bf.len(), "o {:?} d {:?}\nkd {:?}\nbf {:?}", o, d, kd, bf);
+            for (k, f) in kd.iter().zip(&bf) {
+                prop_assert_eq!(k.region, f.region);
+                prop_assert!(close(k.t_enter, f.t_enter) && close(k.t_exit, f.t_exit), "{:?} vs {:?}", k, f);
+            }
+            // Front to back, non-overlapping.
+            for w in kd.windows(2) {
+                prop_assert!(w[0].t_exit <= w[1].t_enter);
+            }
+            // The iterator form yields the same.
+            let it: Vec<_> = RayRegions::new(file, o, d, t0, t1).collect();
+            prop_assert_eq!(&it, &kd);
+        }
+    }
+
+    #[test]
+    fn brick_access_matches_layout(seed in any::<u64>()) {
+        let original = common::random_file(seed);
+        let view = open(seed);
+        let file = view.file();
+        for (bi, brick) in original.bricks.iter().enumerate() {
+            let ab = &file.bricks[bi];
+            for (fi, field) in original.fields.iter().enumerate() {
+                let vals = query::brick_values(file, bi as u32, fi).expect("brick values");
+                prop_assert_eq!(vals.len() as u64, query::brick_cells(ab));
+                let [nx, ny, nz] = brick.dims;
+                for k in 0..nz {
+                    for j in 0..ny {
+                        for i in 0..nx {
+                            let c = query::cell_index(ab, [i, j, k]).expect("in brick");
+                            let global = brick.first_value as usize
+                                + (i + nx * (j + ny * k)) as usize;
+                            prop_assert_eq!(vals[c].to_native(), field.values[global]);
+                        }
+                    }
+                }
+            }
+            prop_assert!(query::cell_index(ab, brick.dims).is_none());
+            let centre = query::cell_center(ab, [1, 0, 2]);
+            for a in 0..3 {
+                let ijk = [1.0, 0.0, 2.0][a];
+                prop_assert_eq!(centre[a], brick.origin[a] + ijk * brick.cell_width);
+            }
+            let s = query::brick_support(ab);
+            for a in 0..3 {
+                prop_assert_eq!(s.min[a], brick.origin[a] - brick.cell_width);
+                prop_assert_eq!(
+                    s.max[a],
+                    brick.origin[a] + f64::from(brick.dims[a]) * brick.cell_width
+                );
+            }
+        }
+        prop_assert!(query::brick_values(file, original.bricks.len() as u32, 0).is_none());
+        prop_assert!(query::brick_values(file, 0, original.fields.len()).is_none());
+        for (ri, region) in original.regions.iter().enumerate() {
+            let ids: Vec<u32> = query::region_bricks(file, ri as u32).iter().map(|v| v.to_native()).collect();
+            let start = region.bricks_start as usize;
+            prop_assert_eq!(&ids[..], &original.region_bricks[start..start + region.bricks_len as usize]);
+            for f in 0..original.fields.len() {
+                let r = original.region_ranges[ri * original.fields.len() + f];
+                prop_assert_eq!(query::region_range(file, ri as u32, f), Some((r.min, r.max)));
+            }
+        }
+        prop_assert!(query::region_bricks(file, original.regions.len() as u32).is_empty());
+        prop_assert_eq!(query::bounds(file), original.bounds);
+    }
+}
+
+#[test]
+fn ray_box_matches_point_sampling() {
+    let mut rng = Rng::new(99);
+    let file = common::random_file(5);
+    let bytes = writer::to_bytes(&file).expect("bytes");
+    let view = BrickFileView::from_bytes(Path::new("b.qbk"), &bytes).expect("open");
+    let b = &view.file().bounds;
+    let bounds = query::bounds(view.file());
+    for _ in 0..2000 {
+        let o = random_point(&mut rng, &bounds);
+        let d = random_dir(&mut rng);
+        let inside = |t: f64| {
+            let p: [f64; 3] = std::array::from_fn(|a| o[a] + t * d[a]);
+            query::contains(b, p)
+        };
+        match query::ray_box(b, o, d, -100.0, 100.0) {
+            Some((t0, t1)) => {
+                assert!(inside(0.5 * (t0 + t1)), "midpoint outside: {o:?} {d:?}");
+                let eps = 1e-7 * (t1 - t0);
+                assert!(inside(t0 + eps) && inside(t1 - eps));
+                if t0 > -100.0 {
+                    assert!(!inside(t0 - eps.max(1e-9)));
+                }
+            }
+            None => {
+                for i in 0..=200 {
+                    assert!(!inside(-100.0 + i as f64), "missed {o:?} {d:?}");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn degenerate_rays_give_nothing_not_panics() {
+    let view = open(11);
+    let file = view.file();
+    assert!(query::ray_regions(file, [f64::NAN; 3], [1.0, 0.0, 0.0], 0.0, 1.0).is_empty());
+    assert!(query::ray_regions(file, [0.0; 3], [f64::INFINITY, 0.0, 0.0], 0.0, 1.0).is_empty());
+    assert!(query::ray_regions(file, [0.0; 3], [1.0, 0.0, 0.0], 1.0, 0.0).is_empty());
+}

@@ -1,0 +1,184 @@
+//! Round trips: random files → write → open → equal; errors for version, checksum,
+//! overwrite of the input.
+
+mod common;
+
+use std::path::Path;
+
+use proptest::prelude::*;
+use qbricks_format::header::{Header, HEADER_LEN};
+use qbricks_format::writer::{self, WriteOptions};
+use qbricks_format::{BrickFileView, FormatErrorKind, OpenOptions, FORMAT_VERSION};
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+
+    #[test]
+    fn write_open_deserialize_is_identity(seed in any::<u64>()) {
+        let original = common::random_file(seed);
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("r.qbk");
+        let n = writer::write(&path, &original).expect("write");
+        let on_disk = std::fs::read(&path).expect("read");
+        prop_assert_eq!(n, on_disk.len() as u64);
+        // The streaming writer and the in-memory serialiser agree byte for byte.
+        prop_assert!(on_disk == writer::to_bytes(&original).expect("to_bytes"));
+
+        let view = BrickFileView::open(&path).expect("open");
+        prop_assert!(view.is_mapped());
+        prop_assert_eq!(view.byte_len(), n);
+        prop_assert_eq!(view.header().format_version, FORMAT_VERSION);
+        prop_assert_eq!(&view.to_brick_file().expect("deserialize"), &original);
+
+        let unchecked = BrickFileView::open_with(&path, &OpenOptions { verify_checksum: false })
+            .expect("open without checksum");
+        prop_assert!(!unchecked.checksum_verified());
+        prop_assert_eq!(&unchecked.to_brick_file().expect("deserialize"), &original);
+
+        let copy = BrickFileView::from_bytes(Path::new("mem.qbk"), &on_disk).expect("from_bytes");
+        prop_assert!(!copy.is_mapped());
+        prop_assert_eq!(&copy.to_brick_file().expect("deserialize"), &original);
+    }
+}
+
+fn sample_bytes() -> Vec<u8> {
+    writer::to_bytes(&common::random_file(7)).expect("to_bytes")
+}
+
+#[test]
+fn payload_is_16_aligned_in_file_and_memory() {
+    assert_eq!(HEADER_LEN % 16, 0);
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("a.qbk");
+    writer::write(&path, &common::random_file(3)).expect("write");
+    let view = BrickFileView::open(&path).expect("open");
+    assert_eq!(view.payload().as_ptr() as usize % 16, 0);
+    let copy =
+        BrickFileView::from_bytes(&path, &std::fs::read(&path).expect("read")).expect("copy");
+    assert_eq!(copy.payload().as_ptr() as usize % 16, 0);
+}
+
+#[test]
+fn version_mismatch_names_both_versions() {
+    let mut bytes = sample_bytes();
+    bytes[8..12].copy_from_slice(&2u32.to_le_bytes());
+    let err = BrickFileView::from_bytes(Path::new("new.qbk"), &bytes).expect_err("version 2");
+    assert!(matches!(
+        err.kind,
+        FormatErrorKind::UnsupportedVersion {
+            found: 2,
+            supported: 1
+        }
+    ));
+    let msg = err.to_string();
+    assert!(msg.starts_with("new.qbk: "), "{msg}");
+    assert!(
+        msg.contains("version 2") && msg.contains("version 1"),
+        "{msg}"
+    );
+    assert!(!msg.contains('\n'));
+}
+
+#[test]
+fn checksum_mismatch_is_reported_unless_skipped() {
+    let mut bytes = sample_bytes();
+    let header = Header::parse(&bytes).expect("header");
+    assert_eq!(header.payload_len as usize, bytes.len() - HEADER_LEN);
+    // Flip a bit in the checksum field itself: payload intact, header disagrees.
+    bytes[24] ^= 0x40;
+    let err = BrickFileView::from_bytes(Path::new("c.qbk"), &bytes).expect_err("checksum");
+    assert!(
+        matches!(err.kind, FormatErrorKind::ChecksumMismatch { .. }),
+        "{err}"
+    );
+    let view = BrickFileView::from_bytes_with(
+        Path::new("c.qbk"),
+        &bytes,
+        &OpenOptions {
+            verify_checksum: false,
+        },
+    )
+    .expect("checksum skipped, archive intact");
+    assert!(!view.checksum_verified());
+}
+
+#[test]
+fn missing_file_and_empty_file_are_clear_errors() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let missing = dir.path().join("missing.qbk");
+    let err = BrickFileView::open(&missing).expect_err("missing");
+    assert!(matches!(err.kind, FormatErrorKind::Io(_)));
+    assert!(err.to_string().contains("missing.qbk"));
+    let empty = dir.path().join("empty.qbk");
+    std::fs::write(&empty, b"").expect("write");
+    let err = BrickFileView::open(&empty).expect_err("empty");
+    assert!(matches!(
+        err.kind,
+        FormatErrorKind::TooShort {
+            expected: 48,
+            found: 0
+        }
+    ));
+    let text = dir.path().join("text.qbk");
+    std::fs::write(&text, [b'x'; 100]).expect("write");
+    let err = BrickFileView::open(&text).expect_err("not qbk");
+    assert!(
+        matches!(err.kind, FormatErrorKind::BadMagic { .. }),
+        "{err}"
+    );
+}
+
+#[test]
+fn refuses_to_overwrite_its_input() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let input = dir.path().join("in.vdb");
+    std::fs::write(&input, b"precious input").expect("write");
+    let sub = dir.path().join("sub");
+    std::fs::create_dir(&sub).expect("mkdir");
+    let file = common::random_file(1);
+    let opts = WriteOptions {
+        forbid_overwrite_of: Some(input.clone()),
+    };
+    let mut targets = vec![input.clone(), sub.join("..").join("in.vdb")];
+    #[cfg(unix)]
+    {
+        let link = dir.path().join("link.qbk");
+        std::os::unix::fs::symlink(&input, &link).expect("symlink");
+        targets.push(link);
+        let hard = dir.path().join("hard.qbk");
+        std::fs::hard_link(&input, &hard).expect("hard link");
+        targets.push(hard);
+    }
+    for target in &targets {
+        let err = writer::write_with(target, &file, &opts).expect_err("must refuse");
+        assert!(
+            matches!(err.kind, FormatErrorKind::OverwritesInput { .. }),
+            "{err}"
+        );
+        assert_eq!(std::fs::read(&input).expect("read"), b"precious input");
+    }
+    // A different target is fine.
+    let out = dir.path().join("out.qbk");
+    writer::write_with(&out, &file, &opts).expect("write next to the input");
+    BrickFileView::open(&out).expect("open");
+}
+
+#[test]
+fn failed_write_leaves_no_partial_file() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    // The target is a directory: the rename at the end fails after the archive was written.
+    let target = dir.path().join("out.qbk");
+    std::fs::create_dir(&target).expect("mkdir");
+    let err = writer::write(&target, &common::random_file(2)).expect_err("rename onto a dir");
+    assert!(err.to_string().contains("out.qbk"));
+    let names: Vec<_> = std::fs::read_dir(dir.path())
+        .expect("ls")
+        .map(|e| e.expect("entry").file_name())
+        .collect();
+    assert_eq!(names, vec![std::ffi::OsString::from("out.qbk")]);
+    assert!(target.is_dir());
+    // A missing directory is an error naming the path.
+    let err = writer::write(&dir.path().join("no/such/dir.qbk"), &common::random_file(2))
+        .expect_err("no dir");
+    assert!(err.to_string().contains("dir.qbk"));
+}
