@@ -95,6 +95,8 @@ pub enum BakeError {
     NoGrids,
     #[error("no grid named \"{name}\" (grids: {available})")]
     GridNotFound { name: String, available: String },
+    #[error("grid \"{grid}\" has a value type that cannot be baked (expected vec3s, vec3d, float or double)")]
+    UnsupportedGrid { grid: String },
     #[error("several scalar grids ({names}) and no vec3 grid: choose one with --grid")]
     AmbiguousScalar { names: String },
     #[error("cannot bake vec3 grids and scalar grids together: {vector} vs {scalar}")]
@@ -188,53 +190,92 @@ fn is_vector(g: &AnyGrid) -> bool {
     matches!(g, AnyGrid::Vec3s(_) | AnyGrid::Vec3d(_))
 }
 
-/// Picks the grids to bake (file order kept).
-fn select(grids: Vec<AnyGrid>, names: &[String]) -> Result<Vec<AnyGrid>, BakeError> {
+/// Kind of an input grid, for selection.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GridKind {
+    Vector,
+    Scalar,
+    /// A grid type the baker cannot read (listed, never selected by default).
+    Other,
+}
+
+/// Indices (file order) of the grids to bake among `grids` (name, kind): every grid named
+/// in `names`, or by default all vec3 grids, or the scalar grid(s) of the one scalar name
+/// when there is no vec3 grid.
+pub fn select_grids(grids: &[(&str, GridKind)], names: &[String]) -> Result<Vec<usize>, BakeError> {
+    let quoted = |v: Vec<&str>| {
+        v.iter()
+            .map(|n| format!("\"{n}\""))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
     if !names.is_empty() {
         for n in names {
-            if !grids.iter().any(|g| grid_name(g) == n) {
+            if !grids.iter().any(|(g, _)| g == n) {
                 return Err(BakeError::GridNotFound {
                     name: n.clone(),
-                    available: grids
-                        .iter()
-                        .map(|g| format!("\"{}\"", grid_name(g)))
-                        .collect::<Vec<_>>()
-                        .join(", "),
+                    available: quoted(grids.iter().map(|g| g.0).collect()),
                 });
             }
         }
-        let chosen: Vec<AnyGrid> = grids
-            .into_iter()
-            .filter(|g| names.iter().any(|n| n == grid_name(g)))
+        let chosen: Vec<usize> = (0..grids.len())
+            .filter(|&i| names.iter().any(|n| n == grids[i].0))
             .collect();
-        let v = chosen.iter().find(|g| is_vector(g));
-        let s = chosen.iter().find(|g| !is_vector(g));
-        if let (Some(v), Some(s)) = (v, s) {
+        if let Some(&i) = chosen.iter().find(|&&i| grids[i].1 == GridKind::Other) {
+            return Err(BakeError::UnsupportedGrid {
+                grid: grids[i].0.to_string(),
+            });
+        }
+        let v = chosen.iter().find(|&&i| grids[i].1 == GridKind::Vector);
+        let s = chosen.iter().find(|&&i| grids[i].1 == GridKind::Scalar);
+        if let (Some(&v), Some(&s)) = (v, s) {
             return Err(BakeError::MixedKinds {
-                vector: format!("\"{}\"", grid_name(v)),
-                scalar: format!("\"{}\"", grid_name(s)),
+                vector: format!("\"{}\"", grids[v].0),
+                scalar: format!("\"{}\"", grids[s].0),
             });
         }
         return Ok(chosen);
     }
-    if grids.iter().any(is_vector) {
-        return Ok(grids.into_iter().filter(is_vector).collect());
+    let vectors: Vec<usize> = (0..grids.len())
+        .filter(|&i| grids[i].1 == GridKind::Vector)
+        .collect();
+    if !vectors.is_empty() {
+        return Ok(vectors);
     }
-    let mut names: Vec<&str> = grids.iter().map(grid_name).collect();
-    names.dedup();
-    names.sort_unstable();
-    names.dedup();
-    match names.len() {
+    let scalars: Vec<usize> = (0..grids.len())
+        .filter(|&i| grids[i].1 == GridKind::Scalar)
+        .collect();
+    let mut snames: Vec<&str> = scalars.iter().map(|&i| grids[i].0).collect();
+    snames.sort_unstable();
+    snames.dedup();
+    match snames.len() {
         0 => Err(BakeError::NoGrids),
-        1 => Ok(grids),
+        1 => Ok(scalars),
         _ => Err(BakeError::AmbiguousScalar {
-            names: names
-                .iter()
-                .map(|n| format!("\"{n}\""))
-                .collect::<Vec<_>>()
-                .join(", "),
+            names: quoted(snames),
         }),
     }
+}
+
+fn select(grids: Vec<AnyGrid>, names: &[String]) -> Result<Vec<AnyGrid>, BakeError> {
+    let kinds: Vec<(&str, GridKind)> = grids
+        .iter()
+        .map(|g| {
+            let k = if is_vector(g) {
+                GridKind::Vector
+            } else {
+                GridKind::Scalar
+            };
+            (grid_name(g), k)
+        })
+        .collect();
+    let keep = select_grids(&kinds, names)?;
+    Ok(grids
+        .into_iter()
+        .enumerate()
+        .filter(|(i, _)| keep.contains(i))
+        .map(|(_, g)| g)
+        .collect())
 }
 
 /// Cell sets and values of the selected grids.

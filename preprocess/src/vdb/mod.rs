@@ -319,10 +319,7 @@ impl VdbFile {
                         RawError::invalid(
                             g.grid_pos as usize,
                             "grid descriptor",
-                            format!(
-                                "grid {name:?} is an instance of missing grid {:?}",
-                                parent
-                            ),
+                            format!("grid {name:?} is an instance of missing grid {:?}", parent),
                         )
                     })?;
                 Some(p)
