@@ -1,6 +1,9 @@
 //! Bake pipeline on in-memory grids sampled from closed-form flows.
 
-use format::{BrickFile, KdNode};
+mod bake_common;
+
+use bake_common::{cells, field, locate, reconstruct, Rng};
+use format::BrickFile;
 use preprocess::bake::{bake, BakeError, BakeOptions};
 use preprocess::derive::Stencil;
 use preprocess::fields::FieldKind;
@@ -31,17 +34,6 @@ fn abc_q(p: [f64; 3]) -> f64 {
     let g12 = -A * z.sin();
     let g21 = C * y.cos();
     -(g01 * g10 + g02 * g20 + g12 * g21)
-}
-
-/// Small deterministic random numbers (xorshift64*).
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        (self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
-    }
 }
 
 /// A grid of width `w` whose cell `i` is centred at `t + i*w`, active on `lo..hi`.
@@ -111,86 +103,12 @@ fn two_level(n: i32, f: &dyn Fn([f64; 3]) -> [f64; 3]) -> Vec<AnyGrid> {
     vec![AnyGrid::Vec3d(coarse), AnyGrid::Vec3d(fine)]
 }
 
-/// Every stored leaf cell: (centre, cell width, value of field `f`).
-fn cells(file: &BrickFile, f: usize) -> Vec<([f64; 3], f64, f32)> {
-    let mut out = vec![];
-    for b in &file.bricks {
-        let [nx, ny, nz] = b.dims.map(|d| d as usize);
-        for z in 0..nz {
-            for y in 0..ny {
-                for x in 0..nx {
-                    let c = [x, y, z];
-                    let p = [0, 1, 2].map(|a| b.origin[a] + c[a] as f64 * b.cell_width);
-                    let v = file.fields[f].values[b.first_value as usize + x + nx * (y + ny * z)];
-                    out.push((p, b.cell_width, v));
-                }
-            }
-        }
-    }
-    out
-}
-
-/// Reference reconstruction over the given bricks: `Σ H v / Σ H` with tents.
-fn reconstruct(file: &BrickFile, bricks: &[u32], f: usize, p: [f64; 3]) -> Option<f64> {
-    let (mut s, mut ws) = (0.0, 0.0);
-    for &bi in bricks {
-        let b = &file.bricks[bi as usize];
-        let [nx, ny, nz] = b.dims.map(|d| d as usize);
-        for z in 0..nz {
-            for y in 0..ny {
-                for x in 0..nx {
-                    let c = [x, y, z];
-                    let mut h = 1.0;
-                    for a in 0..3 {
-                        let ca = b.origin[a] + c[a] as f64 * b.cell_width;
-                        h *= (1.0 - (p[a] - ca).abs() / b.cell_width).max(0.0);
-                    }
-                    if h > 0.0 {
-                        let v =
-                            file.fields[f].values[b.first_value as usize + x + nx * (y + ny * z)];
-                        s += h * v as f64;
-                        ws += h;
-                    }
-                }
-            }
-        }
-    }
-    (ws > 1e-12).then(|| s / ws)
-}
-
-fn locate(file: &BrickFile, p: [f64; 3]) -> Option<u32> {
-    let mut n = 0usize;
-    loop {
-        match file.kd_nodes.get(n)? {
-            KdNode::Leaf { region } => return *region,
-            KdNode::Inner {
-                axis,
-                split,
-                left,
-                right,
-            } => {
-                n = if p[*axis as usize] < *split {
-                    *left
-                } else {
-                    *right
-                } as usize
-            }
-        }
-    }
-}
-
-fn field(file: &BrickFile, name: &str) -> usize {
-    file.fields
-        .iter()
-        .position(|f| f.name == name)
-        .unwrap_or_else(|| panic!("field {name} missing"))
-}
-
 /// (max, rms) of |Q − Q_exact| over leaf cells at least `margin` from the domain edge.
 fn q_error(file: &BrickFile, margin: f64) -> (f64, f64) {
     let q = field(file, "q");
     let (mut max, mut sum, mut n) = (0.0f64, 0.0, 0usize);
-    for (p, _, v) in cells(file, q) {
+    for c in cells(file, q) {
+        let (p, v) = (c.centre, c.value);
         if p.iter().all(|&x| x > margin && x < L - margin) {
             let e = (v as f64 - abc_q(p)).abs();
             max = max.max(e);
@@ -250,8 +168,9 @@ fn leaf_cells_bricks_and_counts() {
     assert_eq!(file.levels[0].cells + file.levels[1].cells, s.leaf_cells);
     // Every level-1 stored cell lies outside (or straddles) the fine box.
     let w = L / n as f64;
-    for (p, cw, _) in cells(&file, 0) {
-        if cw > 0.75 * w {
+    for c in cells(&file, 0) {
+        let p = c.centre;
+        if c.width > 0.75 * w {
             assert!(
                 p.iter().any(|&x| !(0.25 * L..=0.75 * L).contains(&x)),
                 "covered cell at {p:?}"
@@ -260,7 +179,8 @@ fn leaf_cells_bricks_and_counts() {
     }
     // Speed at a leaf cell is |u|.
     let sp = field(&file, "speed");
-    for (p, _, v) in cells(&file, sp).into_iter().take(200) {
+    for c in cells(&file, sp).into_iter().take(200) {
+        let (p, v) = (c.centre, c.value);
         let u = abc(p);
         let e = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt();
         assert!((v as f64 - e).abs() < 1e-5);
