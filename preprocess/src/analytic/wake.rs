@@ -69,18 +69,26 @@ struct Particle {
     core2: f64,
 }
 
-/// Uniform flow `U` along +x past a solid sphere (potential flow, zero velocity inside the
-/// sphere) plus the velocity induced by vortex rings made of Rosenhead–Moore particles:
-/// `u(x) = Σ α × r / (4π (|r|² + σ²)^{3/2})`, `r = x − x_p`.
+/// Uniform flow `U` along +x past a sphere plus the velocity induced by vortex rings made
+/// of Rosenhead–Moore particles: `u(x) = Σ α × r / (4π (|r|² + σ²)^{3/2})`, `r = x − x_p`.
 ///
-/// Every term is divergence-free and has a closed-form gradient. The rings are not
-/// advected: this is a steady snapshot with wake-like structure, not a solution of the
-/// Navier–Stokes equations.
+/// Around the sphere the flow comes from the Stokes stream function `ψ = ½ U ρ² F(r)`:
+/// with no boundary layer (`boundary_layer = 0`, the sample scene) it is potential flow
+/// (slip on the surface); with `δ > 0` a no-slip layer of that thickness joins it smoothly.
+/// Inside the sphere the velocity is uniform, continuing the surface's tangential velocity
+/// (see [`Wake::interior_velocity`]). Every term is divergence-free outside the sphere and
+/// has a closed-form gradient. The rings are not advected: this is a steady snapshot with
+/// wake-like structure, not a solution of the Navier–Stokes equations.
+///
+/// Why the sample scene has no no-slip layer: the layer's curved shear makes Q positive
+/// (up to ≈ 0.36 for δ = 0.1), which would coat the sphere with the iso-0.05 surface.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Wake {
     pub free_stream: f64,
     pub sphere_centre: [f64; 3],
     pub sphere_radius: f64,
+    /// Thickness δ of the no-slip layer on the sphere (0: slip, pure potential flow).
+    pub boundary_layer: f64,
     pub rings: Vec<Ring>,
     particles: Vec<Particle>,
 }
@@ -90,6 +98,7 @@ impl Wake {
         free_stream: f64,
         sphere_centre: [f64; 3],
         sphere_radius: f64,
+        boundary_layer: f64,
         rings: Vec<Ring>,
     ) -> Self {
         let particles = rings.iter().flat_map(Ring::particles).collect();
@@ -97,6 +106,7 @@ impl Wake {
             free_stream,
             sphere_centre,
             sphere_radius,
+            boundary_layer,
             rings,
             particles,
         }
@@ -127,7 +137,7 @@ impl Wake {
                 }
             })
             .collect();
-        Wake::new(0.06, [0.0; 3], 0.5, rings)
+        Wake::new(0.06, [0.0; 3], 0.5, SAMPLE_BOUNDARY_LAYER, rings)
     }
 
     /// Number of vortex particles.
@@ -135,10 +145,96 @@ impl Wake {
         self.particles.len()
     }
 
+    /// Radial profile of the sphere flow's Stokes stream function
+    /// `ψ = ½ U ρ² F(r)` (ρ the distance from the x axis through the centre):
+    /// `F = S((r − a) / δ) · (1 − a³ / r³)` with the ramp `S(t) = 1 − (1 − t)³` on [0, 1]
+    /// and 1 beyond. `S(0) = 0` gives `F(a) = F'(a) = 0`, i.e. no slip on the sphere; for
+    /// `r ≥ a + δ` this is exactly potential flow, joined with continuous second
+    /// derivatives. Returns `(F, F', F'')` in r.
+    fn profile(&self, r: f64) -> (f64, f64, f64) {
+        let a3 = self.sphere_radius.powi(3);
+        let p = 1.0 - a3 / (r * r * r);
+        let p1 = 3.0 * a3 / r.powi(4);
+        let p2 = -12.0 * a3 / r.powi(5);
+        let d = self.boundary_layer;
+        let t = if d > 0.0 {
+            (r - self.sphere_radius) / d
+        } else {
+            1.0
+        };
+        if t >= 1.0 {
+            return (p, p1, p2);
+        }
+        let m = 1.0 - t;
+        let (s0, s1, s2) = (1.0 - m * m * m, 3.0 * m * m / d, -6.0 * m / (d * d));
+        (s0 * p, s1 * p + s0 * p1, s2 * p + 2.0 * s1 * p1 + s0 * p2)
+    }
+
+    /// Velocity of the sphere flow from its stream function (so it is divergence-free for
+    /// any profile): `u = U [(F + G ρ²) e_x − G x (0, y, z)]` with `G = F' / (2r)`, in
+    /// coordinates `r` relative to the sphere centre.
+    fn sphere_velocity(&self, r: [f64; 3]) -> [f64; 3] {
+        let rr = dot(r, r).sqrt();
+        let (f, f1, _) = self.profile(rr);
+        let g = f1 / (2.0 * rr);
+        let rho2 = r[1] * r[1] + r[2] * r[2];
+        let u = self.free_stream;
+        [
+            u * (f + g * rho2),
+            -u * g * r[0] * r[1],
+            -u * g * r[0] * r[2],
+        ]
+    }
+
+    /// Gradient of [`Self::sphere_velocity`]:
+    /// `∂u_0/∂x_j = U (F' x_j / r + G' ρ² x_j / r + 2 G ρ_j)` and, for i = 1, 2,
+    /// `∂u_i/∂x_j = −U (G' x ρ_i x_j / r + G (δ_j0 ρ_i + x δ_ij))`, with ρ_j = (0, y, z)_j
+    /// and `G' = F'' / (2r) − F' / (2r²)`.
+    fn sphere_gradient(&self, r: [f64; 3]) -> Gradient {
+        let rr = dot(r, r).sqrt();
+        let (_, f1, f2) = self.profile(rr);
+        let g = f1 / (2.0 * rr);
+        let g1 = f2 / (2.0 * rr) - f1 / (2.0 * rr * rr);
+        let rho = [0.0, r[1], r[2]];
+        let rho2 = r[1] * r[1] + r[2] * r[2];
+        let u = self.free_stream;
+        let x = r[0];
+        let mut out = [[0.0; 3]; 3];
+        for j in 0..3 {
+            let nj = r[j] / rr;
+            out[0][j] = u * (f1 * nj + g1 * rho2 * nj + 2.0 * g * rho[j]);
+            for i in 1..3 {
+                let mut v = g1 * x * rho[i] * nj;
+                if j == 0 {
+                    v += g * rho[i];
+                }
+                if i == j {
+                    v += g * x;
+                }
+                out[i][j] = -u * v;
+            }
+        }
+        out
+    }
+
+    /// The uniform velocity (along x) inside the sphere: `U a F'(a) / 2`, whose tangential
+    /// part on the surface equals the outside flow's (1.5 U for the slip sphere, 0 with a
+    /// no-slip layer). Finite differences across the surface then see only a jump in the
+    /// normal component, which reads as strain (Q < 0); a zero interior under slip flow
+    /// would be a vortex sheet and give a spurious skin of large positive Q.
+    pub fn interior_velocity(&self) -> f64 {
+        let a = self.sphere_radius;
+        let (_, f1, _) = self.profile(a);
+        0.5 * self.free_stream * a * f1
+    }
+
     fn inside_sphere(&self, r: [f64; 3]) -> bool {
         dot(r, r) < self.sphere_radius * self.sphere_radius
     }
 }
+
+/// No-slip layer thickness of the `wake` scene.
+pub const SAMPLE_BOUNDARY_LAYER: f64 = 0.0;
 
 /// Rotates `v` by `angle` about the unit `axis` (Rodrigues).
 fn rotate(v: [f64; 3], axis: [f64; 3], angle: f64) -> [f64; 3] {
@@ -157,19 +253,9 @@ impl Flow for Wake {
     fn velocity(&self, p: [f64; 3]) -> [f64; 3] {
         let r = sub(p, self.sphere_centre);
         if self.inside_sphere(r) {
-            return [0.0; 3];
+            return [self.interior_velocity(), 0.0, 0.0];
         }
-        // Potential flow: φ = U x (1 + a³ / (2 r³)).
-        let r2 = dot(r, r);
-        let inv_r = 1.0 / r2.sqrt();
-        let inv_r3 = inv_r * inv_r * inv_r;
-        let inv_r5 = inv_r3 * inv_r * inv_r;
-        let k = 0.5 * self.free_stream * self.sphere_radius.powi(3);
-        let mut u = [
-            self.free_stream + k * (inv_r3 - 3.0 * r[0] * r[0] * inv_r5),
-            -k * 3.0 * r[0] * r[1] * inv_r5,
-            -k * 3.0 * r[0] * r[2] * inv_r5,
-        ];
+        let mut u = self.sphere_velocity(r);
         // Vortex particles.
         let mut w = [0.0; 3];
         for part in &self.particles {
@@ -193,29 +279,7 @@ impl Flow for Wake {
         if self.inside_sphere(r) {
             return [[0.0; 3]; 3];
         }
-        // Potential flow: u_i = U δ_i0 + k (δ_i0 / r³ − 3 x r_i / r⁵), so
-        // ∂u_i/∂x_j = k (−3 δ_i0 r_j / r⁵ − 3 (δ_0j r_i + x δ_ij) / r⁵ + 15 x r_i r_j / r⁷).
-        let r2 = dot(r, r);
-        let inv_r2 = 1.0 / r2;
-        let inv_r5 = inv_r2 * inv_r2 * inv_r2.sqrt();
-        let k = 0.5 * self.free_stream * self.sphere_radius.powi(3);
-        let x = r[0];
-        let mut g = [[0.0; 3]; 3];
-        for (i, row) in g.iter_mut().enumerate() {
-            for (j, gij) in row.iter_mut().enumerate() {
-                let mut v = 15.0 * x * r[i] * r[j] * inv_r2;
-                if i == 0 {
-                    v -= 3.0 * r[j];
-                }
-                if j == 0 {
-                    v -= 3.0 * r[i];
-                }
-                if i == j {
-                    v -= 3.0 * x;
-                }
-                *gij = k * v * inv_r5;
-            }
-        }
+        let mut g = self.sphere_gradient(r);
         // Vortex particles: u = α × d f / 4π with f = (|d|² + σ²)^{-3/2}, so
         // ∂u_i/∂x_j = (ε_ikj α_k f − 3 (α × d)_i d_j f / (|d|² + σ²)) / 4π.
         let mut acc = [[0.0; 3]; 3];
@@ -272,8 +336,8 @@ mod tests {
     }
 
     #[test]
-    fn sphere_potential_flow_has_no_normal_velocity_and_negative_q() {
-        let w = Wake::new(0.06, [0.0; 3], 0.5, Vec::new());
+    fn slip_sphere_is_potential_flow() {
+        let w = Wake::new(0.06, [0.0; 3], 0.5, 0.0, Vec::new());
         let mut rng = Rng::new(22);
         for _ in 0..100 {
             let d = normalize(rng.point([-1.0; 3], [1.0; 3]));
@@ -282,12 +346,60 @@ mod tests {
             // Irrotational: Q = -½‖S‖² < 0 outside.
             let q = q_from_gradient(&w.gradient(scale(d, 0.7)));
             assert!(q < 0.0);
+            // The dipole formula u = U e_x + (U a³ / 2) (e_x / r³ − 3 x r / r⁵).
+            let p = scale(d, 0.5 + rng.next_f64());
+            let r2 = dot(p, p);
+            let k = 0.5 * 0.06 * 0.125;
+            let u = w.velocity(p);
+            for i in 0..3 {
+                let e = if i == 0 { 1.0 } else { 0.0 };
+                let want = 0.06 * e + k * (e / r2.powf(1.5) - 3.0 * p[0] * p[i] / r2.powf(2.5));
+                assert!((u[i] - want).abs() < 1e-15, "{u:?}");
+            }
         }
+        check_flow(&w, [-2.0; 3], [2.0; 3], 100, 23);
         // Stagnation point upstream, 1.5 U at the equator, U far away.
         assert!(speed(w.velocity([-0.5 - 1e-9, 0.0, 0.0])) < 1e-8);
         assert!((w.velocity([0.0, 0.5 + 1e-12, 0.0])[0] - 0.09).abs() < 1e-9);
         assert!((w.velocity([-1e4, 3.0, 0.0])[0] - 0.06).abs() < 1e-9);
-        assert_eq!(w.velocity([0.1, 0.1, 0.1]), [0.0; 3]);
+        // Inside: 1.5 U along x, the surface's tangential velocity continued.
+        assert_eq!(w.velocity([0.1, 0.1, 0.1]), [0.09, 0.0, 0.0]);
+        let d = normalize([0.2, -0.5, 0.7]);
+        let (inside, outside) = (
+            w.velocity(scale(d, 0.5 - 1e-12)),
+            w.velocity(scale(d, 0.5 + 1e-12)),
+        );
+        let tangential = |u: [f64; 3]| sub(u, scale(d, dot(u, d)));
+        let jump = sub(tangential(inside), tangential(outside));
+        assert!(dot(jump, jump).sqrt() < 1e-9);
+    }
+
+    #[test]
+    fn no_slip_layer_is_smooth_divergence_free_and_matches_potential_flow_outside() {
+        let w = Wake::new(0.06, [0.0; 3], 0.5, 0.1, Vec::new());
+        let slip = Wake::new(0.06, [0.0; 3], 0.5, 0.0, Vec::new());
+        let mut rng = Rng::new(24);
+        for n in 0..200 {
+            let d = normalize(rng.point([-1.0; 3], [1.0; 3]));
+            // No slip on the surface, and at rest inside.
+            assert!(speed(w.velocity(scale(d, 0.5 + 1e-12))) < 1e-9);
+            assert_eq!(w.velocity(scale(d, 0.3)), [0.0; 3]);
+            // Exact potential flow beyond the layer.
+            let p = scale(d, 0.6 + rng.next_f64());
+            assert_eq!(w.velocity(p), slip.velocity(p));
+            // Gradient and divergence inside the layer.
+            let p = scale(d, 0.5 + 1e-4 + 0.0998 * rng.next_f64());
+            check_flow(&w, p, p, 1, n);
+        }
+        // Continuous velocity and gradient where the layer ends.
+        let d = normalize([0.3, 0.8, -0.2]);
+        let (a, b) = (scale(d, 0.6 - 1e-9), scale(d, 0.6 + 1e-9));
+        let (ga, gb) = (w.gradient(a), w.gradient(b));
+        for i in 0..3 {
+            for j in 0..3 {
+                assert!((ga[i][j] - gb[i][j]).abs() < 1e-7);
+            }
+        }
     }
 
     #[test]
