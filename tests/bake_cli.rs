@@ -19,17 +19,36 @@ fn bake_json_summary_matches_the_file() {
         .arg(&vdb)
         .output()
         .expect("run synth");
-    assert!(st.status.success(), "{}", String::from_utf8_lossy(&st.stderr));
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
 
     let out = qbricks_bake()
         .arg("bake")
         .arg(&vdb)
-        .args(["--json", "--fields", "q,speed,velocity", "--stencil", "cross-level"])
+        .args([
+            "--json",
+            "--fields",
+            "q,speed,velocity",
+            "--stencil",
+            "cross-level",
+        ])
         .output()
         .expect("run bake");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
-    let mut keys: Vec<&str> = v.as_object().expect("object").keys().map(|k| k.as_str()).collect();
+    let mut keys: Vec<&str> = v
+        .as_object()
+        .expect("object")
+        .keys()
+        .map(|k| k.as_str())
+        .collect();
     keys.sort_unstable();
     assert_eq!(
         keys,
@@ -65,12 +84,18 @@ fn bake_json_summary_matches_the_file() {
         .iter()
         .map(|f| f["name"].as_str().expect("name"))
         .collect();
-    assert_eq!(names, ["q", "speed", "velocity_x", "velocity_y", "velocity_z"]);
+    assert_eq!(
+        names,
+        ["q", "speed", "velocity_x", "velocity_y", "velocity_z"]
+    );
     assert_eq!(f.provenance.source.as_str(), "tiny.vdb");
     assert_eq!(f.provenance.grids.len(), 2);
 
     // Refuses to overwrite its input; unknown grid: one line, exit code 2.
-    for args in [vec!["-o", vdb.to_str().expect("utf8")], vec!["--grid", "nope"]] {
+    for args in [
+        vec!["-o", vdb.to_str().expect("utf8")],
+        vec!["--grid", "nope"],
+    ] {
         let out = qbricks_bake()
             .arg("bake")
             .arg(&vdb)

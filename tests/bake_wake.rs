@@ -44,10 +44,13 @@ struct Errors {
     p99: f64,
 }
 
-fn q_errors(file: &BrickFile, flow: &Wake) -> Errors {
+/// Errors over every `stride`-th leaf cell (the exact wake Q costs a sum over all vortex
+/// particles, so the lean test samples).
+fn q_errors(file: &BrickFile, flow: &Wake, stride: usize) -> Errors {
     let q = field(file, "q");
     let cs: Vec<Cell> = cells(file, q)
         .into_iter()
+        .step_by(stride)
         .filter(|c| smooth(flow, c.centre, c.width))
         .collect();
     let mut exact: Vec<f64> = cs.iter().map(|c| flow.q(c.centre).abs()).collect();
@@ -130,8 +133,8 @@ fn level_jumps(file: &BrickFile, flow: &Wake, p99: f64) -> (f64, f64, usize) {
 #[test]
 fn wake_q_error_shrinks_towards_second_order() {
     let flow = Wake::sample_scene();
-    let e1 = q_errors(&baked(32, 3, Stencil::Central), &flow);
-    let e2 = q_errors(&baked(64, 3, Stencil::Central), &flow);
+    let e1 = q_errors(&baked(32, 3, Stencil::Central), &flow, 1);
+    let e2 = q_errors(&baked(64, 3, Stencil::Central), &flow, 7);
     let (rmax, rrms) = (e1.max / e2.max, e1.rms / e2.rms);
     eprintln!(
         "n0 32: max {:.3e} rms {:.3e}; n0 64: max {:.3e} rms {:.3e}; ratios {rmax:.2} {rrms:.2}",
@@ -149,7 +152,7 @@ fn measure_q_error_and_level_jumps() {
     for stencil in [Stencil::Central, Stencil::CrossLevel] {
         for n0 in [32, 64, 128] {
             let file = baked(n0, 3, stencil);
-            let e = q_errors(&file, &flow);
+            let e = q_errors(&file, &flow, 1);
             let (js, jr, pairs) = level_jumps(&file, &flow, e.p99);
             println!(
                 "{:<11} {n0:>4} {:>6} {:>9} {:>10.4} {:>10.5} {:>15.4} {:>15.4} {pairs:>7}",

@@ -156,6 +156,26 @@ impl CellSet {
         Some(b * BLOCK_CELLS + offset_in_block(ijk))
     }
 
+    /// Active slot of the neighbour `d` cells (|d| <= 8) along `axis` of cell `ijk`
+    /// (held in `slot`): in-block arithmetic when the neighbour shares the block.
+    pub fn active_neighbour(
+        &self,
+        slot: usize,
+        ijk: [i32; 3],
+        axis: usize,
+        d: i32,
+    ) -> Option<usize> {
+        let local = (ijk[axis] & 7) + d;
+        if (0..8).contains(&local) {
+            let stride = [64i64, 8, 1][axis];
+            let s = (slot as i64 + stride * d as i64) as usize;
+            return self.is_active(s).then_some(s);
+        }
+        let mut q = ijk;
+        q[axis] = q[axis].checked_add(d)?;
+        self.active_slot(q)
+    }
+
     /// Slot of `ijk` when that cell is active.
     pub fn active_slot(&self, ijk: [i32; 3]) -> Option<usize> {
         self.slot(ijk).filter(|&s| self.is_active(s))
@@ -257,6 +277,14 @@ pub fn classify_leaves(sets: &mut [CellSet]) {
                         }
                         let ijk = me.ijk(b * BLOCK_CELLS + n);
                         let c = me.centre(ijk);
+                        // Quick exit: a cell whose centre no finer active cell holds is not
+                        // covered (most cells away from finer grids).
+                        let centre_in_finer = finer
+                            .iter()
+                            .any(|g| g.cell_at(c).and_then(|q| g.active_slot(q)).is_some());
+                        if !centre_in_finer {
+                            continue;
+                        }
                         let h = 0.5 * me.width;
                         let lo = c.map(|x| x - h);
                         let hi = c.map(|x| x + h);

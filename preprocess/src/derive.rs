@@ -123,21 +123,16 @@ pub fn gradient(f: &VelocityField, s: usize, ijk: [i32; 3], stencil: Stencil) ->
     let set = &f.sets[s];
     let vals = &f.values[s];
     let h = set.width;
-    let at = |q: [i32; 3]| set.active_slot(q).map(|t| vals[t]);
-    let step = |q: [i32; 3], a: usize, d: i32| {
-        let mut r = q;
-        r[a] = r[a].saturating_add(d);
-        r
+    let Some(slot) = set.active_slot(ijk) else {
+        return [[0.0; 3]; 3];
     };
-    let u0 = match at(ijk) {
-        Some(u) => u,
-        None => return [[0.0; 3]; 3],
-    };
+    let u0 = vals[slot];
+    let at = |a: usize, d: i32| set.active_neighbour(slot, ijk, a, d).map(|t| vals[t]);
     let centre = set.centre(ijk);
     let mut g = [[0.0; 3]; 3];
     for a in 0..3 {
-        let mut plus = at(step(ijk, a, 1));
-        let mut minus = at(step(ijk, a, -1));
+        let mut plus = at(a, 1);
+        let mut minus = at(a, -1);
         if stencil == Stencil::CrossLevel && (plus.is_none() || minus.is_none()) {
             let mut p = centre;
             if plus.is_none() {
@@ -151,11 +146,11 @@ pub fn gradient(f: &VelocityField, s: usize, ijk: [i32; 3], stencil: Stencil) ->
         }
         let d = match (minus, plus) {
             (Some(m), Some(p)) => sub(p, m).map(|c| c / (2.0 * h)),
-            (None, Some(p)) => match at(step(ijk, a, 2)) {
+            (None, Some(p)) => match at(a, 2) {
                 Some(pp) => [0, 1, 2].map(|c| (-3.0 * u0[c] + 4.0 * p[c] - pp[c]) / (2.0 * h)),
                 None => sub(p, u0).map(|c| c / h),
             },
-            (Some(m), None) => match at(step(ijk, a, -2)) {
+            (Some(m), None) => match at(a, -2) {
                 Some(mm) => [0, 1, 2].map(|c| (3.0 * u0[c] - 4.0 * m[c] + mm[c]) / (2.0 * h)),
                 None => sub(u0, m).map(|c| c / h),
             },

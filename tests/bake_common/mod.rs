@@ -55,7 +55,13 @@ pub fn locate(file: &BrickFile, p: [f64; 3]) -> Option<u32> {
                 split,
                 left,
                 right,
-            } => n = if p[*axis as usize] < *split { *left } else { *right } as usize,
+            } => {
+                n = if p[*axis as usize] < *split {
+                    *left
+                } else {
+                    *right
+                } as usize
+            }
         }
     }
 }
@@ -91,8 +97,7 @@ pub fn reconstruct(file: &BrickFile, bricks: &[u32], f: usize, p: [f64; 3]) -> O
                         h *= (1.0 - (p[a] - ca).abs() / b.cell_width).max(0.0);
                     }
                     if h > 0.0 {
-                        let i = b.first_value as usize
-                            + (x + d[0] * (y + d[1] * z)) as usize;
+                        let i = b.first_value as usize + (x + d[0] * (y + d[1] * z)) as usize;
                         s += h * file.fields[f].values[i] as f64;
                         ws += h;
                     }
