@@ -1,1 +1,707 @@
-//! (to be written)
+//! The bake pipeline: grids → cells → leaf cells → derived fields → bricks → regions →
+//! KD-tree → [`BrickFile`].
+//!
+//! Every parallel stage maps items to results collected in item order, so the output is
+//! byte-identical whatever the thread count.
+
+use rayon::prelude::*;
+use serde::Serialize;
+
+use format::{Aabb, Brick, BrickFile, Field, Level, Provenance, Region, SourceGrid, ValueRange};
+
+use crate::bricks::{make_bricks, BrickBox};
+use crate::cells::{classify_leaves, CellSet};
+use crate::derive::{gradient, q_from_gradient, speed, Stencil, VelocityField};
+use crate::fields::{range_and_histogram, region_ranges, FieldKind, RangeInput};
+use crate::grid::{AnyGrid, Grid, Transform};
+use crate::levels::assign_levels;
+use crate::nonfinite::{self, CellValue};
+use crate::regions::{self, Bbox};
+
+/// Default cap on brick edge length (cells).
+pub const DEFAULT_MAX_BRICK: u32 = 8;
+/// Default cap on the number of input cells (tiles counted as the voxels they cover).
+pub const DEFAULT_MAX_CELLS: u64 = 1 << 28;
+
+/// What to bake and how.
+#[derive(Debug, Clone, Serialize)]
+pub struct BakeOptions {
+    /// Grid names to bake (every grid of that name); empty: all vec3 grids, or the scalar
+    /// grid when there is no vec3 grid.
+    pub grids: Vec<String>,
+    /// Fields derived from velocity; `None` means the default (Q and speed). Scalar grids
+    /// are baked as their own field and accept no field list.
+    pub fields: Option<Vec<FieldKind>>,
+    pub stencil: Stencil,
+    /// Largest brick edge in cells.
+    pub max_brick: u32,
+    /// Refuse non-finite input values instead of replacing them.
+    pub strict: bool,
+    /// Source file name recorded in the provenance (not part of the options JSON).
+    #[serde(skip)]
+    pub source: String,
+    /// Largest accepted number of input cells.
+    #[serde(skip)]
+    pub max_cells: u64,
+    /// Run on a pool of this many threads (None: rayon's global pool). Not recorded: the
+    /// output does not depend on it.
+    #[serde(skip)]
+    pub threads: Option<usize>,
+}
+
+impl Default for BakeOptions {
+    fn default() -> Self {
+        BakeOptions {
+            grids: vec![],
+            fields: None,
+            stencil: Stencil::Central,
+            max_brick: DEFAULT_MAX_BRICK,
+            strict: false,
+            source: String::new(),
+            max_cells: DEFAULT_MAX_CELLS,
+            threads: None,
+        }
+    }
+}
+
+/// Range of one baked field.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FieldSummary {
+    pub name: String,
+    pub min: f32,
+    pub max: f32,
+}
+
+/// What a bake did.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BakeSummary {
+    pub input_cells: u64,
+    pub leaf_cells: u64,
+    pub dropped_cells: u64,
+    pub bricks: u64,
+    pub regions: u64,
+    pub kd_nodes: u64,
+    pub nonfinite: u64,
+    pub fields: Vec<FieldSummary>,
+    /// Non-fatal problems (non-finite values replaced, …), one line each.
+    #[serde(skip)]
+    pub warnings: Vec<String>,
+}
+
+/// Why a bake was refused.
+#[derive(Debug, thiserror::Error)]
+pub enum BakeError {
+    #[error("no grids to bake: the input has no vec3 or scalar grid")]
+    NoGrids,
+    #[error("no grid named \"{name}\" (grids: {available})")]
+    GridNotFound { name: String, available: String },
+    #[error("grid \"{grid}\" has a value type that cannot be baked (expected vec3s, vec3d, float or double)")]
+    UnsupportedGrid { grid: String },
+    #[error("several scalar grids ({names}) and no vec3 grid: choose one with --grid")]
+    AmbiguousScalar { names: String },
+    #[error("cannot bake vec3 grids and scalar grids together: {vector} vs {scalar}")]
+    MixedKinds { vector: String, scalar: String },
+    #[error(
+        "scalar grid \"{grid}\" is baked as its own field; --fields applies to velocity grids only"
+    )]
+    FieldsForScalar { grid: String },
+    #[error("no fields requested")]
+    NoFields,
+    #[error("grid \"{grid}\": transform is not usable: {found}")]
+    BadTransform { grid: String, found: String },
+    #[error("grid \"{grid}\": voxels must be cubes, found voxel size {voxel_size:?}")]
+    NonCubicVoxels { grid: String, voxel_size: [f64; 3] },
+    #[error("grid \"{grid}\": voxel size {voxel_size} is not the finest voxel size {finest} times a power of two")]
+    NonPowerOfTwo {
+        grid: String,
+        voxel_size: f64,
+        finest: f64,
+    },
+    #[error("{cells} input cells (tiles counted as voxels) exceed the limit of {limit}")]
+    TooManyCells { cells: u64, limit: u64 },
+    #[error("grid \"{grid}\": {count} non-finite values (first at voxel {first:?}); refused because of --strict")]
+    NonFinite {
+        grid: String,
+        count: u64,
+        first: [i32; 3],
+    },
+    #[error("--max-brick must be at least 1, found {0}")]
+    BadMaxBrick(u32),
+    #[error("grids have no active cells")]
+    Empty,
+    #[error("thread pool: {0}")]
+    ThreadPool(String),
+}
+
+/// Bakes `grids` into a brick file.
+pub fn bake(
+    grids: Vec<AnyGrid>,
+    opts: &BakeOptions,
+) -> Result<(BrickFile, BakeSummary), BakeError> {
+    bake_with_progress(grids, opts, &|_| {})
+}
+
+/// As [`bake`], calling `stage` with the name of each stage as it starts.
+pub fn bake_with_progress(
+    grids: Vec<AnyGrid>,
+    opts: &BakeOptions,
+    stage: &(dyn Fn(&str) + Sync),
+) -> Result<(BrickFile, BakeSummary), BakeError> {
+    match opts.threads {
+        Some(n) => {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(n.max(1))
+                .build()
+                .map_err(|e| BakeError::ThreadPool(e.to_string()))?;
+            pool.install(|| run(grids, opts, stage))
+        }
+        None => run(grids, opts, stage),
+    }
+}
+
+fn grid_name(g: &AnyGrid) -> &str {
+    match g {
+        AnyGrid::Float(g) => &g.name,
+        AnyGrid::Double(g) => &g.name,
+        AnyGrid::Vec3s(g) => &g.name,
+        AnyGrid::Vec3d(g) => &g.name,
+    }
+}
+
+fn grid_transform(g: &AnyGrid) -> Transform {
+    match g {
+        AnyGrid::Float(g) => g.transform,
+        AnyGrid::Double(g) => g.transform,
+        AnyGrid::Vec3s(g) => g.transform,
+        AnyGrid::Vec3d(g) => g.transform,
+    }
+}
+
+fn grid_voxels(g: &AnyGrid) -> u64 {
+    match g {
+        AnyGrid::Float(g) => g.active_voxel_count(),
+        AnyGrid::Double(g) => g.active_voxel_count(),
+        AnyGrid::Vec3s(g) => g.active_voxel_count(),
+        AnyGrid::Vec3d(g) => g.active_voxel_count(),
+    }
+}
+
+fn is_vector(g: &AnyGrid) -> bool {
+    matches!(g, AnyGrid::Vec3s(_) | AnyGrid::Vec3d(_))
+}
+
+/// Kind of an input grid, for selection.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GridKind {
+    Vector,
+    Scalar,
+    /// A grid type the baker cannot read (listed, never selected by default).
+    Other,
+}
+
+/// Indices (file order) of the grids to bake among `grids` (name, kind): every grid named
+/// in `names`, or by default all vec3 grids, or the scalar grid(s) of the one scalar name
+/// when there is no vec3 grid.
+pub fn select_grids(grids: &[(&str, GridKind)], names: &[String]) -> Result<Vec<usize>, BakeError> {
+    let quoted = |v: Vec<&str>| {
+        v.iter()
+            .map(|n| format!("\"{n}\""))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    if !names.is_empty() {
+        for n in names {
+            if !grids.iter().any(|(g, _)| g == n) {
+                return Err(BakeError::GridNotFound {
+                    name: n.clone(),
+                    available: quoted(grids.iter().map(|g| g.0).collect()),
+                });
+            }
+        }
+        let chosen: Vec<usize> = (0..grids.len())
+            .filter(|&i| names.iter().any(|n| n == grids[i].0))
+            .collect();
+        if let Some(&i) = chosen.iter().find(|&&i| grids[i].1 == GridKind::Other) {
+            return Err(BakeError::UnsupportedGrid {
+                grid: grids[i].0.to_string(),
+            });
+        }
+        let v = chosen.iter().find(|&&i| grids[i].1 == GridKind::Vector);
+        let s = chosen.iter().find(|&&i| grids[i].1 == GridKind::Scalar);
+        if let (Some(&v), Some(&s)) = (v, s) {
+            return Err(BakeError::MixedKinds {
+                vector: format!("\"{}\"", grids[v].0),
+                scalar: format!("\"{}\"", grids[s].0),
+            });
+        }
+        return Ok(chosen);
+    }
+    let vectors: Vec<usize> = (0..grids.len())
+        .filter(|&i| grids[i].1 == GridKind::Vector)
+        .collect();
+    if !vectors.is_empty() {
+        return Ok(vectors);
+    }
+    let scalars: Vec<usize> = (0..grids.len())
+        .filter(|&i| grids[i].1 == GridKind::Scalar)
+        .collect();
+    let mut snames: Vec<&str> = scalars.iter().map(|&i| grids[i].0).collect();
+    snames.sort_unstable();
+    snames.dedup();
+    match snames.len() {
+        0 => Err(BakeError::NoGrids),
+        1 => Ok(scalars),
+        _ => Err(BakeError::AmbiguousScalar {
+            names: quoted(snames),
+        }),
+    }
+}
+
+fn select(grids: Vec<AnyGrid>, names: &[String]) -> Result<Vec<AnyGrid>, BakeError> {
+    let kinds: Vec<(&str, GridKind)> = grids
+        .iter()
+        .map(|g| {
+            let k = if is_vector(g) {
+                GridKind::Vector
+            } else {
+                GridKind::Scalar
+            };
+            (grid_name(g), k)
+        })
+        .collect();
+    let keep = select_grids(&kinds, names)?;
+    Ok(grids
+        .into_iter()
+        .enumerate()
+        .filter(|(i, _)| keep.contains(i))
+        .map(|(_, g)| g)
+        .collect())
+}
+
+/// Cell sets and values of the selected grids.
+enum Input {
+    Vector(Vec<CellSet>, Vec<Vec<[f64; 3]>>),
+    Scalar(Vec<CellSet>, Vec<Vec<f64>>, String),
+}
+
+fn to_sets<V: Copy + Sync, T: Copy + Default + Send>(
+    grids: &[(&Grid<V>, u32)],
+    conv: fn(V) -> T,
+) -> (Vec<CellSet>, Vec<Vec<T>>) {
+    grids
+        .par_iter()
+        .map(|(g, l)| CellSet::from_grid(g, *l, conv))
+        .collect::<Vec<_>>()
+        .into_iter()
+        .unzip()
+}
+
+fn fix_nonfinite<T: CellValue>(
+    sets: &[CellSet],
+    values: &mut [Vec<T>],
+    strict: bool,
+    warnings: &mut Vec<String>,
+) -> Result<u64, BakeError> {
+    let mut total = 0;
+    for (set, vals) in sets.iter().zip(values.iter_mut()) {
+        let rep = nonfinite::count(set, vals);
+        if rep.count == 0 {
+            continue;
+        }
+        let first = rep.first.unwrap_or([0; 3]);
+        if strict {
+            return Err(BakeError::NonFinite {
+                grid: set.name.clone(),
+                count: rep.count,
+                first,
+            });
+        }
+        nonfinite::replace(set, vals);
+        warnings.push(format!(
+            "grid \"{}\": replaced {} non-finite values (first at voxel {:?}) by the average of their finite neighbours",
+            set.name, rep.count, first
+        ));
+        total += rep.count;
+    }
+    Ok(total)
+}
+
+fn run(
+    grids: Vec<AnyGrid>,
+    opts: &BakeOptions,
+    stage: &(dyn Fn(&str) + Sync),
+) -> Result<(BrickFile, BakeSummary), BakeError> {
+    if opts.max_brick == 0 {
+        return Err(BakeError::BadMaxBrick(opts.max_brick));
+    }
+    stage("selecting grids");
+    let grids = select(grids, &opts.grids)?;
+    if grids.is_empty() {
+        return Err(BakeError::NoGrids);
+    }
+    let named: Vec<(&str, Transform)> = grids
+        .iter()
+        .map(|g| (grid_name(g), grid_transform(g)))
+        .collect();
+    let (levels, widths) = assign_levels(&named)?;
+    let input_cells: u64 = grids.iter().map(grid_voxels).sum();
+    if input_cells > opts.max_cells {
+        return Err(BakeError::TooManyCells {
+            cells: input_cells,
+            limit: opts.max_cells,
+        });
+    }
+    if input_cells == 0 {
+        return Err(BakeError::Empty);
+    }
+    let source_grids: Vec<SourceGrid> = grids
+        .iter()
+        .zip(&levels)
+        .map(|(g, &level)| SourceGrid {
+            name: grid_name(g).to_string(),
+            voxel_size: grid_transform(g).voxel_size,
+            level,
+        })
+        .collect();
+
+    // Cells.
+    stage("reading cells");
+    let vector = is_vector(&grids[0]);
+    let mut input = if vector {
+        if let Some(f) = &opts.fields {
+            if f.is_empty() {
+                return Err(BakeError::NoFields);
+            }
+        }
+        let mut s32 = vec![];
+        let mut s64 = vec![];
+        let mut order = vec![];
+        for (g, &l) in grids.iter().zip(&levels) {
+            match g {
+                AnyGrid::Vec3s(g) => {
+                    order.push((false, s32.len()));
+                    s32.push((g, l));
+                }
+                AnyGrid::Vec3d(g) => {
+                    order.push((true, s64.len()));
+                    s64.push((g, l));
+                }
+                _ => {}
+            }
+        }
+        let (a_sets, a_vals) = to_sets(&s32, |v: [f32; 3]| v.map(f64::from));
+        let (b_sets, b_vals) = to_sets(&s64, |v: [f64; 3]| v);
+        let mut a = a_sets.into_iter().zip(a_vals).map(Some).collect::<Vec<_>>();
+        let mut b = b_sets.into_iter().zip(b_vals).map(Some).collect::<Vec<_>>();
+        let (mut sets, mut vals) = (vec![], vec![]);
+        for (dbl, i) in order {
+            let slot = if dbl { &mut b[i] } else { &mut a[i] };
+            if let Some((s, v)) = slot.take() {
+                sets.push(s);
+                vals.push(v);
+            }
+        }
+        Input::Vector(sets, vals)
+    } else {
+        let name = grid_name(&grids[0]).to_string();
+        if opts.fields.is_some() {
+            return Err(BakeError::FieldsForScalar { grid: name });
+        }
+        let mut s32 = vec![];
+        let mut s64 = vec![];
+        let mut order = vec![];
+        for (g, &l) in grids.iter().zip(&levels) {
+            match g {
+                AnyGrid::Float(g) => {
+                    order.push((false, s32.len()));
+                    s32.push((g, l));
+                }
+                AnyGrid::Double(g) => {
+                    order.push((true, s64.len()));
+                    s64.push((g, l));
+                }
+                _ => {}
+            }
+        }
+        let (a_sets, a_vals) = to_sets(&s32, f64::from);
+        let (b_sets, b_vals) = to_sets(&s64, |v: f64| v);
+        let mut a = a_sets.into_iter().zip(a_vals).map(Some).collect::<Vec<_>>();
+        let mut b = b_sets.into_iter().zip(b_vals).map(Some).collect::<Vec<_>>();
+        let (mut sets, mut vals) = (vec![], vec![]);
+        for (dbl, i) in order {
+            let slot = if dbl { &mut b[i] } else { &mut a[i] };
+            if let Some((s, v)) = slot.take() {
+                sets.push(s);
+                vals.push(v);
+            }
+        }
+        Input::Scalar(sets, vals, name)
+    };
+    drop(grids);
+
+    // Non-finite values.
+    let mut warnings = Vec::new();
+    let nonfinite = match &mut input {
+        Input::Vector(sets, vals) => fix_nonfinite(sets, vals, opts.strict, &mut warnings)?,
+        Input::Scalar(sets, vals, _) => fix_nonfinite(sets, vals, opts.strict, &mut warnings)?,
+    };
+
+    // Leaf cells.
+    stage("classifying leaf cells");
+    match &mut input {
+        Input::Vector(s, _) | Input::Scalar(s, _, _) => classify_leaves(s),
+    };
+    let sets: &[CellSet] = match &input {
+        Input::Vector(s, _) | Input::Scalar(s, _, _) => s,
+    };
+    let leaf_cells: u64 = sets.iter().map(|s| s.leaf_count()).sum();
+
+    // Bricks.
+    stage("bricking");
+    let bricks = make_bricks(sets, opts.max_brick);
+    let mut first = Vec::with_capacity(bricks.len());
+    let mut acc = 0u64;
+    for b in &bricks {
+        first.push(acc);
+        acc += b.cells();
+    }
+
+    // Field values, brick after brick.
+    stage("deriving fields");
+    let (names, values) = match &input {
+        Input::Vector(sets, vals) => {
+            let kinds = opts
+                .fields
+                .clone()
+                .unwrap_or(vec![FieldKind::Q, FieldKind::Speed]);
+            let names: Vec<String> = kinds
+                .iter()
+                .flat_map(|k| k.names().iter().map(|n| n.to_string()))
+                .collect();
+            let field = VelocityField { sets, values: vals };
+            let values = per_brick(&bricks, names.len(), |b, out| {
+                let set = &sets[b.set];
+                let v = &vals[b.set];
+                for ijk in b.cell_coords() {
+                    let u = set.slot(ijk).map(|s| v[s]).unwrap_or_default();
+                    for k in &kinds {
+                        match k {
+                            FieldKind::Q => {
+                                let g = gradient(&field, b.set, ijk, opts.stencil);
+                                out.push(q_from_gradient(&g) as f32);
+                            }
+                            FieldKind::Speed => out.push(speed(&u) as f32),
+                            FieldKind::Velocity => out.extend(u.map(|c| c as f32)),
+                        }
+                    }
+                }
+            });
+            (names, values)
+        }
+        Input::Scalar(sets, vals, name) => {
+            let values = per_brick(&bricks, 1, |b, out| {
+                let set = &sets[b.set];
+                let v = &vals[b.set];
+                for ijk in b.cell_coords() {
+                    out.push(set.slot(ijk).map(|s| v[s]).unwrap_or_default() as f32);
+                }
+            });
+            (vec![name.clone()], values)
+        }
+    };
+
+    // Supports, regions, KD-tree.
+    stage("building regions");
+    let origins: Vec<[f64; 3]> = bricks.iter().map(|b| sets[b.set].centre(b.lo)).collect();
+    let bwidths: Vec<f64> = bricks.iter().map(|b| sets[b.set].width).collect();
+    let supports = snapped_supports(sets, &bricks, widths[0]);
+    let (bounds, tree) = regions::build(&supports);
+    let (kd_nodes, region_list) = crate::kdtree::flatten(&tree);
+    let ranges = region_ranges(
+        &RangeInput {
+            bricks: &bricks,
+            origins: &origins,
+            widths: &bwidths,
+            first: &first,
+            values: &values,
+        },
+        &region_list,
+    );
+
+    // Assemble.
+    stage("assembling");
+    let mut fields = Vec::with_capacity(names.len());
+    let mut field_summaries = Vec::with_capacity(names.len());
+    for (name, vals) in names.into_iter().zip(values) {
+        let (min, max, histogram) = range_and_histogram(&vals);
+        field_summaries.push(FieldSummary {
+            name: name.clone(),
+            min,
+            max,
+        });
+        fields.push(Field {
+            name,
+            min,
+            max,
+            histogram,
+            values: vals,
+        });
+    }
+    let mut file_levels: Vec<Level> = widths
+        .iter()
+        .map(|&w| Level {
+            cell_width: w,
+            cells: 0,
+            bricks: 0,
+        })
+        .collect();
+    for b in &bricks {
+        let l = &mut file_levels[b.level as usize];
+        l.cells += b.cells();
+        l.bricks += 1;
+    }
+    let file_bricks: Vec<Brick> = bricks
+        .iter()
+        .zip(&origins)
+        .zip(&first)
+        .map(|((b, o), f)| Brick {
+            level: b.level,
+            origin: *o,
+            cell_width: sets[b.set].width,
+            dims: b.dims,
+            first_value: *f,
+        })
+        .collect();
+    let mut region_bricks = Vec::new();
+    let mut file_regions = Vec::with_capacity(region_list.len());
+    for (rb, ids) in &region_list {
+        let finest_level = ids
+            .iter()
+            .map(|&i| bricks[i as usize].level)
+            .min()
+            .unwrap_or(0);
+        file_regions.push(Region {
+            bounds: Aabb {
+                min: rb.min,
+                max: rb.max,
+            },
+            bricks_start: region_bricks.len() as u32,
+            bricks_len: ids.len() as u32,
+            finest_level,
+        });
+        region_bricks.extend_from_slice(ids);
+    }
+    let bounds = bounds.unwrap_or(Bbox {
+        min: [0.0; 3],
+        max: [0.0; 3],
+    });
+    let summary = BakeSummary {
+        input_cells,
+        leaf_cells,
+        dropped_cells: input_cells - leaf_cells,
+        bricks: bricks.len() as u64,
+        regions: file_regions.len() as u64,
+        kd_nodes: kd_nodes.len() as u64,
+        nonfinite,
+        fields: field_summaries,
+        warnings,
+    };
+    let file = BrickFile {
+        provenance: Provenance {
+            source: opts.source.clone(),
+            grids: source_grids,
+            bake_options: serde_json::to_string(opts).unwrap_or_default(),
+            tool_version: env!("CARGO_PKG_VERSION").to_string(),
+        },
+        bounds: Aabb {
+            min: bounds.min,
+            max: bounds.max,
+        },
+        levels: file_levels,
+        fields,
+        bricks: file_bricks,
+        regions: file_regions,
+        region_bricks,
+        region_ranges: ranges
+            .into_iter()
+            .map(|[min, max]| ValueRange { min, max })
+            .collect(),
+        kd_nodes,
+    };
+    Ok((file, summary))
+}
+
+/// Computes `nf` values per cell for every brick (in parallel, collected in brick order)
+/// and returns them as one array per field, brick after brick, x fastest.
+fn per_brick(
+    bricks: &[BrickBox],
+    nf: usize,
+    cell_values: impl Fn(&BrickBox, &mut Vec<f32>) + Sync,
+) -> Vec<Vec<f32>> {
+    let chunks: Vec<Vec<f32>> = bricks
+        .par_iter()
+        .map(|b| {
+            let mut out = Vec::with_capacity(b.cells() as usize * nf);
+            cell_values(b, &mut out);
+            out
+        })
+        .collect();
+    let total: usize = bricks.iter().map(|b| b.cells() as usize).sum();
+    let mut fields: Vec<Vec<f32>> = (0..nf).map(|_| Vec::with_capacity(total)).collect();
+    for c in &chunks {
+        for cell in c.chunks_exact(nf) {
+            for (f, v) in cell.iter().enumerate() {
+                fields[f].push(*v);
+            }
+        }
+    }
+    fields
+}
+
+/// Brick supports (first centre − w .. first centre + dims·w), with coordinates that agree
+/// up to rounding across lattices snapped to one value, so that no sliver regions appear.
+fn snapped_supports(sets: &[CellSet], bricks: &[BrickBox], finest: f64) -> Vec<Bbox> {
+    let raw: Vec<Bbox> = bricks
+        .iter()
+        .map(|b| {
+            let s = &sets[b.set];
+            let lo = [0, 1, 2].map(|a| b.lo[a] as i64 - 1);
+            let hi = [0, 1, 2].map(|a| b.lo[a] as i64 + b.dims[a] as i64);
+            Bbox {
+                min: s.transform.index_to_world(lo.map(|c| c as f64)),
+                max: s.transform.index_to_world(hi.map(|c| c as f64)),
+            }
+        })
+        .collect();
+    let tol = 1e-7 * finest;
+    let mut canon: [Vec<f64>; 3] = Default::default();
+    for (a, c) in canon.iter_mut().enumerate() {
+        c.extend(raw.iter().flat_map(|b| [b.min[a], b.max[a]]));
+        c.sort_by(f64::total_cmp);
+        // Keep the first value of every run of values closer than `tol` to their neighbour.
+        let mut out: Vec<f64> = Vec::with_capacity(c.len());
+        let mut last = f64::NEG_INFINITY;
+        for &x in c.iter() {
+            if x - last > tol {
+                out.push(x);
+            }
+            last = x;
+        }
+        *c = out;
+    }
+    let snap = |a: usize, x: f64| -> f64 {
+        let c = &canon[a];
+        let i = c.partition_point(|&v| v <= x);
+        if i == 0 {
+            x
+        } else {
+            c[i - 1]
+        }
+    };
+    raw.iter()
+        .map(|b| Bbox {
+            min: [0, 1, 2].map(|a| snap(a, b.min[a])),
+            max: [0, 1, 2].map(|a| snap(a, b.max[a])),
+        })
+        .collect()
+}

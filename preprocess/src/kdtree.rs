@@ -1,1 +1,69 @@
-//! (to be written)
+//! Serialises a [`RegionTree`] into the file's KD-tree: node 0 is the root, inner nodes
+//! send `coordinate < split` left, leaves hold a region id or nothing (empty space).
+//! Regions are numbered in depth-first, left-first order.
+
+use format::KdNode;
+
+use crate::regions::{Bbox, RegionTree};
+
+/// KD nodes and the regions (bounds, sorted brick ids) they reference.
+pub fn flatten(tree: &RegionTree) -> (Vec<KdNode>, Vec<(Bbox, Vec<u32>)>) {
+    let mut nodes = Vec::new();
+    let mut regions = Vec::new();
+    if !matches!(tree, RegionTree::Empty) {
+        emit(tree, &mut nodes, &mut regions);
+    }
+    (nodes, regions)
+}
+
+fn emit(t: &RegionTree, nodes: &mut Vec<KdNode>, regions: &mut Vec<(Bbox, Vec<u32>)>) -> u32 {
+    let id = nodes.len() as u32;
+    match t {
+        RegionTree::Empty => nodes.push(KdNode::Leaf { region: None }),
+        RegionTree::Region { bounds, bricks } => {
+            nodes.push(KdNode::Leaf {
+                region: Some(regions.len() as u32),
+            });
+            regions.push((*bounds, bricks.clone()));
+        }
+        RegionTree::Split {
+            axis,
+            split,
+            left,
+            right,
+        } => {
+            nodes.push(KdNode::Leaf { region: None });
+            let l = emit(left, nodes, regions);
+            let r = emit(right, nodes, regions);
+            nodes[id as usize] = KdNode::Inner {
+                axis: *axis,
+                split: *split,
+                left: l,
+                right: r,
+            };
+        }
+    }
+    id
+}
+
+/// Region containing `p` by descending the nodes (for tests and the baker's self-check).
+pub fn locate(nodes: &[KdNode], p: [f64; 3]) -> Option<u32> {
+    let mut n = 0usize;
+    loop {
+        match nodes.get(n)? {
+            KdNode::Leaf { region } => return *region,
+            KdNode::Inner {
+                axis,
+                split,
+                left,
+                right,
+            } => {
+                n = if p[*axis as usize] < *split {
+                    *left as usize
+                } else {
+                    *right as usize
+                };
+            }
+        }
+    }
+}

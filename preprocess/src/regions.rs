@@ -1,1 +1,268 @@
-//! (to be written)
+//! Active brick regions: boxes partitioning the union of brick supports such that the set
+//! of overlapping supports is constant inside each box.
+//!
+//! Built by recursive splitting at support boundaries (a KD-style build), so the KD-tree
+//! over the regions falls out of the recursion ([`crate::kdtree`] serialises it). A node
+//! whose box has no support boundary strictly inside is a region: every support that
+//! overlaps it covers it. Otherwise it splits at the boundary plane that cuts the fewest
+//! supports (ties: nearest the middle of the box), which keeps regions few — a plane that
+//! cuts no support separates clean pieces without fragmenting anything.
+
+/// Box `[min, max)` in world units.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Bbox {
+    pub min: [f64; 3],
+    pub max: [f64; 3],
+}
+
+impl Bbox {
+    /// Whether the open interiors of the boxes intersect.
+    pub fn overlaps(&self, o: &Bbox) -> bool {
+        (0..3).all(|a| self.min[a] < o.max[a] && self.max[a] > o.min[a])
+    }
+
+    pub fn union(&self, o: &Bbox) -> Bbox {
+        Bbox {
+            min: [0, 1, 2].map(|a| self.min[a].min(o.min[a])),
+            max: [0, 1, 2].map(|a| self.max[a].max(o.max[a])),
+        }
+    }
+}
+
+/// The region tree before serialisation.
+#[derive(Debug, Clone, PartialEq)]
+pub enum RegionTree {
+    /// Space inside the global bounds that no support reaches.
+    Empty,
+    /// A region with its sorted brick ids.
+    Region { bounds: Bbox, bricks: Vec<u32> },
+    /// Points with coordinate `< split` on `axis` go left.
+    Split {
+        axis: u8,
+        split: f64,
+        left: Box<RegionTree>,
+        right: Box<RegionTree>,
+    },
+}
+
+/// Builds the region tree over `supports` (indexed by brick id). Returns the union box of
+/// all supports (None when there are none) and the tree.
+pub fn build(supports: &[Bbox]) -> (Option<Bbox>, RegionTree) {
+    let Some(first) = supports.first() else {
+        return (None, RegionTree::Empty);
+    };
+    let bounds = supports.iter().fold(*first, |acc, s| acc.union(s));
+    let ids: Vec<u32> = (0..supports.len() as u32).collect();
+    (Some(bounds), node(supports, bounds, ids))
+}
+
+/// Below this many supports a node recurses on the current thread.
+const PARALLEL_MIN: usize = 64;
+
+fn node(sup: &[Bbox], b: Bbox, ids: Vec<u32>) -> RegionTree {
+    if ids.is_empty() {
+        return RegionTree::Empty;
+    }
+    let Some((axis, split)) = choose_split(sup, &b, &ids) else {
+        let mut bricks = ids;
+        bricks.sort_unstable();
+        return RegionTree::Region { bounds: b, bricks };
+    };
+    let a = axis as usize;
+    let left_ids: Vec<u32> = ids
+        .iter()
+        .copied()
+        .filter(|&i| sup[i as usize].min[a] < split)
+        .collect();
+    let right_ids: Vec<u32> = ids
+        .into_iter()
+        .filter(|&i| sup[i as usize].max[a] > split)
+        .collect();
+    let mut lb = b;
+    lb.max[a] = split;
+    let mut rb = b;
+    rb.min[a] = split;
+    let (left, right) = if left_ids.len() + right_ids.len() >= PARALLEL_MIN {
+        rayon::join(|| node(sup, lb, left_ids), || node(sup, rb, right_ids))
+    } else {
+        (node(sup, lb, left_ids), node(sup, rb, right_ids))
+    };
+    match (&left, &right) {
+        (RegionTree::Empty, RegionTree::Empty) => RegionTree::Empty,
+        (RegionTree::Region { bricks: l, .. }, RegionTree::Region { bricks: r, .. }) if l == r => {
+            RegionTree::Region {
+                bounds: b,
+                bricks: l.clone(),
+            }
+        }
+        _ => RegionTree::Split {
+            axis,
+            split,
+            left: Box::new(left),
+            right: Box::new(right),
+        },
+    }
+}
+
+/// Plane (axis, coordinate) among the support boundaries strictly inside `b` that cuts the
+/// fewest supports; ties go to the plane nearest the middle, then to the lower axis.
+fn choose_split(sup: &[Bbox], b: &Bbox, ids: &[u32]) -> Option<(u8, f64)> {
+    let mut best: Option<(usize, f64, u8, f64)> = None;
+    let mut mins = Vec::with_capacity(ids.len());
+    let mut maxs = Vec::with_capacity(ids.len());
+    for a in 0..3 {
+        mins.clear();
+        maxs.clear();
+        mins.extend(ids.iter().map(|&i| sup[i as usize].min[a]));
+        maxs.extend(ids.iter().map(|&i| sup[i as usize].max[a]));
+        mins.sort_unstable_by(f64::total_cmp);
+        maxs.sort_unstable_by(f64::total_cmp);
+        let (lo, hi) = (b.min[a], b.max[a]);
+        let mid = 0.5 * (lo + hi);
+        let ext = hi - lo;
+        let mut consider = |v: f64| {
+            if !(v > lo && v < hi) {
+                return;
+            }
+            // Supports with min < v < max straddle v: all with min < v minus those
+            // entirely below (max <= v).
+            let below_start = mins.partition_point(|&m| m < v);
+            let ended = maxs.partition_point(|&m| m <= v);
+            let cost = below_start - ended;
+            let bal = (v - mid).abs() / ext;
+            let better = match best {
+                None => true,
+                Some((c, bb, _, _)) => cost < c || (cost == c && bal < bb),
+            };
+            if better {
+                best = Some((cost, bal, a as u8, v));
+            }
+        };
+        let mut prev = f64::NAN;
+        for &v in mins.iter().chain(maxs.iter()) {
+            if v != prev {
+                consider(v);
+                prev = v;
+            }
+        }
+    }
+    best.map(|(_, _, a, v)| (a, v))
+}
+
+/// Regions (bounds, bricks) of a tree in depth-first, left-first order.
+pub fn leaves(tree: &RegionTree) -> Vec<(Bbox, &[u32])> {
+    let mut out = Vec::new();
+    fn walk<'t>(t: &'t RegionTree, out: &mut Vec<(Bbox, &'t [u32])>) {
+        match t {
+            RegionTree::Empty => {}
+            RegionTree::Region { bounds, bricks } => out.push((*bounds, bricks)),
+            RegionTree::Split { left, right, .. } => {
+                walk(left, out);
+                walk(right, out);
+            }
+        }
+    }
+    walk(tree, &mut out);
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn volume(b: &Bbox) -> f64 {
+        (0..3).map(|a| (b.max[a] - b.min[a]).max(0.0)).product()
+    }
+
+    fn intersect(a: &Bbox, b: &Bbox) -> Bbox {
+        Bbox {
+            min: [0, 1, 2].map(|i| a.min[i].max(b.min[i])),
+            max: [0, 1, 2].map(|i| a.max[i].min(b.max[i])),
+        }
+    }
+
+    /// Random multi-level layouts: supports of bricks on lattices of width 1, 2, 4
+    /// (origin - w .. origin + dims*w), like the baker makes.
+    fn layout() -> impl Strategy<Value = Vec<Bbox>> {
+        prop::collection::vec(
+            (
+                0u32..3,
+                0i32..6,
+                0i32..6,
+                0i32..6,
+                1u32..4,
+                1u32..4,
+                1u32..4,
+            ),
+            1..14,
+        )
+        .prop_map(|v| {
+            v.into_iter()
+                .map(|(l, x, y, z, dx, dy, dz)| {
+                    let w = (1u32 << l) as f64;
+                    let o = [x, y, z].map(|c| c as f64 * w + 0.5 * w);
+                    let d = [dx, dy, dz].map(|c| c as f64);
+                    Bbox {
+                        min: [0, 1, 2].map(|a| o[a] - w),
+                        max: [0, 1, 2].map(|a| o[a] + d[a] * w),
+                    }
+                })
+                .collect()
+        })
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(96))]
+        #[test]
+        fn regions_partition_supports(sup in layout()) {
+            let (bounds, tree) = build(&sup);
+            let bounds = bounds.expect("non-empty");
+            let regs = leaves(&tree);
+            // Disjoint.
+            for i in 0..regs.len() {
+                prop_assert!(volume(&regs[i].0) > 0.0);
+                for j in i + 1..regs.len() {
+                    prop_assert!(!regs[i].0.overlaps(&regs[j].0), "regions {} and {} overlap", i, j);
+                }
+            }
+            // Brick list equals brute force, and every support is covered by the regions
+            // overlapping it (volumes of the pieces add up).
+            for (b, bricks) in &regs {
+                let brute: Vec<u32> = (0..sup.len() as u32)
+                    .filter(|&i| sup[i as usize].overlaps(b))
+                    .collect();
+                prop_assert_eq!(&brute, &bricks.to_vec());
+                for a in 0..3 {
+                    prop_assert!(b.min[a] >= bounds.min[a] && b.max[a] <= bounds.max[a]);
+                }
+            }
+            for (i, s) in sup.iter().enumerate() {
+                let covered: f64 = regs
+                    .iter()
+                    .filter(|(_, br)| br.contains(&(i as u32)))
+                    .map(|(b, _)| volume(&intersect(b, s)))
+                    .sum();
+                prop_assert!((covered - volume(s)).abs() <= 1e-9 * volume(s));
+                // and no region lists a brick whose support it does not overlap (checked
+                // above), so the union of regions is exactly the union of supports.
+            }
+        }
+    }
+
+    #[test]
+    fn single_support_is_one_region() {
+        let s = Bbox {
+            min: [0.0; 3],
+            max: [1.0, 2.0, 3.0],
+        };
+        let (_, t) = build(&[s]);
+        assert_eq!(
+            t,
+            RegionTree::Region {
+                bounds: s,
+                bricks: vec![0]
+            }
+        );
+    }
+}

@@ -1,8 +1,202 @@
-//! `qbricks-bake bake`.
+//! `qbricks-bake bake`: argument parsing, progress and output; the work is in
+//! `qbricks_preprocess::bake`.
+
+use std::io::IsTerminal;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use clap::ValueEnum;
+use format::writer::{write_with, WriteOptions};
+use indicatif::{ProgressBar, ProgressStyle};
+use qbricks_preprocess::bake::{
+    bake_with_progress, select_grids, BakeOptions, GridKind, DEFAULT_MAX_BRICK,
+};
+use qbricks_preprocess::derive::Stencil;
+use qbricks_preprocess::fields::FieldKind;
+use qbricks_preprocess::vdb::{ValueType, VdbFile};
+
+#[derive(Clone, Copy, ValueEnum)]
+pub enum StencilArg {
+    /// Central differences; one-sided at grid edges and next to missing cells.
+    Central,
+    /// Central differences; at grid edges the neighbour velocity comes from the
+    /// reconstructed multi-level field.
+    CrossLevel,
+}
 
 #[derive(clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// Input OpenVDB file.
+    pub input: PathBuf,
+    /// Output brick file (default: the input with extension `.qbk`). Written atomically;
+    /// never the input itself.
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    /// Grid to bake (repeatable; every grid of that name). Default: all vec3 grids, or the
+    /// scalar grid when there is no vec3 grid.
+    #[arg(long = "grid", value_name = "NAME")]
+    pub grids: Vec<String>,
+    /// Fields derived from velocity, comma separated: q, speed, velocity (three fields
+    /// velocity_x/y/z). Default: q,speed. A scalar grid is baked as its own field.
+    #[arg(long, value_delimiter = ',')]
+    pub fields: Option<Vec<String>>,
+    /// Velocity gradient stencil at grid edges and next to missing cells.
+    #[arg(long, value_enum, default_value_t = StencilArg::Central)]
+    pub stencil: StencilArg,
+    /// Largest brick edge in cells.
+    #[arg(long, default_value_t = DEFAULT_MAX_BRICK)]
+    pub max_brick: u32,
+    /// Refuse input with non-finite values (default: replace them and warn).
+    #[arg(long)]
+    pub strict: bool,
+    /// Print a JSON summary on stdout.
+    #[arg(long)]
+    pub json: bool,
+    /// Print nothing but errors.
+    #[arg(long)]
+    pub quiet: bool,
+    /// Show progress on stderr even when it is not a terminal.
+    #[arg(long)]
+    pub progress: bool,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`bake` is not implemented yet")
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let start = Instant::now();
+    let input_name = args.input.display().to_string();
+    let output = args
+        .output
+        .clone()
+        .unwrap_or_else(|| args.input.with_extension("qbk"));
+    let fields = match &args.fields {
+        None => None,
+        Some(list) => Some(
+            list.iter()
+                .map(|s| {
+                    FieldKind::parse(s).ok_or_else(|| {
+                        anyhow::anyhow!(
+                            "--fields: unknown field \"{s}\" (expected q, speed or velocity)"
+                        )
+                    })
+                })
+                .collect::<anyhow::Result<Vec<_>>>()?,
+        ),
+    };
+    let opts = BakeOptions {
+        grids: args.grids.clone(),
+        fields,
+        stencil: match args.stencil {
+            StencilArg::Central => Stencil::Central,
+            StencilArg::CrossLevel => Stencil::CrossLevel,
+        },
+        max_brick: args.max_brick,
+        strict: args.strict,
+        source: args
+            .input
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default(),
+        ..BakeOptions::default()
+    };
+
+    // Progress: a spinner on a terminal, plain stage lines with --progress elsewhere.
+    let show = !args.quiet && (args.progress || std::io::stderr().is_terminal());
+    let bar = (show && std::io::stderr().is_terminal()).then(|| {
+        let b = ProgressBar::new_spinner();
+        b.set_style(
+            ProgressStyle::with_template("{spinner} {elapsed:>4} {msg}")
+                .unwrap_or_else(|_| ProgressStyle::default_spinner()),
+        );
+        b.enable_steady_tick(Duration::from_millis(120));
+        b
+    });
+    let lines = show && bar.is_none();
+    let stage = |name: &str| {
+        if let Some(b) = &bar {
+            b.set_message(name.to_string());
+        } else if lines {
+            let t = start.elapsed().as_secs_f64();
+            eprintln!("qbricks-bake: {t:7.2} s  {name}");
+        }
+    };
+
+    // Read only the grids that will be baked.
+    stage("reading VDB");
+    let file = VdbFile::open(&args.input)?;
+    let kinds: Vec<(&str, GridKind)> = file
+        .grids()
+        .iter()
+        .map(|g| {
+            let k = match g.value_type {
+                ValueType::Vec3s | ValueType::Vec3d => GridKind::Vector,
+                ValueType::Float | ValueType::Double => GridKind::Scalar,
+                ValueType::Unsupported(_) => GridKind::Other,
+            };
+            (g.name.as_str(), k)
+        })
+        .collect();
+    let chosen = select_grids(&kinds, &opts.grids).with_context(|| input_name.clone())?;
+    let grids = chosen
+        .iter()
+        .map(|&i| file.read_grid(i))
+        .collect::<Result<Vec<_>, _>>()?;
+    drop(file);
+
+    let (brick_file, summary) =
+        bake_with_progress(grids, &opts, &stage).with_context(|| input_name.clone())?;
+    stage("writing");
+    write_with(
+        &output,
+        &brick_file,
+        &WriteOptions {
+            forbid_overwrite_of: Some(args.input.clone()),
+        },
+    )?;
+    if let Some(b) = &bar {
+        b.finish_and_clear();
+    }
+    let seconds = start.elapsed().as_secs_f64();
+
+    if !args.quiet {
+        for w in &summary.warnings {
+            eprintln!("qbricks-bake: warning: {input_name}: {w}");
+        }
+    }
+    if args.json {
+        let fields: Vec<serde_json::Value> = summary
+            .fields
+            .iter()
+            .map(|f| serde_json::json!({"name": f.name, "min": f.min, "max": f.max}))
+            .collect();
+        let v = serde_json::json!({
+            "input_cells": summary.input_cells,
+            "leaf_cells": summary.leaf_cells,
+            "dropped_cells": summary.dropped_cells,
+            "bricks": summary.bricks,
+            "regions": summary.regions,
+            "kd_nodes": summary.kd_nodes,
+            "nonfinite": summary.nonfinite,
+            "fields": fields,
+            "seconds": seconds,
+            "output": output.display().to_string(),
+        });
+        println!("{}", serde_json::to_string_pretty(&v)?);
+    } else if !args.quiet {
+        println!(
+            "{} -> {}: {} input cells, {} leaf cells ({} dropped), {} bricks, {} regions, {} KD nodes, {:.2} s",
+            input_name,
+            output.display(),
+            summary.input_cells,
+            summary.leaf_cells,
+            summary.dropped_cells,
+            summary.bricks,
+            summary.regions,
+            summary.kd_nodes,
+            seconds
+        );
+        for f in &summary.fields {
+            println!("  {:<12} min {:>12.6e} max {:>12.6e}", f.name, f.min, f.max);
+        }
+    }
+    Ok(())
 }

@@ -1,0 +1,131 @@
+//! Baked fields: which ones, their per-cell values brick after brick, global range and
+//! histogram, and per-region value bounds.
+
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::bricks::BrickBox;
+use crate::regions::Bbox;
+
+/// Bins of every field's histogram.
+pub const HISTOGRAM_BINS: usize = 64;
+
+/// A field derived from velocity grids.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum FieldKind {
+    /// Q-criterion.
+    Q,
+    /// Velocity magnitude.
+    Speed,
+    /// The three velocity components (three fields `velocity_x`, `velocity_y`, `velocity_z`).
+    Velocity,
+}
+
+impl FieldKind {
+    pub fn parse(s: &str) -> Option<FieldKind> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "q" => Some(FieldKind::Q),
+            "speed" => Some(FieldKind::Speed),
+            "velocity" => Some(FieldKind::Velocity),
+            _ => None,
+        }
+    }
+
+    /// Names of the file fields this kind produces.
+    pub fn names(self) -> &'static [&'static str] {
+        match self {
+            FieldKind::Q => &["q"],
+            FieldKind::Speed => &["speed"],
+            FieldKind::Velocity => &["velocity_x", "velocity_y", "velocity_z"],
+        }
+    }
+}
+
+/// Range over finite values (`(0, 0)` when there is none) and histogram over that range.
+pub fn range_and_histogram(values: &[f32]) -> (f32, f32, Vec<u64>) {
+    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+    for &v in values.iter().filter(|v| v.is_finite()) {
+        lo = lo.min(v);
+        hi = hi.max(v);
+    }
+    if lo > hi {
+        return (0.0, 0.0, vec![0; HISTOGRAM_BINS]);
+    }
+    let mut hist = vec![0u64; HISTOGRAM_BINS];
+    let span = hi as f64 - lo as f64;
+    for &v in values.iter().filter(|v| v.is_finite()) {
+        let b = if span > 0.0 {
+            (((v as f64 - lo as f64) / span) * HISTOGRAM_BINS as f64) as usize
+        } else {
+            0
+        };
+        hist[b.min(HISTOGRAM_BINS - 1)] += 1;
+    }
+    (lo, hi, hist)
+}
+
+/// Per-region, per-field `(min, max)` over every cell of the region's bricks whose tent
+/// `(c − w, c + w)` reaches into the region box; conservative by a hair at the edges.
+/// `values[f]` is field `f` brick after brick; `first[b]` is brick `b`'s first value;
+/// `origins[b]`, `widths[b]` its first cell centre and cell width.
+pub struct RangeInput<'a> {
+    pub bricks: &'a [BrickBox],
+    pub origins: &'a [[f64; 3]],
+    pub widths: &'a [f64],
+    pub first: &'a [u64],
+    pub values: &'a [Vec<f32>],
+}
+
+pub fn region_ranges(input: &RangeInput, regions: &[(Bbox, Vec<u32>)]) -> Vec<[f32; 2]> {
+    let nf = input.values.len();
+    let per_region: Vec<Vec<[f32; 2]>> = regions
+        .par_iter()
+        .map(|(rb, bricks)| {
+            let mut out = vec![[f32::INFINITY, f32::NEG_INFINITY]; nf];
+            for &b in bricks {
+                let b = b as usize;
+                let bx = &input.bricks[b];
+                let o = input.origins[b];
+                let w = input.widths[b];
+                let mut lo = [0usize; 3];
+                let mut hi = [0usize; 3];
+                for a in 0..3 {
+                    let d = bx.dims[a] as f64;
+                    let l = ((rb.min[a] - o[a]) / w - 1.0 - 1e-6)
+                        .ceil()
+                        .clamp(0.0, d - 1.0);
+                    let h = ((rb.max[a] - o[a]) / w + 1.0 + 1e-6)
+                        .floor()
+                        .clamp(0.0, d - 1.0);
+                    lo[a] = l as usize;
+                    hi[a] = h as usize;
+                }
+                let (nx, ny) = (bx.dims[0] as usize, bx.dims[1] as usize);
+                let base = input.first[b] as usize;
+                for (f, r) in out.iter_mut().enumerate() {
+                    let vals = &input.values[f];
+                    for z in lo[2]..=hi[2] {
+                        for y in lo[1]..=hi[1] {
+                            let row = base + nx * (y + ny * z);
+                            for &v in &vals[row + lo[0]..=row + hi[0]] {
+                                if v.is_finite() {
+                                    r[0] = r[0].min(v);
+                                    r[1] = r[1].max(v);
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+            // A region whose cells are all non-finite gets an empty-but-valid range.
+            for r in &mut out {
+                if r[0] > r[1] {
+                    *r = [0.0, 0.0];
+                }
+            }
+            out
+        })
+        .collect();
+    per_region.into_iter().flatten().collect()
+}

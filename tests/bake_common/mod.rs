@@ -1,0 +1,126 @@
+//! Helpers shared by the bake tests: reading cells back from a baked file and a reference
+//! reconstruction (basis method) written independently of the baker and the viewer.
+#![allow(dead_code)]
+
+use format::{BrickFile, KdNode};
+
+/// One stored leaf cell.
+#[derive(Debug, Clone, Copy)]
+pub struct Cell {
+    pub centre: [f64; 3],
+    pub width: f64,
+    pub level: u32,
+    pub value: f32,
+}
+
+/// Every stored leaf cell with the value of field `f`.
+pub fn cells(file: &BrickFile, f: usize) -> Vec<Cell> {
+    let mut out = vec![];
+    for b in &file.bricks {
+        let [nx, ny, nz] = b.dims.map(|d| d as usize);
+        for z in 0..nz {
+            for y in 0..ny {
+                for x in 0..nx {
+                    let c = [x, y, z];
+                    out.push(Cell {
+                        centre: [0, 1, 2].map(|a| b.origin[a] + c[a] as f64 * b.cell_width),
+                        width: b.cell_width,
+                        level: b.level,
+                        value: file.fields[f].values
+                            [b.first_value as usize + x + nx * (y + ny * z)],
+                    });
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Index of the field called `name`.
+pub fn field(file: &BrickFile, name: &str) -> usize {
+    file.fields
+        .iter()
+        .position(|f| f.name == name)
+        .unwrap_or_else(|| panic!("field {name} missing"))
+}
+
+/// Region containing `p` by KD-tree descent.
+pub fn locate(file: &BrickFile, p: [f64; 3]) -> Option<u32> {
+    let mut n = 0usize;
+    loop {
+        match file.kd_nodes.get(n)? {
+            KdNode::Leaf { region } => return *region,
+            KdNode::Inner {
+                axis,
+                split,
+                left,
+                right,
+            } => {
+                n = if p[*axis as usize] < *split {
+                    *left
+                } else {
+                    *right
+                } as usize
+            }
+        }
+    }
+}
+
+/// Brick ids of region `r`.
+pub fn region_bricks(file: &BrickFile, r: u32) -> &[u32] {
+    let reg = &file.regions[r as usize];
+    &file.region_bricks[reg.bricks_start as usize..(reg.bricks_start + reg.bricks_len) as usize]
+}
+
+/// Reference reconstruction over the given bricks: `Σ H v / Σ H` with tents
+/// `H = Π max(0, 1 − |p − c| / w)`; `None` where no tent reaches `p`.
+pub fn reconstruct(file: &BrickFile, bricks: &[u32], f: usize, p: [f64; 3]) -> Option<f64> {
+    let (mut s, mut ws) = (0.0, 0.0);
+    for &bi in bricks {
+        let b = &file.bricks[bi as usize];
+        let d = b.dims.map(|d| d as i64);
+        // Only cells within one width of p can contribute.
+        let mut lo = [0i64; 3];
+        let mut hi = [0i64; 3];
+        for a in 0..3 {
+            let x = (p[a] - b.origin[a]) / b.cell_width;
+            lo[a] = (x.floor() - 1.0).max(0.0) as i64;
+            hi[a] = ((x.ceil() + 1.0) as i64).min(d[a] - 1);
+        }
+        for z in lo[2]..=hi[2] {
+            for y in lo[1]..=hi[1] {
+                for x in lo[0]..=hi[0] {
+                    let c = [x, y, z];
+                    let mut h = 1.0;
+                    for a in 0..3 {
+                        let ca = b.origin[a] + c[a] as f64 * b.cell_width;
+                        h *= (1.0 - (p[a] - ca).abs() / b.cell_width).max(0.0);
+                    }
+                    if h > 0.0 {
+                        let i = b.first_value as usize + (x + d[0] * (y + d[1] * z)) as usize;
+                        s += h * file.fields[f].values[i] as f64;
+                        ws += h;
+                    }
+                }
+            }
+        }
+    }
+    (ws > 1e-12).then(|| s / ws)
+}
+
+/// Reconstruction at `p` through the KD-tree (None outside the data).
+pub fn sample(file: &BrickFile, f: usize, p: [f64; 3]) -> Option<f64> {
+    let r = locate(file, p)?;
+    reconstruct(file, region_bricks(file, r), f, p)
+}
+
+/// Small deterministic random numbers (xorshift64*), uniform in [0, 1).
+pub struct Rng(pub u64);
+impl Rng {
+    pub fn next(&mut self) -> f64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        (self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
