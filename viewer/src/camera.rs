@@ -1,4 +1,9 @@
 //! A pure camera: pose and projection; turns (pixel, sub-pixel offset) into a world ray.
+//!
+//! The camera knows nothing about the volume or the renderer: it is a pose (`eye`,
+//! `look_at`, `up`) and a projection. Degenerate poses (eye on the look-at point, `up`
+//! parallel to the view direction, non-finite numbers) never panic and never produce a
+//! NaN ray; they fall back to a fixed, documented basis instead.
 
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
@@ -10,8 +15,15 @@ pub struct Ray {
     pub dir: DVec3,
 }
 
+impl Ray {
+    /// Point at parameter `t`.
+    pub fn at(&self, t: f64) -> DVec3 {
+        self.origin + t * self.dir
+    }
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "snake_case")]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum Projection {
     /// Vertical field of view in degrees.
     Perspective { fov_deg: f64 },
@@ -20,6 +32,7 @@ pub enum Projection {
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Camera {
     pub eye: [f64; 3],
     pub look_at: [f64; 3],
@@ -27,17 +40,294 @@ pub struct Camera {
     pub projection: Projection,
 }
 
+/// Default vertical field of view of [`Camera::frame`], degrees.
+pub const DEFAULT_FOV_DEG: f64 = 35.0;
+
+/// Orthonormal camera basis: `forward` points from the eye into the scene, `right` and
+/// `up` span the image plane (x to the right, y up on screen).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Basis {
+    pub forward: DVec3,
+    pub right: DVec3,
+    pub up: DVec3,
+}
+
+fn finite_vec(a: [f64; 3]) -> Option<DVec3> {
+    let v = DVec3::from_array(a);
+    v.is_finite().then_some(v)
+}
+
 impl Camera {
+    /// The camera's orthonormal basis.
+    ///
+    /// Fallbacks: if `eye == look_at` (or either is not finite) the camera looks along
+    /// −z; if `up` is zero, not finite or parallel to the view direction, the world axis
+    /// least aligned with the view direction is used as `up` instead.
+    pub fn basis(&self) -> Basis {
+        let forward = match (finite_vec(self.eye), finite_vec(self.look_at)) {
+            (Some(e), Some(l)) => (l - e).try_normalize().unwrap_or(DVec3::NEG_Z),
+            _ => DVec3::NEG_Z,
+        };
+        let up_hint = finite_vec(self.up).and_then(DVec3::try_normalize);
+        // `up` must not be (nearly) parallel to `forward`: 1e-9 in sin(angle) still gives
+        // a well-conditioned cross product in f64.
+        let right = up_hint
+            .map(|u| forward.cross(u))
+            .filter(|c| c.length() > 1e-9)
+            .map(DVec3::normalize)
+            .unwrap_or_else(|| {
+                let a = forward.abs();
+                let axis = if a.x <= a.y && a.x <= a.z {
+                    DVec3::X
+                } else if a.y <= a.z {
+                    DVec3::Y
+                } else {
+                    DVec3::Z
+                };
+                forward.cross(axis).normalize()
+            });
+        let up = right.cross(forward);
+        Basis { forward, right, up }
+    }
+
     /// Ray through image position (`x`, `y`) in pixels (0,0 = top-left corner of the
     /// image; pixel centres at +0.5) of a `width`×`height` image.
+    ///
+    /// Perspective rays start at the eye; orthographic rays start on the plane through
+    /// the eye perpendicular to the view direction (so a camera inside the volume sees
+    /// what is in front of that plane) and all share the view direction.
     pub fn ray(&self, x: f64, y: f64, width: u32, height: u32) -> Ray {
-        let _ = (x, y, width, height);
-        unimplemented!("provisional stub: the scene helper writes this")
+        let b = self.basis();
+        let w = f64::from(width.max(1));
+        let h = f64::from(height.max(1));
+        let aspect = w / h;
+        // Normalised device coordinates in [-1, 1], y up.
+        let sx = 2.0 * x / w - 1.0;
+        let sy = 1.0 - 2.0 * y / h;
+        let eye = finite_vec(self.eye).unwrap_or(DVec3::ZERO);
+        match self.projection {
+            Projection::Perspective { fov_deg } => {
+                let fov = if fov_deg.is_finite() && fov_deg > 0.0 && fov_deg < 179.0 {
+                    fov_deg
+                } else {
+                    DEFAULT_FOV_DEG
+                };
+                let half_h = (0.5 * fov.to_radians()).tan();
+                let half_w = half_h * aspect;
+                let dir = b.forward + (sx * half_w) * b.right + (sy * half_h) * b.up;
+                Ray {
+                    origin: eye,
+                    dir: dir.normalize(),
+                }
+            }
+            Projection::Orthographic { width: ow } => {
+                let ow = if ow.is_finite() && ow > 0.0 { ow } else { 1.0 };
+                let half_w = 0.5 * ow;
+                let half_h = half_w / aspect;
+                Ray {
+                    origin: eye + (sx * half_w) * b.right + (sy * half_h) * b.up,
+                    dir: b.forward,
+                }
+            }
+        }
     }
 
     /// A camera that frames the box `min..max` from a pleasant oblique direction.
+    ///
+    /// The camera looks at the box centre from the (+x, −y, +z) octant, slightly from
+    /// above (`up` = +z), far enough for the box's bounding sphere to fit the vertical
+    /// field of view of [`DEFAULT_FOV_DEG`]. Inverted corners are swapped, a degenerate
+    /// (flat or point) box gets a size relative to its position, and non-finite input
+    /// frames the unit box.
     pub fn frame(min: [f64; 3], max: [f64; 3]) -> Camera {
-        let _ = (min, max);
-        unimplemented!("provisional stub: the scene helper writes this")
+        let (lo, hi) = match (finite_vec(min), finite_vec(max)) {
+            (Some(a), Some(b)) => (a.min(b), a.max(b)),
+            _ => (DVec3::ZERO, DVec3::ONE),
+        };
+        let centre = 0.5 * (lo + hi);
+        // Bounding-sphere radius; a flat or point box still gets a visible extent that
+        // is representable next to its (possibly huge) coordinates.
+        let floor = (centre.abs().max_element() * 1e-9).max(1e-6);
+        let radius = (0.5 * (hi - lo).length()).max(floor);
+        let dir = DVec3::new(1.0, -1.6, 0.9).normalize();
+        let half_fov = 0.5 * DEFAULT_FOV_DEG.to_radians();
+        let distance = 1.05 * radius / half_fov.sin();
+        let eye = centre + distance * dir;
+        Camera {
+            eye: eye.to_array(),
+            look_at: centre.to_array(),
+            up: [0.0, 0.0, 1.0],
+            projection: Projection::Perspective {
+                fov_deg: DEFAULT_FOV_DEG,
+            },
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn persp(eye: [f64; 3], look_at: [f64; 3], up: [f64; 3], fov: f64) -> Camera {
+        Camera {
+            eye,
+            look_at,
+            up,
+            projection: Projection::Perspective { fov_deg: fov },
+        }
+    }
+
+    fn close(a: DVec3, b: DVec3, tol: f64) -> bool {
+        (a - b).length() <= tol
+    }
+
+    #[test]
+    fn centre_pixel_ray_points_at_look_at() {
+        let cam = persp([1.0, 2.0, 3.0], [4.0, -2.0, 3.5], [0.0, 0.0, 1.0], 50.0);
+        // 101×51: the centre of pixel (50, 25) is the image centre.
+        let r = cam.ray(50.5, 25.5, 101, 51);
+        let want = (DVec3::new(4.0, -2.0, 3.5) - DVec3::new(1.0, 2.0, 3.0)).normalize();
+        assert!(close(r.dir, want, 1e-12), "{:?} vs {want:?}", r.dir);
+        assert_eq!(r.origin, DVec3::new(1.0, 2.0, 3.0));
+        assert!((r.dir.length() - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn perspective_corner_rays_span_the_field_of_view() {
+        // Camera on +z looking down −z, up +y: image x = world x, image y = world y.
+        let cam = persp([0.0, 0.0, 5.0], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0], 90.0);
+        let (w, h) = (200, 100);
+        // Top edge middle: angle of half the vertical fov (45°) above the axis.
+        let top = cam.ray(100.0, 0.0, w, h);
+        assert!(close(
+            top.dir,
+            DVec3::new(0.0, 1.0, -1.0).normalize(),
+            1e-12
+        ));
+        // Left edge middle: tan(half horizontal fov) = aspect · tan(45°) = 2.
+        let left = cam.ray(0.0, 50.0, w, h);
+        assert!(close(
+            left.dir,
+            DVec3::new(-2.0, 0.0, -1.0).normalize(),
+            1e-12
+        ));
+        // Pixel (0,0) centre hits the plane z=0 at the expected spot: x = -2·5·(1 - 1/200).
+        let r = cam.ray(0.5, 0.5, w, h);
+        let t = -r.origin.z / r.dir.z;
+        let p = r.at(t);
+        assert!((p.x - (-10.0 * (1.0 - 0.5 / 100.0))).abs() < 1e-9, "{p:?}");
+        assert!((p.y - (5.0 * (1.0 - 0.5 / 50.0))).abs() < 1e-9, "{p:?}");
+    }
+
+    #[test]
+    fn orthographic_rays_are_parallel_and_offset_through_pixel_centres() {
+        let cam = Camera {
+            eye: [0.0, 0.0, 10.0],
+            look_at: [0.0, 0.0, 0.0],
+            up: [0.0, 1.0, 0.0],
+            projection: Projection::Orthographic { width: 4.0 },
+        };
+        let (w, h) = (4, 2);
+        for py in 0..h {
+            for px in 0..w {
+                let r = cam.ray(f64::from(px) + 0.5, f64::from(py) + 0.5, w, h);
+                assert!(close(r.dir, DVec3::NEG_Z, 1e-15));
+                // Each pixel is 1 world unit wide; centres at x = -1.5, -0.5, 0.5, 1.5
+                // and y = 0.5, -0.5 (image height = 4 / aspect 2 = 2).
+                let want = DVec3::new(f64::from(px) - 1.5, 0.5 - f64::from(py), 10.0);
+                assert!(close(r.origin, want, 1e-12), "{:?} vs {want:?}", r.origin);
+            }
+        }
+    }
+
+    #[test]
+    fn degenerate_poses_give_finite_orthonormal_bases() {
+        let cams = [
+            // up parallel to the view direction
+            persp([0.0, 0.0, 5.0], [0.0, 0.0, 0.0], [0.0, 0.0, 1.0], 40.0),
+            persp([0.0, 0.0, 5.0], [0.0, 0.0, 0.0], [0.0, 0.0, -3.0], 40.0),
+            // eye on the look-at point
+            persp([1.0, 1.0, 1.0], [1.0, 1.0, 1.0], [0.0, 1.0, 0.0], 40.0),
+            // zero up, NaN eye, silly fov
+            persp([0.0, 0.0, 5.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], 0.0),
+            persp(
+                [f64::NAN, 0.0, 5.0],
+                [0.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0],
+                400.0,
+            ),
+        ];
+        for cam in cams {
+            let b = cam.basis();
+            for (a, c) in [(b.forward, b.right), (b.forward, b.up), (b.right, b.up)] {
+                assert!(a.dot(c).abs() < 1e-12, "{cam:?}");
+            }
+            for v in [b.forward, b.right, b.up] {
+                assert!((v.length() - 1.0).abs() < 1e-12, "{cam:?}");
+            }
+            let r = cam.ray(3.5, 7.5, 16, 16);
+            assert!(r.origin.is_finite() && r.dir.is_finite(), "{cam:?}");
+        }
+    }
+
+    #[test]
+    fn frame_sees_the_whole_box() {
+        let boxes: [([f64; 3], [f64; 3]); 5] = [
+            ([-1.0, -2.0, -0.5], [3.0, 2.0, 0.5]),
+            // huge offset
+            ([1e6, 1e6, 1e6], [1e6 + 1.0, 1e6 + 2.0, 1e6 + 0.5]),
+            // flat, point and inverted boxes
+            ([0.0, 0.0, 0.0], [1.0, 1.0, 0.0]),
+            ([2.0, 2.0, 2.0], [2.0, 2.0, 2.0]),
+            ([1.0, 1.0, 1.0], [0.0, 0.0, 0.0]),
+        ];
+        for (lo, hi) in boxes {
+            let cam = Camera::frame(lo, hi);
+            let b = cam.basis();
+            let eye = DVec3::from_array(cam.eye);
+            let half = (0.5 * DEFAULT_FOV_DEG.to_radians()).tan();
+            // Every box corner projects inside the (square) image and in front of the eye.
+            for i in 0..8 {
+                let c = DVec3::new(
+                    if i & 1 == 0 { lo[0] } else { hi[0] },
+                    if i & 2 == 0 { lo[1] } else { hi[1] },
+                    if i & 4 == 0 { lo[2] } else { hi[2] },
+                );
+                let d = c - eye;
+                let z = d.dot(b.forward);
+                assert!(z > 0.0, "corner behind the eye for {lo:?}..{hi:?}");
+                assert!((d.dot(b.right) / z).abs() <= half, "{lo:?}..{hi:?}");
+                assert!((d.dot(b.up) / z).abs() <= half, "{lo:?}..{hi:?}");
+            }
+            // Oblique: not along a coordinate axis, and the centre pixel looks at the centre.
+            assert!(b.forward.abs().max_element() < 0.9);
+            let r = cam.ray(32.0, 32.0, 64, 64);
+            assert!(close(r.dir, b.forward, 1e-12));
+        }
+    }
+
+    #[test]
+    fn frame_of_non_finite_box_is_usable() {
+        let cam = Camera::frame([f64::NAN; 3], [f64::INFINITY; 3]);
+        let r = cam.ray(1.0, 1.0, 2, 2);
+        assert!(r.origin.is_finite() && r.dir.is_finite());
+    }
+
+    #[test]
+    fn serde_round_trip() {
+        let cam = Camera::frame([0.0; 3], [1.0; 3]);
+        let s = serde_json::to_string(&cam).expect("serialize");
+        let back: Camera = serde_json::from_str(&s).expect("deserialize");
+        assert_eq!(cam, back);
+        let ortho = Camera {
+            projection: Projection::Orthographic { width: 3.0 },
+            ..cam
+        };
+        let s = serde_json::to_string(&ortho).expect("serialize");
+        assert!(s.contains("\"orthographic\""), "{s}");
+        assert_eq!(
+            ortho,
+            serde_json::from_str::<Camera>(&s).expect("deserialize")
+        );
     }
 }

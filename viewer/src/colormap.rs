@@ -3,6 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ControlPoint {
     pub value: f32,
     pub colour: [f32; 3],
@@ -11,6 +12,7 @@ pub struct ControlPoint {
 /// A value within ±`band` of a control value takes its colour; between two control bands
 /// colours interpolate linearly; outside the ends they clamp to the end colours.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ColorMap {
     /// Name of the field that drives the colour (e.g. `speed`).
     pub field: String,
@@ -19,15 +21,253 @@ pub struct ColorMap {
     pub band: f32,
 }
 
+pub const BLUE: [f32; 3] = [0.1, 0.25, 0.95];
+pub const GREEN: [f32; 3] = [0.1, 0.8, 0.2];
+pub const RED: [f32; 3] = [0.95, 0.15, 0.1];
+/// Colour of a map without control points, and of NaN values.
+pub const NEUTRAL: [f32; 3] = [0.75, 0.75, 0.75];
+
+fn lerp(a: [f32; 3], b: [f32; 3], t: f32) -> [f32; 3] {
+    [
+        a[0] + (b[0] - a[0]) * t,
+        a[1] + (b[1] - a[1]) * t,
+        a[2] + (b[2] - a[2]) * t,
+    ]
+}
+
 impl ColorMap {
+    /// Colour of value `v`.
+    ///
+    /// If two bands overlap (control values closer than `2·band`), the lower control
+    /// point wins in the overlap. A NaN value, or a map without
+    /// points, gives [`NEUTRAL`]. `points` must be sorted by value ([`ColorMap::validate`]).
     pub fn colour(&self, v: f32) -> [f32; 3] {
-        let _ = v;
-        unimplemented!("provisional stub: the scene helper writes this")
+        let (Some(first), Some(last)) = (self.points.first(), self.points.last()) else {
+            return NEUTRAL;
+        };
+        if v.is_nan() {
+            return NEUTRAL;
+        }
+        let band = if self.band.is_finite() {
+            self.band.max(0.0)
+        } else {
+            0.0
+        };
+        if v <= first.value + band {
+            return first.colour;
+        }
+        if v >= last.value - band {
+            return last.colour;
+        }
+        // First point whose value exceeds v; 1 ≤ i < len because of the clamps above.
+        let i = self.points.partition_point(|p| p.value <= v);
+        let (Some(a), Some(b)) = (self.points.get(i.wrapping_sub(1)), self.points.get(i)) else {
+            return last.colour;
+        };
+        let lo = a.value + band;
+        let hi = b.value - band;
+        if v <= lo {
+            return a.colour;
+        }
+        if v >= hi {
+            return b.colour;
+        }
+        // lo < v < hi here, so hi - lo > 0.
+        lerp(a.colour, b.colour, (v - lo) / (hi - lo))
     }
 
     /// Blue/green/red over a field's range, so any data set looks reasonable on first open.
+    ///
+    /// Control points at the minimum, the middle and the maximum; the band is 2 % of the
+    /// range. Swapped or non-finite limits are repaired (non-finite → 0..1).
     pub fn default_for_range(field: &str, min: f32, max: f32) -> ColorMap {
-        let _ = (field, min, max);
-        unimplemented!("provisional stub: the scene helper writes this")
+        let (lo, hi) = if min.is_finite() && max.is_finite() {
+            (min.min(max), min.max(max))
+        } else {
+            (0.0, 1.0)
+        };
+        let mid = lo + 0.5 * (hi - lo);
+        ColorMap {
+            field: field.to_string(),
+            points: vec![
+                ControlPoint {
+                    value: lo,
+                    colour: BLUE,
+                },
+                ControlPoint {
+                    value: mid,
+                    colour: GREEN,
+                },
+                ControlPoint {
+                    value: hi,
+                    colour: RED,
+                },
+            ],
+            band: 0.02 * (hi - lo),
+        }
+    }
+
+    /// The seed report's speed colouring: 0.012 blue, 0.025 green, 0.072 red, ±0.0025.
+    pub fn seed_report() -> ColorMap {
+        ColorMap {
+            field: "speed".to_string(),
+            points: vec![
+                ControlPoint {
+                    value: 0.012,
+                    colour: BLUE,
+                },
+                ControlPoint {
+                    value: 0.025,
+                    colour: GREEN,
+                },
+                ControlPoint {
+                    value: 0.072,
+                    colour: RED,
+                },
+            ],
+            band: 0.0025,
+        }
+    }
+
+    /// Checks what serde cannot: finite, sorted values, a finite non-negative band,
+    /// colours in 0..=1. The message names the offending entry.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(self.band.is_finite() && self.band >= 0.0) {
+            return Err(format!(
+                "band: expected a finite number ≥ 0, found {}",
+                self.band
+            ));
+        }
+        for (i, p) in self.points.iter().enumerate() {
+            if !p.value.is_finite() {
+                return Err(format!("points[{i}].value: not finite ({})", p.value));
+            }
+            if p.colour.iter().any(|c| !(0.0..=1.0).contains(c)) {
+                return Err(format!(
+                    "points[{i}].colour: expected components in 0..=1, found {:?}",
+                    p.colour
+                ));
+            }
+        }
+        for (i, w) in self.points.windows(2).enumerate() {
+            if let [a, b] = w {
+                if b.value < a.value {
+                    return Err(format!(
+                        "points[{}].value {} is below points[{i}].value {}: points must be sorted",
+                        i + 1,
+                        b.value,
+                        a.value
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn close(a: [f32; 3], b: [f32; 3]) -> bool {
+        a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-5)
+    }
+
+    #[test]
+    fn bands_take_the_control_colour() {
+        let m = ColorMap::seed_report();
+        for (v, c) in [
+            (0.012, BLUE),
+            (0.012 + 0.0024, BLUE),
+            (0.012 - 0.0024, BLUE),
+            (0.025, GREEN),
+            (0.0226, GREEN),
+            (0.0274, GREEN),
+            (0.072, RED),
+            (0.0696, RED),
+        ] {
+            assert!(close(m.colour(v), c), "{v}: {:?}", m.colour(v));
+        }
+    }
+
+    #[test]
+    fn between_bands_interpolates_linearly() {
+        let m = ColorMap::seed_report();
+        // Blue band ends at 0.0145, green band starts at 0.0225: midpoint 0.0185.
+        assert!(close(m.colour(0.0185), lerp(BLUE, GREEN, 0.5)));
+        assert!(close(m.colour(0.0165), lerp(BLUE, GREEN, 0.25)));
+        // Green band ends at 0.0275, red starts at 0.0695.
+        let v = 0.0275 + 0.3 * (0.0695 - 0.0275);
+        assert!(close(m.colour(v), lerp(GREEN, RED, 0.3)));
+        // Continuity at band edges.
+        for edge in [0.0145f32, 0.0225, 0.0275, 0.0695] {
+            let a = m.colour(edge - 1e-6);
+            let b = m.colour(edge + 1e-6);
+            assert!(a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-3), "{edge}");
+        }
+    }
+
+    #[test]
+    fn outside_clamps_to_end_colours() {
+        let m = ColorMap::seed_report();
+        assert_eq!(m.colour(-5.0), BLUE);
+        assert_eq!(m.colour(0.0), BLUE);
+        assert_eq!(m.colour(1.0), RED);
+        assert_eq!(m.colour(f32::INFINITY), RED);
+        assert_eq!(m.colour(f32::NEG_INFINITY), BLUE);
+        assert_eq!(m.colour(f32::NAN), NEUTRAL);
+    }
+
+    #[test]
+    fn overlapping_bands_and_empty_maps_do_not_break() {
+        let mut m = ColorMap::seed_report();
+        m.band = 0.5; // every band overlaps every other
+        for v in [-1.0, 0.0, 0.02, 0.03, 0.05, 0.1] {
+            let c = m.colour(v);
+            assert!(c.iter().all(|x| x.is_finite()));
+        }
+        m.points.clear();
+        assert_eq!(m.colour(0.1), NEUTRAL);
+        let one = ColorMap {
+            field: "speed".into(),
+            points: vec![ControlPoint {
+                value: 1.0,
+                colour: GREEN,
+            }],
+            band: 0.0,
+        };
+        assert_eq!(one.colour(-3.0), GREEN);
+        assert_eq!(one.colour(3.0), GREEN);
+    }
+
+    #[test]
+    fn default_for_range_spans_the_range() {
+        let m = ColorMap::default_for_range("speed", 2.0, 10.0);
+        assert_eq!(m.field, "speed");
+        assert_eq!(m.colour(2.0), BLUE);
+        assert_eq!(m.colour(6.0), GREEN);
+        assert_eq!(m.colour(10.0), RED);
+        assert!(m.validate().is_ok());
+        // swapped, constant and non-finite ranges
+        let s = ColorMap::default_for_range("s", 10.0, 2.0);
+        assert_eq!(s.points[0].value, 2.0);
+        let c = ColorMap::default_for_range("c", 3.0, 3.0);
+        assert_eq!(c.colour(3.0), BLUE);
+        assert!(c.validate().is_ok());
+        let n = ColorMap::default_for_range("n", f32::NAN, 1.0);
+        assert!(n.validate().is_ok());
+    }
+
+    #[test]
+    fn validate_names_the_problem() {
+        let mut m = ColorMap::seed_report();
+        m.points.swap(0, 1);
+        assert!(m.validate().unwrap_err().contains("points[1]"));
+        let mut m = ColorMap::seed_report();
+        m.band = -1.0;
+        assert!(m.validate().unwrap_err().contains("band"));
+        let mut m = ColorMap::seed_report();
+        m.points[2].colour = [2.0, 0.0, 0.0];
+        assert!(m.validate().unwrap_err().contains("points[2].colour"));
     }
 }

@@ -20,4 +20,5 @@ pub mod shading;
 pub mod testvol;
 pub mod transfer;
 pub mod traverse;
+pub mod view_state;
 pub mod volume;

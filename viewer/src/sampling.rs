@@ -7,36 +7,14 @@
 //! on the other side, the band was crossed in between and is searched for there, so
 //! skipping never loses a crossing.
 
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 
 use crate::integrate::{correct_opacity, Accum};
 use crate::reconstruct::{Cubic, Eval};
 use crate::transfer::{Class, Mode, Transfer};
 use crate::volume::Volume;
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "snake_case")]
-pub enum Strategy {
-    /// Fixed step in units of the local (finest contributing) cell width.
-    Uniform,
-    /// ExaBricks adaptive sampling: interval midpoints, opacity corrected by interval length.
-    Paper,
-    /// `paper` plus bisection into the transfer function band when two samples straddle it.
-    Bisect,
-    /// Iso mode: exact first root of the cubic along the ray in every dual cell.
-    Exact,
-}
-
-impl Strategy {
-    pub fn name(self) -> &'static str {
-        match self {
-            Strategy::Uniform => "uniform",
-            Strategy::Paper => "paper",
-            Strategy::Bisect => "bisect",
-            Strategy::Exact => "exact",
-        }
-    }
-}
+pub use crate::view_state::Strategy;
 
 /// Smallest bisection interval of `bisect`, in cell widths.
 pub const BISECT_RESOLUTION: f64 = 0.005;

@@ -3,23 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "snake_case")]
-pub enum Mode {
-    /// Opaque surface at the iso value, Phong-shaded from the analytic gradient.
-    Iso,
-    /// Semi-transparent Gaussian band around the iso value.
-    Dvr,
-}
-
-impl Mode {
-    pub fn name(self) -> &'static str {
-        match self {
-            Mode::Iso => "iso",
-            Mode::Dvr => "dvr",
-        }
-    }
-}
+pub use crate::view_state::Mode;
 
 /// Where a value lies relative to the transfer function's non-zero band.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -1,0 +1,592 @@
+//! Everything that determines a picture besides the data file: camera, mode, iso value,
+//! sampling, transfer function, colour map, lights, meshes, resolution.
+//!
+//! Saved and loaded as JSON so a view set up in the GUI renders headless pixel for
+//! pixel. Unknown fields are rejected (a typo must not silently fall back to a default);
+//! values serde cannot check are checked by [`ViewState::validate`], which `load` calls.
+
+use std::fmt;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+
+use serde::{Deserialize, Serialize};
+
+use crate::camera::{Camera, Projection};
+use crate::colormap::ColorMap;
+use crate::mesh::MeshInstance;
+use crate::shading::{default_lights, Light, Material};
+
+/// Render mode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    /// Opaque surface at the iso value, Phong-shaded from the analytic gradient.
+    Iso,
+    /// Semi-transparent Gaussian band around the iso value (direct volume rendering).
+    Dvr,
+}
+
+/// Sampling strategy along a ray (see DESIGN.md, "Sampling strategies").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Strategy {
+    /// Fixed step in units of the local cell width.
+    Uniform,
+    /// ExaBricks adaptive sampling at interval midpoints.
+    Paper,
+    /// Adaptive sampling plus bisection into the transfer function's band.
+    Bisect,
+    /// Root finding on the trilinear cubic per dual cell (iso mode).
+    Exact,
+}
+
+impl Mode {
+    pub const ALL: [Mode; 2] = [Mode::Iso, Mode::Dvr];
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Mode::Iso => "iso",
+            Mode::Dvr => "dvr",
+        }
+    }
+}
+
+impl Strategy {
+    pub const ALL: [Strategy; 4] = [
+        Strategy::Uniform,
+        Strategy::Paper,
+        Strategy::Bisect,
+        Strategy::Exact,
+    ];
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Strategy::Uniform => "uniform",
+            Strategy::Paper => "paper",
+            Strategy::Bisect => "bisect",
+            Strategy::Exact => "exact",
+        }
+    }
+}
+
+impl fmt::Display for Mode {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl fmt::Display for Strategy {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl FromStr for Mode {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Mode::ALL
+            .into_iter()
+            .find(|m| m.as_str() == s)
+            .ok_or_else(|| format!("unknown mode `{s}`: expected iso or dvr"))
+    }
+}
+
+impl FromStr for Strategy {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Strategy::ALL
+            .into_iter()
+            .find(|m| m.as_str() == s)
+            .ok_or_else(|| {
+                format!("unknown strategy `{s}`: expected uniform, paper, bisect or exact")
+            })
+    }
+}
+
+/// DVR opacity around the iso value: `min(1, peak·exp(-½((v-iso)/σ)²))` inside
+/// `iso ± k·σ`, zero outside.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TransferFunction {
+    pub sigma: f64,
+    pub peak: f64,
+    pub k: f64,
+}
+
+impl TransferFunction {
+    /// The seed report's shape for iso 0.05: σ = 0.004 (8 % of iso), peak 1.6, k = 2
+    /// (band 0.042–0.058).
+    pub fn seed_report() -> TransferFunction {
+        TransferFunction {
+            sigma: 0.004,
+            peak: 1.6,
+            k: 2.0,
+        }
+    }
+
+    /// Opacity for value `v` around `iso` (per reference step, before opacity correction).
+    pub fn opacity(&self, v: f64, iso: f64) -> f64 {
+        let x = (v - iso) / self.sigma;
+        if x.is_nan() || x.abs() > self.k {
+            return 0.0;
+        }
+        (self.peak * (-0.5 * x * x).exp()).min(1.0)
+    }
+}
+
+/// Range of one field of the file (from its regions' value bounds).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FieldRange {
+    pub name: String,
+    pub min: f32,
+    pub max: f32,
+}
+
+/// Upper limit of `width`/`height`, so a state file cannot ask for an absurd allocation.
+pub const MAX_IMAGE_SIDE: u32 = 16384;
+/// Upper limit of `spp`.
+pub const MAX_SPP: u32 = 4096;
+
+/// Camera and all render settings. JSON field names are the Rust field names.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ViewState {
+    pub camera: Camera,
+    pub mode: Mode,
+    /// Field the iso value / transfer function applies to (e.g. `q`).
+    pub iso_field: String,
+    pub iso: f64,
+    pub strategy: Strategy,
+    /// Sample step in units of the local (finest contributing) cell width.
+    pub step: f64,
+    /// Samples (jittered rays) per pixel.
+    #[serde(default = "one")]
+    pub spp: u32,
+    /// Seed of the per-pixel jitter (interleaved sampling).
+    #[serde(default)]
+    pub seed: u64,
+    pub transfer: TransferFunction,
+    pub colormap: ColorMap,
+    pub lights: Vec<Light>,
+    #[serde(default)]
+    pub material: Material,
+    #[serde(default)]
+    pub meshes: Vec<MeshInstance>,
+    /// Shadow rays towards every light, through meshes and the volume's opacity.
+    #[serde(default)]
+    pub shadows: bool,
+    /// Colour where rays leave the scene.
+    #[serde(default = "default_background")]
+    pub background: [f32; 3],
+    pub width: u32,
+    pub height: u32,
+}
+
+fn one() -> u32 {
+    1
+}
+
+/// Dark blue-grey, so both white-ish meshes and blue shells stand out.
+pub const DEFAULT_BACKGROUND: [f32; 3] = [0.08, 0.09, 0.11];
+
+fn default_background() -> [f32; 3] {
+    DEFAULT_BACKGROUND
+}
+
+/// Why a view state could not be loaded or saved.
+#[derive(Debug, thiserror::Error)]
+pub enum ViewStateError {
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{}: not a valid view state: {source}", path.display())]
+    Parse {
+        path: PathBuf,
+        source: serde_json::Error,
+    },
+    #[error("{}: {message}", path.display())]
+    Invalid { path: PathBuf, message: String },
+}
+
+impl ViewState {
+    /// A state that shows any data set reasonably on first open: the camera frames the
+    /// box `min..max`, the iso field is `q` (else the first field), the iso value is
+    /// 10 % of its positive maximum (else the middle of its range), colour by `speed`
+    /// (else the second field, else the iso field) over that field's range.
+    pub fn default_for(min: [f64; 3], max: [f64; 3], fields: &[FieldRange]) -> ViewState {
+        let camera = Camera::frame(min, max);
+        let iso_range = fields
+            .iter()
+            .find(|f| f.name == "q")
+            .or_else(|| fields.first());
+        let (iso_field, iso, span) = match iso_range {
+            Some(f) if f.min.is_finite() && f.max.is_finite() => {
+                let (lo, hi) = (f64::from(f.min.min(f.max)), f64::from(f.min.max(f.max)));
+                let iso = if hi > 0.0 && lo < 0.1 * hi {
+                    0.1 * hi
+                } else {
+                    0.5 * (lo + hi)
+                };
+                (f.name.clone(), iso, hi - lo)
+            }
+            Some(f) => (f.name.clone(), 0.0, 1.0),
+            None => ("q".to_string(), 0.0, 1.0),
+        };
+        // σ as in the seed report (8 % of the iso value), but never zero.
+        let mut sigma = 0.08 * iso.abs();
+        if sigma <= 0.0 || sigma.is_nan() {
+            sigma = 0.02 * span;
+        }
+        if !(sigma > 0.0 && sigma.is_finite()) {
+            sigma = 1e-3;
+        }
+        let colour_field = fields
+            .iter()
+            .find(|f| f.name == "speed")
+            .or_else(|| fields.iter().find(|f| f.name != iso_field))
+            .or(iso_range);
+        let colormap = match colour_field {
+            Some(f) => ColorMap::default_for_range(&f.name, f.min, f.max),
+            None => ColorMap::default_for_range("speed", 0.0, 1.0),
+        };
+        ViewState {
+            lights: default_lights(&camera),
+            camera,
+            mode: Mode::Iso,
+            iso_field,
+            iso,
+            strategy: Strategy::Exact,
+            step: 0.5,
+            spp: 1,
+            seed: 0,
+            transfer: TransferFunction {
+                sigma,
+                peak: 1.6,
+                k: 2.0,
+            },
+            colormap,
+            material: Material::default(),
+            meshes: Vec::new(),
+            shadows: false,
+            background: DEFAULT_BACKGROUND,
+            width: 800,
+            height: 600,
+        }
+    }
+
+    /// Checks what the JSON types cannot; the message names the field.
+    pub fn validate(&self) -> Result<(), String> {
+        let c = &self.camera;
+        for (name, v) in [("eye", c.eye), ("look_at", c.look_at), ("up", c.up)] {
+            if v.iter().any(|x| !x.is_finite()) {
+                return Err(format!("camera.{name}: not finite ({v:?})"));
+            }
+        }
+        if c.eye == c.look_at {
+            return Err("camera: eye and look_at are the same point".into());
+        }
+        match c.projection {
+            Projection::Perspective { fov_deg } if !(fov_deg > 0.0 && fov_deg < 179.0) => {
+                return Err(format!(
+                    "camera.projection.fov_deg: expected 0 < fov < 179, found {fov_deg}"
+                ))
+            }
+            Projection::Orthographic { width } if !(width > 0.0 && width.is_finite()) => {
+                return Err(format!(
+                    "camera.projection.width: expected a finite number > 0, found {width}"
+                ))
+            }
+            _ => {}
+        }
+        if !self.iso.is_finite() {
+            return Err(format!("iso: not finite ({})", self.iso));
+        }
+        if !(self.step.is_finite() && self.step > 0.0) {
+            return Err(format!(
+                "step: expected a finite number > 0, found {}",
+                self.step
+            ));
+        }
+        if !(1..=MAX_SPP).contains(&self.spp) {
+            return Err(format!("spp: expected 1..={MAX_SPP}, found {}", self.spp));
+        }
+        for (name, v) in [
+            ("transfer.sigma", self.transfer.sigma),
+            ("transfer.peak", self.transfer.peak),
+            ("transfer.k", self.transfer.k),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!("{name}: expected a finite number > 0, found {v}"));
+            }
+        }
+        self.colormap
+            .validate()
+            .map_err(|m| format!("colormap.{m}"))?;
+        for (i, l) in self.lights.iter().enumerate() {
+            l.validate().map_err(|m| format!("lights[{i}].{m}"))?;
+        }
+        self.material
+            .validate()
+            .map_err(|m| format!("material.{m}"))?;
+        for (i, m) in self.meshes.iter().enumerate() {
+            m.validate().map_err(|e| format!("meshes[{i}]: {e}"))?;
+        }
+        if self.background.iter().any(|c| !(0.0..=1.0).contains(c)) {
+            return Err(format!(
+                "background: expected components in 0..=1, found {:?}",
+                self.background
+            ));
+        }
+        for (name, v) in [("width", self.width), ("height", self.height)] {
+            if !(1..=MAX_IMAGE_SIDE).contains(&v) {
+                return Err(format!("{name}: expected 1..={MAX_IMAGE_SIDE}, found {v}"));
+            }
+        }
+        Ok(())
+    }
+
+    /// Parses and validates JSON text; `path` only names the source in errors.
+    pub fn from_json(path: &Path, text: &str) -> Result<ViewState, ViewStateError> {
+        let state: ViewState =
+            serde_json::from_str(text).map_err(|source| ViewStateError::Parse {
+                path: path.to_path_buf(),
+                source,
+            })?;
+        state
+            .validate()
+            .map_err(|message| ViewStateError::Invalid {
+                path: path.to_path_buf(),
+                message,
+            })?;
+        Ok(state)
+    }
+
+    /// Reads a state file (at most 16 MiB).
+    pub fn load(path: &Path) -> Result<ViewState, ViewStateError> {
+        const MAX_BYTES: u64 = 16 << 20;
+        let io = |source| ViewStateError::Io {
+            path: path.to_path_buf(),
+            source,
+        };
+        let len = std::fs::metadata(path).map_err(io)?.len();
+        if len > MAX_BYTES {
+            return Err(ViewStateError::Invalid {
+                path: path.to_path_buf(),
+                message: format!(
+                    "expected a JSON view state of at most {MAX_BYTES} bytes, found {len} bytes"
+                ),
+            });
+        }
+        let text = std::fs::read_to_string(path).map_err(io)?;
+        ViewState::from_json(path, &text)
+    }
+
+    /// Pretty JSON text.
+    pub fn to_json(&self) -> String {
+        // Serialising plain data with string keys cannot fail.
+        serde_json::to_string_pretty(self).unwrap_or_default()
+    }
+
+    /// Writes the state atomically: to a temporary file next to `path`, then renamed.
+    pub fn save(&self, path: &Path) -> Result<(), ViewStateError> {
+        let io = |source| ViewStateError::Io {
+            path: path.to_path_buf(),
+            source,
+        };
+        let name = path.file_name().ok_or_else(|| {
+            io(std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                "expected a file name",
+            ))
+        })?;
+        let mut tmp_name = std::ffi::OsString::from(".");
+        tmp_name.push(name);
+        tmp_name.push(format!(".tmp-{}", std::process::id()));
+        let tmp = path.with_file_name(tmp_name);
+        let result = (|| {
+            let mut f = std::fs::File::create(&tmp)?;
+            f.write_all(self.to_json().as_bytes())?;
+            f.write_all(b"\n")?;
+            f.sync_all()?;
+            std::fs::rename(&tmp, path)
+        })();
+        if result.is_err() {
+            let _ = std::fs::remove_file(&tmp);
+        }
+        result.map_err(io)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn fields() -> Vec<FieldRange> {
+        vec![
+            FieldRange {
+                name: "q".into(),
+                min: -2.0,
+                max: 0.5,
+            },
+            FieldRange {
+                name: "speed".into(),
+                min: 0.0,
+                max: 0.08,
+            },
+        ]
+    }
+
+    #[test]
+    fn defaults_are_valid_and_sensible() {
+        let s = ViewState::default_for([-1.0, -1.0, -1.0], [3.0, 1.0, 1.0], &fields());
+        s.validate().expect("valid");
+        assert_eq!(s.iso_field, "q");
+        assert!((s.iso - 0.05).abs() < 1e-7);
+        assert!((s.transfer.sigma - 0.004).abs() < 1e-7);
+        assert_eq!(s.colormap.field, "speed");
+        assert_eq!(s.mode, Mode::Iso);
+        // Without fields, and with odd ranges, still valid.
+        ViewState::default_for([0.0; 3], [0.0; 3], &[])
+            .validate()
+            .expect("no fields");
+        let odd = [FieldRange {
+            name: "density".into(),
+            min: 3.0,
+            max: 3.0,
+        }];
+        let s = ViewState::default_for([0.0; 3], [1.0; 3], &odd);
+        s.validate().expect("constant field");
+        assert_eq!(s.iso_field, "density");
+        assert_eq!(s.colormap.field, "density");
+        let nan = [FieldRange {
+            name: "q".into(),
+            min: f32::NAN,
+            max: 1.0,
+        }];
+        ViewState::default_for([0.0; 3], [1.0; 3], &nan)
+            .validate()
+            .expect("nan range");
+    }
+
+    #[test]
+    fn json_round_trip_through_a_file() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("view.json");
+        let mut s = ViewState::default_for([0.0; 3], [1.0; 3], &fields());
+        s.mode = Mode::Dvr;
+        s.strategy = Strategy::Bisect;
+        s.meshes.push(MeshInstance::at_origin("data/sphere.obj"));
+        s.shadows = true;
+        s.seed = 42;
+        s.camera.projection = Projection::Orthographic { width: 2.5 };
+        s.colormap = ColorMap::seed_report();
+        s.save(&path).expect("save");
+        let back = ViewState::load(&path).expect("load");
+        assert_eq!(s, back);
+        // Only the final file is left behind.
+        let names: Vec<_> = std::fs::read_dir(dir.path())
+            .expect("read_dir")
+            .map(|e| e.expect("entry").file_name())
+            .collect();
+        assert_eq!(names, vec![std::ffi::OsString::from("view.json")]);
+        let text = std::fs::read_to_string(&path).expect("read");
+        assert!(text.contains("\"mode\": \"dvr\""), "{text}");
+        assert!(text.contains("\"strategy\": \"bisect\""), "{text}");
+    }
+
+    #[test]
+    fn unknown_fields_are_rejected_with_their_name() {
+        let s = ViewState::default_for([0.0; 3], [1.0; 3], &fields());
+        let mut v: serde_json::Value = serde_json::from_str(&s.to_json()).expect("json");
+        v["isovalue"] = serde_json::json!(0.1);
+        let e = ViewState::from_json(Path::new("v.json"), &v.to_string()).expect_err("unknown");
+        let msg = e.to_string();
+        assert!(
+            msg.starts_with("v.json: ") && msg.contains("isovalue"),
+            "{msg}"
+        );
+        // Nested: inside the camera and inside a light.
+        let mut v: serde_json::Value = serde_json::from_str(&s.to_json()).expect("json");
+        v["camera"]["fov"] = serde_json::json!(30);
+        let e = ViewState::from_json(Path::new("v.json"), &v.to_string()).expect_err("nested");
+        assert!(e.to_string().contains("fov"), "{e}");
+        let mut v: serde_json::Value = serde_json::from_str(&s.to_json()).expect("json");
+        v["lights"][0]["power"] = serde_json::json!(3);
+        let e = ViewState::from_json(Path::new("v.json"), &v.to_string()).expect_err("light");
+        assert!(e.to_string().contains("power"), "{e}");
+        // Bad enum strings.
+        let mut v: serde_json::Value = serde_json::from_str(&s.to_json()).expect("json");
+        v["strategy"] = serde_json::json!("fast");
+        let e = ViewState::from_json(Path::new("v.json"), &v.to_string()).expect_err("enum");
+        assert!(e.to_string().contains("fast"), "{e}");
+    }
+
+    #[test]
+    fn invalid_values_are_rejected_with_their_name() {
+        let s = ViewState::default_for([0.0; 3], [1.0; 3], &fields());
+        type Change = Box<dyn Fn(&mut ViewState)>;
+        let cases: Vec<(&str, Change)> = vec![
+            ("width", Box::new(|s| s.width = 0)),
+            ("height", Box::new(|s| s.height = 100_000)),
+            ("step", Box::new(|s| s.step = -1.0)),
+            ("spp", Box::new(|s| s.spp = 0)),
+            ("transfer.sigma", Box::new(|s| s.transfer.sigma = 0.0)),
+            ("colormap.band", Box::new(|s| s.colormap.band = -1.0)),
+            (
+                "camera.projection.fov_deg",
+                Box::new(|s| s.camera.projection = Projection::Perspective { fov_deg: 200.0 }),
+            ),
+            (
+                "meshes[0]",
+                Box::new(|s| {
+                    let mut m = MeshInstance::at_origin("a.obj");
+                    m.scale = -1.0;
+                    s.meshes.push(m);
+                }),
+            ),
+        ];
+        for (name, change) in cases {
+            let mut bad = s.clone();
+            change(&mut bad);
+            let e = ViewState::from_json(Path::new("v.json"), &bad.to_json()).expect_err(name);
+            assert!(e.to_string().contains(name), "{name}: {e}");
+        }
+        let e = ViewState::load(Path::new("/nonexistent/v.json")).expect_err("missing");
+        assert!(e.to_string().contains("/nonexistent/v.json"), "{e}");
+    }
+
+    #[test]
+    fn defaulted_fields_may_be_omitted() {
+        let s = ViewState::default_for([0.0; 3], [1.0; 3], &fields());
+        let mut v: serde_json::Value = serde_json::from_str(&s.to_json()).expect("json");
+        let obj = v.as_object_mut().expect("object");
+        for k in ["spp", "seed", "material", "meshes", "shadows", "background"] {
+            obj.remove(k);
+        }
+        let back = ViewState::from_json(Path::new("v.json"), &v.to_string()).expect("parse");
+        assert_eq!(back, s);
+    }
+
+    #[test]
+    fn enums_parse_and_print() {
+        for m in Mode::ALL {
+            assert_eq!(m.to_string().parse::<Mode>(), Ok(m));
+        }
+        for s in Strategy::ALL {
+            assert_eq!(s.to_string().parse::<Strategy>(), Ok(s));
+        }
+        assert!("ISO".parse::<Mode>().is_err());
+    }
+
+    #[test]
+    fn transfer_function_matches_the_seed_report() {
+        let tf = TransferFunction::seed_report();
+        assert_eq!(tf.opacity(0.05, 0.05), 1.0); // peak 1.6 clamps to 1
+        assert_eq!(tf.opacity(0.0419, 0.05), 0.0);
+        assert_eq!(tf.opacity(0.0581, 0.05), 0.0);
+        let x: f64 = 1.5;
+        let want = 1.6 * (-0.5 * x * x).exp();
+        assert!((tf.opacity(0.05 + 1.5 * 0.004, 0.05) - want).abs() < 1e-12);
+    }
+}
