@@ -427,3 +427,14 @@ pub fn trace_pixel(scene: &Scene, x: u32, y: u32) -> PixelTrace {
         rays,
     }
 }
+
+/// Renders on a pool of `threads` workers (0: all cores).
+pub fn render_with_threads(
+    scene: &Scene,
+    threads: usize,
+) -> Result<Frame, rayon::ThreadPoolBuildError> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()?;
+    Ok(pool.install(|| render(scene)))
+}
