@@ -2,10 +2,23 @@
 //!
 //! Data flows one way: file → volume → traversal → samples → shading → pixels.
 
+// Numeric kernels index several per-axis arrays in lockstep; iterators would obscure them.
+#![allow(clippy::needless_range_loop)]
+
 pub mod bvh;
 pub mod camera;
 pub mod colormap;
+pub mod film;
 pub mod info;
+pub mod integrate;
 pub mod mesh;
+pub mod probe;
+pub mod reconstruct;
+pub mod render;
+pub mod sampling;
 pub mod shading;
+pub mod testvol;
+pub mod transfer;
+pub mod traverse;
 pub mod view_state;
+pub mod volume;

@@ -1,0 +1,783 @@
+//! Sampling strategies along one ray: `uniform`, `paper`, `bisect`, `exact`
+//! (see DESIGN.md, "Sampling strategies").
+//!
+//! All strategies walk the regions front to back ([`Volume::segments`]) and skip a region
+//! whose value bounds miss the transfer function's non-zero band. A skipped region still
+//! tells on which side of the band the field is there: when the last sample before it lies
+//! on the other side, the band was crossed in between and is searched for there, so
+//! skipping never loses a crossing.
+
+use serde::Serialize;
+
+use crate::integrate::{correct_opacity, Accum};
+use crate::reconstruct::{Cubic, Eval};
+use crate::transfer::{Class, Mode, Transfer};
+use crate::traverse::{Skip, SKIPPED};
+use crate::volume::Volume;
+
+pub use crate::view_state::Strategy;
+
+/// Smallest bisection interval of `bisect`, in cell widths.
+pub const BISECT_RESOLUTION: f64 = 0.005;
+
+/// What a ray needs to know about the volume's transfer and sampling.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Params {
+    pub strategy: Strategy,
+    /// Step in units of the local cell width.
+    pub step: f64,
+    pub tf: Transfer,
+    /// Field of the iso value / transfer function.
+    pub field: usize,
+    /// Field that drives the colour.
+    pub colour_field: Option<usize>,
+    /// Reference length of the transfer function's opacity (world units).
+    pub delta0: f64,
+}
+
+/// Work counters of one or more rays (summed in integers: deterministic).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Stats {
+    /// Reconstructions (samples, refinement probes, exact's dual-cell cubics).
+    pub samples: u64,
+    pub segments: u64,
+    pub skipped: u64,
+}
+
+impl std::ops::AddAssign for Stats {
+    fn add_assign(&mut self, o: Stats) {
+        self.samples += o.samples;
+        self.segments += o.segments;
+        self.skipped += o.skipped;
+    }
+}
+
+/// What `--pixel` prints.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[serde(tag = "event", rename_all = "snake_case")]
+pub enum Event {
+    Segment {
+        region: u32,
+        t0: f64,
+        t1: f64,
+        min: f32,
+        max: f32,
+        skipped: bool,
+    },
+    Sample {
+        t: f64,
+        value: Option<f64>,
+        alpha: f64,
+    },
+    Interval {
+        t0: f64,
+        t1: f64,
+        may_cross: bool,
+    },
+    Hit {
+        t: f64,
+        value: Option<f64>,
+    },
+}
+
+/// First iso-surface crossing along a ray.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct IsoHit {
+    pub t: f64,
+    /// Local frame.
+    pub p: [f64; 3],
+    /// Reconstruction at the hit (`None` only where the weights vanish).
+    pub eval: Option<Eval>,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Prev {
+    t: f64,
+    v: f64,
+    /// A real sample (`false`: a bound of a skipped region, only its side is known).
+    real: bool,
+}
+
+/// Sample positions of one region segment: `(t, Δ)`.
+struct Positions {
+    strategy: Strategy,
+    a: f64,
+    b: f64,
+    end: f64,
+    dt: f64,
+}
+
+impl Positions {
+    /// `t_next` carries the uniform sequence from region to region.
+    fn new(strategy: Strategy, t0: f64, t1: f64, dt: f64, jitter: f64, t_next: f64) -> Self {
+        match strategy {
+            Strategy::Uniform => {
+                let a = if t_next < t0 {
+                    t0 + jitter * dt
+                } else {
+                    t_next
+                };
+                Positions {
+                    strategy,
+                    a,
+                    b: a,
+                    end: t1,
+                    dt,
+                }
+            }
+            _ => Positions {
+                strategy,
+                a: t0,
+                b: t0 + jitter * dt,
+                end: t1,
+                dt,
+            },
+        }
+    }
+
+    /// Where the uniform sequence continues after this segment.
+    fn next_t(&self) -> f64 {
+        self.a
+    }
+}
+
+impl Iterator for Positions {
+    type Item = (f64, f64);
+
+    fn next(&mut self) -> Option<(f64, f64)> {
+        if self.strategy == Strategy::Uniform {
+            if self.a >= self.end {
+                return None;
+            }
+            let t = self.a;
+            self.a += self.dt;
+            return Some((t, self.dt));
+        }
+        // Interval delimiters t0, t0 + jitter·dt, t0 + (1 + jitter)·dt, …, t1; midpoints.
+        loop {
+            if self.a >= self.end {
+                return None;
+            }
+            let b = self.b.min(self.end);
+            let a = self.a;
+            self.a = b;
+            self.b += self.dt;
+            if b > a {
+                return Some((0.5 * (a + b), b - a));
+            }
+        }
+    }
+}
+
+#[inline]
+fn at(o: &[f64; 3], d: &[f64; 3], t: f64) -> [f64; 3] {
+    std::array::from_fn(|a| o[a] + t * d[a])
+}
+
+/// Casts rays through one volume with one set of parameters; keeps its scratch space.
+pub struct Tracer<'v> {
+    pub vol: &'v Volume<'v>,
+    pub params: Params,
+    pub stats: Stats,
+    /// Set to `Some` to record what the next rays do (`--pixel`).
+    pub log: Option<Vec<Event>>,
+    stack: Vec<(u32, f64, f64)>,
+}
+
+impl<'v> Tracer<'v> {
+    pub fn new(vol: &'v Volume<'v>, params: Params) -> Self {
+        Tracer {
+            vol,
+            params,
+            stats: Stats::default(),
+            log: None,
+            stack: Vec::with_capacity(64),
+        }
+    }
+
+    fn record(&mut self, e: Event) {
+        if let Some(l) = &mut self.log {
+            l.push(e);
+        }
+    }
+
+    /// Value at any local point (probe during refinement, regions found by KD descent).
+    fn probe(&mut self, p: [f64; 3]) -> Option<f64> {
+        self.stats.samples += 1;
+        self.vol.value_at(p, self.params.field)
+    }
+
+    /// First crossing of the iso value along `o + t d` (local frame, unit `d`) for `t` in
+    /// `[t0, t1]`; `jitter ∈ [0, 1)` offsets the first sample.
+    pub fn iso(
+        &mut self,
+        o: [f64; 3],
+        d: [f64; 3],
+        t0: f64,
+        t1: f64,
+        jitter: f64,
+    ) -> Option<IsoHit> {
+        let t = match self.params.strategy {
+            Strategy::Exact => self.iso_exact(o, d, t0, t1),
+            _ => self.iso_sampled(o, d, t0, t1, jitter),
+        }?;
+        let p = at(&o, &d, t);
+        let vol = self.vol;
+        let eval = vol
+            .region_at(p)
+            .and_then(|r| vol.eval(r as usize, p, self.params.field, self.params.colour_field));
+        self.stats.samples += 1;
+        self.record(Event::Hit {
+            t,
+            value: eval.map(|e| e.value),
+        });
+        Some(IsoHit { t, p, eval })
+    }
+
+    /// Whether anything opaque (iso mode) lies on `o + t d`, `t ∈ (t0, t1)`.
+    pub fn iso_occluded(&mut self, o: [f64; 3], d: [f64; 3], t0: f64, t1: f64) -> bool {
+        let saved = self.log.take();
+        let hit = match self.params.strategy {
+            Strategy::Exact => self.iso_exact(o, d, t0, t1),
+            _ => self.iso_sampled(o, d, t0, t1, 0.5),
+        };
+        self.log = saved;
+        hit.is_some()
+    }
+
+    /// Sample-based iso search (uniform, paper, bisect): a crossing is two consecutive
+    /// samples (or a sample and a skipped region) on opposite sides of the iso value.
+    fn iso_sampled(
+        &mut self,
+        o: [f64; 3],
+        d: [f64; 3],
+        t0: f64,
+        t1: f64,
+        jitter: f64,
+    ) -> Option<f64> {
+        let vol = self.vol;
+        let params = self.params;
+        let iso = params.tf.iso;
+        let mut prev: Option<Prev> = None;
+        let mut last_t1 = f64::NEG_INFINITY;
+        let mut t_next = f64::NEG_INFINITY;
+        let mut bracket: Option<(Prev, Prev, f64)> = None;
+        let mut stack = std::mem::take(&mut self.stack);
+        let tf = params.tf;
+        let skip = Skip {
+            field: params.field,
+            keep: |a, b| tf.may_contribute(a, b),
+            across_gaps: false,
+        };
+        vol.segments_skipping(o, d, t0, t1, &mut stack, &skip, |seg| {
+            let r = seg.region as usize;
+            let w = vol.step_width(seg.region);
+            if seg.t0 > last_t1 + 1e-9 * w {
+                prev = None; // a gap in the data
+            }
+            last_t1 = seg.t1;
+            self.stats.segments += 1;
+            let (mn, mx) = (seg.min, seg.max);
+            let skipped = seg.region == SKIPPED || !params.tf.may_contribute(mn, mx);
+            self.record(Event::Segment {
+                region: seg.region,
+                t0: seg.t0,
+                t1: seg.t1,
+                min: mn,
+                max: mx,
+                skipped,
+            });
+            if skipped {
+                self.stats.skipped += 1;
+                let side = if mn as f64 > iso { mn } else { mx } as f64;
+                let here = Prev {
+                    t: seg.t0,
+                    v: side,
+                    real: false,
+                };
+                if let Some(pv) = prev {
+                    if (pv.v >= iso) != (side >= iso) {
+                        bracket = Some((pv, here, w));
+                        return false;
+                    }
+                }
+                prev = Some(Prev { t: seg.t1, ..here });
+                return true;
+            }
+            let mut pos = Positions::new(
+                params.strategy,
+                seg.t0,
+                seg.t1,
+                params.step * w,
+                jitter,
+                t_next,
+            );
+            for (t, _) in pos.by_ref() {
+                let v = vol.eval_value(r, at(&o, &d, t), params.field);
+                self.stats.samples += 1;
+                self.record(Event::Sample {
+                    t,
+                    value: v,
+                    alpha: 0.0,
+                });
+                match v {
+                    None => prev = None,
+                    Some(v) => {
+                        let cur = Prev { t, v, real: true };
+                        if let Some(pv) = prev {
+                            if (pv.v >= iso) != (v >= iso) {
+                                bracket = Some((pv, cur, w));
+                                return false;
+                            }
+                        }
+                        prev = Some(cur);
+                    }
+                }
+            }
+            t_next = pos.next_t();
+            true
+        });
+        self.stack = stack;
+        let (a, b, w) = bracket?;
+        Some(self.refine_iso(o, d, a, b, w))
+    }
+
+    /// Narrows a bracket `[a, b]` of the iso crossing to a position.
+    fn refine_iso(&mut self, o: [f64; 3], d: [f64; 3], mut a: Prev, mut b: Prev, w: f64) -> f64 {
+        let iso = self.params.tf.iso;
+        let depth = match self.params.strategy {
+            Strategy::Bisect => bisect_depth(b.t - a.t, w),
+            _ if a.real && b.real => 0,
+            _ => 12,
+        };
+        let side_a = a.v >= iso;
+        for _ in 0..depth {
+            let tm = 0.5 * (a.t + b.t);
+            let Some(v) = self.probe(at(&o, &d, tm)) else {
+                break;
+            };
+            let m = Prev {
+                t: tm,
+                v,
+                real: true,
+            };
+            if (v >= iso) == side_a {
+                a = m;
+            } else {
+                b = m;
+            }
+        }
+        if a.real && b.real && a.v != b.v {
+            let s = ((iso - a.v) / (b.v - a.v)).clamp(0.0, 1.0);
+            a.t + s * (b.t - a.t)
+        } else {
+            0.5 * (a.t + b.t)
+        }
+    }
+
+    /// Exact iso search: per region (skipped by bounds), per interval between lattice
+    /// planes of every level present (inside which `Σ H (v − iso)` is a cubic), skip when
+    /// all contributing cells lie on one side, else take the cubic's first root.
+    fn iso_exact(&mut self, o: [f64; 3], d: [f64; 3], t0: f64, t1: f64) -> Option<f64> {
+        let vol = self.vol;
+        let params = self.params;
+        let iso = params.tf.iso;
+        let mut found = None;
+        let mut stack = std::mem::take(&mut self.stack);
+        let skip = Skip {
+            field: params.field,
+            keep: |a: f32, b: f32| a as f64 <= iso && iso <= b as f64,
+            across_gaps: true,
+        };
+        vol.segments_skipping(o, d, t0, t1, &mut stack, &skip, |seg| {
+            let r = seg.region as usize;
+            self.stats.segments += 1;
+            let (mn, mx) = (seg.min, seg.max);
+            let skipped = seg.region == SKIPPED || !(mn as f64 <= iso && iso <= mx as f64);
+            self.record(Event::Segment {
+                region: seg.region,
+                t0: seg.t0,
+                t1: seg.t1,
+                min: mn,
+                max: mx,
+                skipped,
+            });
+            if skipped {
+                self.stats.skipped += 1;
+                return true;
+            }
+            let mut planes = Planes::new(vol, r, &o, &d, seg.t0);
+            let mut ta = seg.t0;
+            while ta < seg.t1 {
+                let tb = planes.next(ta).min(seg.t1);
+                if tb <= ta {
+                    break;
+                }
+                let cubic = vol.cubic(r, &o, &d, ta, tb, params.field, iso);
+                self.stats.samples += 1;
+                let may_cross = cubic.any_above && cubic.any_below;
+                self.record(Event::Interval {
+                    t0: ta,
+                    t1: tb,
+                    may_cross,
+                });
+                if may_cross {
+                    if let Some(x) = first_root(&cubic) {
+                        found = Some(ta + x * (tb - ta));
+                        return false;
+                    }
+                }
+                ta = tb;
+            }
+            true
+        });
+        self.stack = stack;
+        found
+    }
+
+    /// Direct volume rendering of `o + t d`, `t ∈ [t0, t1]`; `shade` gives the colour of a
+    /// visible sample from its local position and reconstruction.
+    pub fn dvr<S: FnMut(&[f64; 3], &Eval) -> [f64; 3]>(
+        &mut self,
+        o: [f64; 3],
+        d: [f64; 3],
+        t0: f64,
+        t1: f64,
+        jitter: f64,
+        shade: &mut S,
+    ) -> Accum {
+        let vol = self.vol;
+        let params = self.params;
+        let tf = params.tf;
+        let mut acc = Accum::default();
+        let mut prev: Option<(f64, Class)> = None;
+        let mut last_t1 = f64::NEG_INFINITY;
+        let mut t_next = f64::NEG_INFINITY;
+        let mut stack = std::mem::take(&mut self.stack);
+        let skip = Skip {
+            field: params.field,
+            keep: |a, b| tf.may_contribute(a, b),
+            // Only `bisect` needs to know about gaps (band crossings next to skipped space).
+            across_gaps: params.strategy != Strategy::Bisect,
+        };
+        vol.segments_skipping(o, d, t0, t1, &mut stack, &skip, |seg| {
+            let r = seg.region as usize;
+            let w = vol.step_width(seg.region);
+            if seg.t0 > last_t1 + 1e-9 * w {
+                prev = None;
+            }
+            last_t1 = seg.t1;
+            self.stats.segments += 1;
+            let (mn, mx) = (seg.min, seg.max);
+            let skipped = seg.region == SKIPPED || !tf.may_contribute(mn, mx);
+            self.record(Event::Segment {
+                region: seg.region,
+                t0: seg.t0,
+                t1: seg.t1,
+                min: mn,
+                max: mx,
+                skipped,
+            });
+            if skipped {
+                self.stats.skipped += 1;
+                if params.strategy == Strategy::Bisect {
+                    let class = tf.classify(mn as f64);
+                    if let Some((pt, pc)) = prev {
+                        if pc != class && pc != Class::Inside {
+                            // The band lies between the last sample and this region.
+                            self.band_search(o, d, pt, seg.t0, w, &mut acc, shade);
+                            if acc.done() {
+                                return false;
+                            }
+                        }
+                    }
+                    prev = Some((seg.t1, class));
+                }
+                return true;
+            }
+            let mut pos = Positions::new(
+                params.strategy,
+                seg.t0,
+                seg.t1,
+                params.step * w,
+                jitter,
+                t_next,
+            );
+            for (t, delta) in pos.by_ref() {
+                let p = at(&o, &d, t);
+                let v = vol.eval_value(r, p, params.field);
+                self.stats.samples += 1;
+                let Some(v) = v else {
+                    prev = None;
+                    continue;
+                };
+                let class = tf.classify(v);
+                let mut delta = delta;
+                if params.strategy == Strategy::Bisect {
+                    if let Some((pt, pc)) = prev {
+                        if pc != Class::Inside && class != Class::Inside && pc != class {
+                            let tm = self.band_search(o, d, pt, t, w, &mut acc, shade);
+                            if acc.done() {
+                                return false;
+                            }
+                            delta = t - tm.unwrap_or(pt);
+                        } else {
+                            delta = t - pt;
+                        }
+                    }
+                    prev = Some((t, class));
+                }
+                let alpha = tf.opacity(v);
+                let a = correct_opacity(alpha, delta, params.delta0);
+                self.record(Event::Sample {
+                    t,
+                    value: Some(v),
+                    alpha: a,
+                });
+                if a > 0.0 {
+                    if let Some(e) = vol.eval(r, p, params.field, params.colour_field) {
+                        acc.add(shade(&p, &e), a);
+                        if acc.done() {
+                            return false;
+                        }
+                    }
+                }
+            }
+            t_next = pos.next_t();
+            true
+        });
+        self.stack = stack;
+        acc
+    }
+
+    /// `bisect`: the band lies between `ta` and `tb` (values on opposite sides); bisects
+    /// for a point inside it and composites that sample with the distance from `ta`.
+    #[allow(clippy::too_many_arguments)]
+    fn band_search<S: FnMut(&[f64; 3], &Eval) -> [f64; 3]>(
+        &mut self,
+        o: [f64; 3],
+        d: [f64; 3],
+        ta: f64,
+        tb: f64,
+        w: f64,
+        acc: &mut Accum,
+        shade: &mut S,
+    ) -> Option<f64> {
+        let tf = self.params.tf;
+        let (mut a, mut b) = (ta, tb);
+        let side_a = self.probe(at(&o, &d, a)).map(|v| tf.classify(v));
+        for _ in 0..bisect_depth(tb - ta, w) {
+            let tm = 0.5 * (a + b);
+            let p = at(&o, &d, tm);
+            let v = self.probe(p)?;
+            let class = tf.classify(v);
+            if class == Class::Inside {
+                let vol = self.vol;
+                let e = vol.region_at(p).and_then(|r| {
+                    vol.eval(r as usize, p, self.params.field, self.params.colour_field)
+                })?;
+                let alpha = correct_opacity(tf.opacity(v), tm - ta, self.params.delta0);
+                self.record(Event::Sample {
+                    t: tm,
+                    value: Some(v),
+                    alpha,
+                });
+                acc.add(shade(&p, &e), alpha);
+                return Some(tm);
+            }
+            if Some(class) == side_a {
+                a = tm;
+            } else {
+                b = tm;
+            }
+        }
+        None
+    }
+
+    /// Transmittance along a shadow ray (dvr), with `paper` sampling and no shading.
+    pub fn transmittance(&mut self, o: [f64; 3], d: [f64; 3], t0: f64, t1: f64) -> f64 {
+        let saved = self.log.take();
+        let acc = self.dvr(o, d, t0, t1, 0.5, &mut |_, _| [0.0; 3]);
+        self.log = saved;
+        acc.transmittance
+    }
+}
+
+/// Bisection depth that narrows `len` (world units) to `BISECT_RESOLUTION` cells of width `w`.
+fn bisect_depth(len: f64, w: f64) -> u32 {
+    let r = (len / w / BISECT_RESOLUTION).max(1.0);
+    (r.log2().ceil() as u32).clamp(1, 40)
+}
+
+/// Walks the lattice planes (cell-centre planes) of every lattice present in a region.
+struct Planes {
+    /// Next plane crossing per (lattice, axis) and the spacing in t.
+    next: [f64; 24],
+    step: [f64; 24],
+    n: usize,
+}
+
+impl Planes {
+    fn new(vol: &Volume, r: usize, o: &[f64; 3], d: &[f64; 3], t: f64) -> Planes {
+        let mut pl = Planes {
+            next: [f64::INFINITY; 24],
+            step: [f64::INFINITY; 24],
+            n: 0,
+        };
+        let ids = vol.region_brick_ids(r);
+        let mut lattices: [(usize, [f64; 3]); 8] = [(0, [0.0; 3]); 8];
+        let mut nl = 0;
+        for (k, &b) in ids.iter().enumerate() {
+            let br = &vol.bricks[b as usize];
+            let same = |&(j, _): &(usize, [f64; 3])| {
+                let o2 = &vol.bricks[ids[j] as usize];
+                o2.w == br.w
+                    && (0..3).all(|a| {
+                        let q = (o2.origin[a] - br.origin[a]) * br.inv_w;
+                        (q - q.round()).abs() < 1e-9
+                    })
+            };
+            if lattices[..nl].iter().any(same) {
+                continue;
+            }
+            if nl == 8 {
+                // More lattices than we track: fall back to the finest spacing everywhere
+                // (still exact per interval only if all lattices are tracked, so keep the
+                // intervals small: half the finest cell).
+                break;
+            }
+            lattices[nl] = (k, br.origin);
+            nl += 1;
+        }
+        for &(k, origin) in &lattices[..nl] {
+            let br = &vol.bricks[ids[k] as usize];
+            for a in 0..3 {
+                if d[a] == 0.0 {
+                    continue;
+                }
+                let x = o[a] + t * d[a];
+                let u = (x - origin[a]) * br.inv_w;
+                let kplane = if d[a] > 0.0 {
+                    u.floor() + 1.0
+                } else {
+                    u.ceil() - 1.0
+                };
+                let tp = (origin[a] + kplane * br.w - o[a]) / d[a];
+                pl.next[pl.n] = tp;
+                pl.step[pl.n] = br.w / d[a].abs();
+                pl.n += 1;
+            }
+        }
+        pl
+    }
+
+    /// The next plane crossing after `t`.
+    fn next(&mut self, t: f64) -> f64 {
+        let mut best = f64::INFINITY;
+        for i in 0..self.n {
+            // Round-off can leave a plane at or just before t: step past it.
+            while self.next[i] <= t + 1e-12 * self.step[i] {
+                self.next[i] += self.step[i];
+            }
+            best = best.min(self.next[i]);
+        }
+        best
+    }
+}
+
+/// First root of the cubic on `[0, 1]` (a sign change or an exact zero), refined by
+/// bisection to round-off.
+pub fn first_root(c: &Cubic) -> Option<f64> {
+    // Where the weights vanish (outer support boundary) g is zero without a surface.
+    let wscale = c.weight.iter().map(|x| x.abs()).sum::<f64>();
+    let real_zero = |x: f64| c.weight_at(x) > 1e-7 * wscale;
+    let mut g0 = c.eval(0.0);
+    if g0 == 0.0 {
+        if real_zero(0.0) {
+            return Some(0.0);
+        }
+        g0 = c.eval(1e-9);
+        if g0 == 0.0 {
+            return None;
+        }
+    }
+    // Monotone pieces between the critical points.
+    let mut cuts = [0.0, 1.0, 1.0, 1.0];
+    let mut n = 1;
+    let (qa, qb, qc) = (3.0 * c.c[3], 2.0 * c.c[2], c.c[1]);
+    let scale = qa.abs() + qb.abs() + qc.abs();
+    let mut roots = [f64::NAN; 2];
+    if qa.abs() <= 1e-14 * scale {
+        if qb != 0.0 {
+            roots[0] = -qc / qb;
+        }
+    } else {
+        let disc = qb * qb - 4.0 * qa * qc;
+        if disc >= 0.0 {
+            let q = -0.5 * (qb + qb.signum() * disc.sqrt());
+            roots[0] = q / qa;
+            if q != 0.0 {
+                roots[1] = qc / q;
+            }
+        }
+    }
+    if roots[0] > roots[1] {
+        roots.swap(0, 1);
+    }
+    for x in roots {
+        if x > 0.0 && x < 1.0 {
+            cuts[n] = x;
+            n += 1;
+        }
+    }
+    cuts[n] = 1.0;
+    let mut xa = 0.0;
+    let mut ga = g0;
+    for &xb in &cuts[1..=n] {
+        if xb <= xa {
+            continue;
+        }
+        let gb = c.eval(xb);
+        if gb == 0.0 {
+            if real_zero(xb) {
+                return Some(xb);
+            }
+            xa = xb;
+            continue;
+        }
+        if (ga < 0.0) != (gb < 0.0) {
+            let (mut lo, mut hi) = (xa, xb);
+            for _ in 0..60 {
+                let m = 0.5 * (lo + hi);
+                if m <= lo || m >= hi {
+                    break;
+                }
+                let gm = c.eval(m);
+                if gm == 0.0 {
+                    if real_zero(m) {
+                        return Some(m);
+                    }
+                    break;
+                }
+                if (gm < 0.0) == (ga < 0.0) {
+                    lo = m;
+                } else {
+                    hi = m;
+                }
+            }
+            let x = 0.5 * (lo + hi);
+            if real_zero(x) {
+                return Some(x);
+            }
+        }
+        xa = xb;
+        ga = gb;
+    }
+    None
+}
+
+impl Params {
+    pub fn mode(&self) -> Mode {
+        self.tf.mode
+    }
+}
