@@ -43,12 +43,13 @@ struct Axis {
 #[inline]
 fn axis_cells(u: f64, dim: i64, inv_w: f64) -> Axis {
     let mut ax = Axis::default();
-    let fl = u.floor();
-    if !(fl >= -1.0 && fl < dim as f64) {
+    // floor() without a libm call (the baseline x86-64 target has no SSE4.1 round).
+    if !(u >= -1.0 && u < dim as f64) {
         return ax;
     }
-    let i0 = fl as i64;
-    let d = u - fl; // in [0, 1)
+    let t = u as i64;
+    let i0 = if (t as f64) > u { t - 1 } else { t };
+    let d = u - i0 as f64; // in [0, 1)
     if i0 >= 0 {
         ax.idx[ax.n] = i0;
         ax.w[ax.n] = 1.0 - d;

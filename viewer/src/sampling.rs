@@ -12,6 +12,7 @@ use serde::Serialize;
 use crate::integrate::{correct_opacity, Accum};
 use crate::reconstruct::{Cubic, Eval};
 use crate::transfer::{Class, Mode, Transfer};
+use crate::traverse::{Skip, SKIPPED};
 use crate::volume::Volume;
 
 pub use crate::view_state::Strategy;
@@ -262,17 +263,22 @@ impl<'v> Tracer<'v> {
         let mut t_next = f64::NEG_INFINITY;
         let mut bracket: Option<(Prev, Prev, f64)> = None;
         let mut stack = std::mem::take(&mut self.stack);
-        vol.segments(o, d, t0, t1, &mut stack, |seg| {
+        let tf = params.tf;
+        let skip = Skip {
+            field: params.field,
+            keep: |a, b| tf.may_contribute(a, b),
+            across_gaps: false,
+        };
+        vol.segments_skipping(o, d, t0, t1, &mut stack, &skip, |seg| {
             let r = seg.region as usize;
-            let reg = &vol.regions[r];
-            let w = reg.finest_w;
+            let w = vol.step_width(seg.region);
             if seg.t0 > last_t1 + 1e-9 * w {
                 prev = None; // a gap in the data
             }
             last_t1 = seg.t1;
             self.stats.segments += 1;
-            let [mn, mx] = vol.range(r, params.field);
-            let skipped = !params.tf.may_contribute(mn, mx);
+            let (mn, mx) = (seg.min, seg.max);
+            let skipped = seg.region == SKIPPED || !params.tf.may_contribute(mn, mx);
             self.record(Event::Segment {
                 region: seg.region,
                 t0: seg.t0,
@@ -378,11 +384,16 @@ impl<'v> Tracer<'v> {
         let iso = params.tf.iso;
         let mut found = None;
         let mut stack = std::mem::take(&mut self.stack);
-        vol.segments(o, d, t0, t1, &mut stack, |seg| {
+        let skip = Skip {
+            field: params.field,
+            keep: |a: f32, b: f32| a as f64 <= iso && iso <= b as f64,
+            across_gaps: true,
+        };
+        vol.segments_skipping(o, d, t0, t1, &mut stack, &skip, |seg| {
             let r = seg.region as usize;
             self.stats.segments += 1;
-            let [mn, mx] = vol.range(r, params.field);
-            let skipped = !(mn as f64 <= iso && iso <= mx as f64);
+            let (mn, mx) = (seg.min, seg.max);
+            let skipped = seg.region == SKIPPED || !(mn as f64 <= iso && iso <= mx as f64);
             self.record(Event::Segment {
                 region: seg.region,
                 t0: seg.t0,
@@ -443,16 +454,22 @@ impl<'v> Tracer<'v> {
         let mut last_t1 = f64::NEG_INFINITY;
         let mut t_next = f64::NEG_INFINITY;
         let mut stack = std::mem::take(&mut self.stack);
-        vol.segments(o, d, t0, t1, &mut stack, |seg| {
+        let skip = Skip {
+            field: params.field,
+            keep: |a, b| tf.may_contribute(a, b),
+            // Only `bisect` needs to know about gaps (band crossings next to skipped space).
+            across_gaps: params.strategy != Strategy::Bisect,
+        };
+        vol.segments_skipping(o, d, t0, t1, &mut stack, &skip, |seg| {
             let r = seg.region as usize;
-            let w = vol.regions[r].finest_w;
+            let w = vol.step_width(seg.region);
             if seg.t0 > last_t1 + 1e-9 * w {
                 prev = None;
             }
             last_t1 = seg.t1;
             self.stats.segments += 1;
-            let [mn, mx] = vol.range(r, params.field);
-            let skipped = !tf.may_contribute(mn, mx);
+            let (mn, mx) = (seg.min, seg.max);
+            let skipped = seg.region == SKIPPED || !tf.may_contribute(mn, mx);
             self.record(Event::Segment {
                 region: seg.region,
                 t0: seg.t0,

@@ -6,9 +6,28 @@ use crate::volume::{KdN, Volume};
 /// The part of a ray inside one region (local frame, `t` in world units along a unit ray).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Segment {
+    /// The region, or [`SKIPPED`] for a whole KD subtree skipped by its value range.
     pub region: u32,
     pub t0: f64,
     pub t1: f64,
+    /// Value range of the traversal's field over the region / subtree.
+    pub min: f32,
+    pub max: f32,
+}
+
+/// [`Segment::region`] of a skipped subtree.
+pub const SKIPPED: u32 = u32::MAX;
+
+/// Which subtrees [`Volume::segments_skipping`] may skip whole.
+#[derive(Debug, Clone, Copy)]
+pub struct Skip<K: Fn(f32, f32) -> bool> {
+    /// Field whose ranges are tested.
+    pub field: usize,
+    /// Keep (descend into) a subtree whose range is `[min, max]`.
+    pub keep: K,
+    /// Skip subtrees that contain empty space too (callers that need to notice gaps in
+    /// the data pass `false`).
+    pub across_gaps: bool,
 }
 
 /// Entry/exit of the ray through the box `min..max`, clipped to `[t_min, t_max]`.
@@ -60,8 +79,31 @@ impl Volume<'_> {
         t_min: f64,
         t_max: f64,
         stack: &mut Vec<(u32, f64, f64)>,
+        f: F,
+    ) {
+        let skip = Skip {
+            field: 0,
+            keep: |_, _| true,
+            across_gaps: false,
+        };
+        self.segments_skipping(o, d, t_min, t_max, stack, &skip, f)
+    }
+
+    /// As [`Volume::segments`], but a KD subtree whose value range `skip.keep` rejects is
+    /// reported as one [`SKIPPED`] segment over the ray's part of the subtree's cell.
+    #[allow(clippy::too_many_arguments)]
+    pub fn segments_skipping<K: Fn(f32, f32) -> bool, F: FnMut(Segment) -> bool>(
+        &self,
+        o: [f64; 3],
+        d: [f64; 3],
+        t_min: f64,
+        t_max: f64,
+        stack: &mut Vec<(u32, f64, f64)>,
+        skip: &Skip<K>,
         mut f: F,
     ) {
+        let nf = self.fields.len();
+        let field = skip.field.min(nf.saturating_sub(1));
         if self.kd.is_empty() {
             return;
         }
@@ -75,7 +117,30 @@ impl Volume<'_> {
         while let Some((mut node, ta, mut tb)) = stack.pop() {
             // The tree was checked acyclic at open; depth bounds this walk.
             loop {
+                let rng = if nf > 0 {
+                    self.kd_ranges[node as usize * nf + field]
+                } else {
+                    [0.0, 0.0]
+                };
                 match self.kd[node as usize] {
+                    KdN::Inner { .. }
+                        if nf > 0
+                            && !(skip.keep)(rng[0], rng[1])
+                            && (skip.across_gaps || self.kd_full[node as usize]) =>
+                    {
+                        if ta < tb
+                            && !f(Segment {
+                                region: SKIPPED,
+                                t0: ta,
+                                t1: tb,
+                                min: rng[0],
+                                max: rng[1],
+                            })
+                        {
+                            return;
+                        }
+                        break;
+                    }
                     KdN::Inner {
                         axis,
                         split,
@@ -111,6 +176,8 @@ impl Volume<'_> {
                                     region: r,
                                     t0: s0,
                                     t1: s1,
+                                    min: rng[0],
+                                    max: rng[1],
                                 }) {
                                     return;
                                 }

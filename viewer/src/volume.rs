@@ -94,6 +94,10 @@ pub struct Volume<'a> {
     /// `[min, max]` per region and field: entry `r * fields + f`.
     pub region_ranges: Vec<[f32; 2]>,
     pub kd: Vec<KdN>,
+    /// `[min, max]` per KD node and field over the regions below it: entry `n * fields + f`.
+    pub kd_ranges: Vec<[f32; 2]>,
+    /// Every leaf below the node holds a region.
+    pub kd_full: Vec<bool>,
     /// Depth of the KD tree (root alone = 1).
     pub kd_depth: usize,
     /// Finest cell width in the file (reference length for opacity).
@@ -227,7 +231,7 @@ impl<'a> Volume<'a> {
                 file.region_ranges.len(),
             ));
         }
-        let region_ranges = file
+        let region_ranges: Vec<[f32; 2]> = file
             .region_ranges
             .iter()
             .map(|r| [r.min.to_native(), r.max.to_native()])
@@ -260,6 +264,7 @@ impl<'a> Volume<'a> {
         let mut seen = vec![false; kd.len()];
         let mut stack: Vec<(u32, usize)> = if kd.is_empty() { vec![] } else { vec![(0, 1)] };
         let mut kd_depth = 0;
+        let mut order = Vec::with_capacity(kd.len());
         while let Some((n, depth)) = stack.pop() {
             let idx = n as usize;
             if idx >= kd.len() {
@@ -273,6 +278,7 @@ impl<'a> Volume<'a> {
                 ));
             }
             seen[idx] = true;
+            order.push(n);
             kd_depth = kd_depth.max(depth);
             match &mut kd[idx] {
                 KdN::Inner {
@@ -303,7 +309,34 @@ impl<'a> Volume<'a> {
             }
         }
 
+        // Per node: value range of every field over its subtree's regions, and whether
+        // every leaf below holds a region (no empty space inside the node's cell).
+        let mut kd_ranges = vec![[f32::INFINITY, f32::NEG_INFINITY]; kd.len() * nf];
+        let mut kd_full = vec![false; kd.len()];
+        for &n in order.iter().rev() {
+            let n = n as usize;
+            match kd[n] {
+                KdN::Leaf(Some(r)) => {
+                    kd_full[n] = true;
+                    for f in 0..nf {
+                        kd_ranges[n * nf + f] = region_ranges[r as usize * nf + f];
+                    }
+                }
+                KdN::Leaf(None) => {}
+                KdN::Inner { left, right, .. } => {
+                    let (l, r) = (left as usize, right as usize);
+                    kd_full[n] = kd_full[l] && kd_full[r];
+                    for f in 0..nf {
+                        let (a, b) = (kd_ranges[l * nf + f], kd_ranges[r * nf + f]);
+                        kd_ranges[n * nf + f] = [a[0].min(b[0]), a[1].max(b[1])];
+                    }
+                }
+            }
+        }
+
         Ok(Volume {
+            kd_ranges,
+            kd_full,
             frame,
             bounds_min: loc(bmin),
             bounds_max: loc(bmax),
@@ -338,6 +371,14 @@ impl<'a> Volume<'a> {
     /// Local frame → world.
     pub fn to_world(&self, p: [f64; 3]) -> [f64; 3] {
         std::array::from_fn(|a| p[a] + self.frame[a])
+    }
+
+    /// Local cell width of a segment's region (the finest width for a skipped subtree).
+    #[inline]
+    pub fn step_width(&self, region: u32) -> f64 {
+        self.regions
+            .get(region as usize)
+            .map_or(self.finest_w, |r| r.finest_w)
     }
 
     /// Bricks of region `r`.

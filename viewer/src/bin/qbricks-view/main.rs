@@ -20,7 +20,7 @@ enum Command {
     /// Describe a .qbk file.
     Info(info::Args),
     /// Render a view to a PNG without a window.
-    Render(render::Args),
+    Render(Box<render::Args>),
     /// Print field values and gradients at points.
     Probe(probe::Args),
 }
@@ -29,7 +29,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Info(args) => info::run(args),
-        Command::Render(args) => render::run(args),
+        Command::Render(args) => render::run(*args),
         Command::Probe(args) => probe::run(args),
     };
     match result {

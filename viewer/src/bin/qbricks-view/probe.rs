@@ -1,8 +1,109 @@
 //! `qbricks-view probe`.
 
-#[derive(clap::Args)]
-pub struct Args {}
+use std::io::Write;
+use std::path::PathBuf;
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`probe` is not implemented yet")
+use anyhow::{bail, Context};
+use qbricks_viewer::probe;
+use qbricks_viewer::volume::Volume;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Brick file to probe.
+    pub file: PathBuf,
+    /// CSV file of points, one `x,y,z` per line (optional header line).
+    #[arg(long, conflicts_with = "line")]
+    pub points: Option<PathBuf>,
+    /// Evenly spaced points on a segment: x0,y0,z0:x1,y1,z1:N.
+    #[arg(long, allow_hyphen_values = true)]
+    pub line: Option<String>,
+    /// Field whose gradient is reported [default: q, else the first field].
+    #[arg(long)]
+    pub field: Option<String>,
+    /// Print a JSON list (one object per point) instead of CSV.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Largest points CSV read.
+const MAX_CSV_BYTES: u64 = 1 << 30;
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let points = match (&args.points, &args.line) {
+        (Some(p), None) => {
+            let len = std::fs::metadata(p)
+                .with_context(|| format!("{}", p.display()))?
+                .len();
+            if len > MAX_CSV_BYTES {
+                bail!(
+                    "{}: expected at most {MAX_CSV_BYTES} bytes, found {len}",
+                    p.display()
+                );
+            }
+            let text = std::fs::read_to_string(p).with_context(|| format!("{}", p.display()))?;
+            probe::parse_points_csv(&text).map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?
+        }
+        (None, Some(l)) => probe::parse_line(l).map_err(|e| anyhow::anyhow!("--line: {e}"))?,
+        _ => bail!("expected exactly one of --points CSV or --line x0,y0,z0:x1,y1,z1:N"),
+    };
+    let view = format::BrickFileView::open(&args.file)?;
+    let vol = Volume::new(view.file()).with_context(|| format!("{}", args.file.display()))?;
+    if vol.fields.is_empty() {
+        bail!("{}: the file has no fields", args.file.display());
+    }
+    let gf = match &args.field {
+        Some(name) => vol
+            .field_index(name)
+            .with_context(|| format!("{}", args.file.display()))?,
+        None => probe::default_field(&vol),
+    };
+    let res = probe::probe(&vol, &points, gf);
+    let stdout = std::io::stdout();
+    let mut out = std::io::BufWriter::new(stdout.lock());
+    if args.json {
+        // JSON has no NaN: points outside the data get null values.
+        let num = |v: f64| {
+            serde_json::Number::from_f64(v)
+                .map_or(serde_json::Value::Null, serde_json::Value::Number)
+        };
+        let list: Vec<serde_json::Value> = res
+            .iter()
+            .map(|r| {
+                let mut o = serde_json::Map::new();
+                o.insert("x".into(), num(r.p[0]));
+                o.insert("y".into(), num(r.p[1]));
+                o.insert("z".into(), num(r.p[2]));
+                for (f, v) in vol.fields.iter().zip(&r.values) {
+                    o.insert(f.name.clone(), num(*v));
+                }
+                o.insert(
+                    "gradient".into(),
+                    serde_json::Value::Array(r.gradient.iter().map(|&g| num(g)).collect()),
+                );
+                serde_json::Value::Object(o)
+            })
+            .collect();
+        serde_json::to_writer(&mut out, &list)?;
+        writeln!(out)?;
+    } else {
+        let names: Vec<&str> = vol.fields.iter().map(|f| f.name.as_str()).collect();
+        let g = &vol.fields[gf].name;
+        writeln!(out, "x,y,z,{},d{g}/dx,d{g}/dy,d{g}/dz", names.join(","))?;
+        for r in &res {
+            let vals: Vec<String> = r.values.iter().map(|v| v.to_string()).collect();
+            writeln!(
+                out,
+                "{},{},{},{},{},{},{}",
+                r.p[0],
+                r.p[1],
+                r.p[2],
+                vals.join(","),
+                r.gradient[0],
+                r.gradient[1],
+                r.gradient[2]
+            )?;
+        }
+    }
+    out.flush()?;
+    Ok(())
 }

@@ -1,0 +1,258 @@
+//! `qbricks-view render` and `probe` from the command line: exit codes, JSON keys, files.
+
+mod util;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use viewer::testvol;
+
+fn view_bin() -> PathBuf {
+    let b = util::bin("qbricks-view");
+    assert!(
+        b.exists(),
+        "{} missing: build it (cargo build --release -p qbricks-viewer)",
+        b.display()
+    );
+    b
+}
+
+/// The bundled sample if present, else a small test volume in `dir`.
+fn sample(dir: &Path) -> PathBuf {
+    let bundled = util::root().join("data/wake_small.qbk");
+    if bundled.exists() {
+        return bundled;
+    }
+    let q = |p: [f64; 3]| (p[0] / 4.0).sin() * (p[1] / 5.0).cos() * 0.1;
+    let s = |p: [f64; 3]| 0.05 + 0.001 * p[2];
+    let file = testvol::nested(8, [0.0; 3], &[("q", &q), ("speed", &s)], 8);
+    let path = dir.join("t.qbk");
+    format::writer::write(&path, &file).expect("write");
+    path
+}
+
+fn run(args: &[&str], cwd: &Path) -> (i32, String, String) {
+    let out = Command::new(view_bin())
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .expect("run");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn render_writes_a_png_and_reports_json() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let file = sample(dir.path());
+    let png = dir.path().join("out.png");
+    let state = dir.path().join("view.json");
+    let (code, stdout, stderr) = run(
+        &[
+            file.to_str().expect("utf8"),
+            "-o",
+            png.to_str().expect("utf8"),
+            "--width",
+            "64",
+            "--height",
+            "48",
+            "--strategy",
+            "exact",
+            "--threads",
+            "2",
+            "--repeat",
+            "2",
+            "--json",
+            "--save-state",
+            state.to_str().expect("utf8"),
+        ]
+        .iter()
+        .copied()
+        .fold(vec!["render"], |mut v, a| {
+            v.push(a);
+            v
+        }),
+        dir.path(),
+    );
+    assert_eq!(code, 0, "stderr: {stderr}");
+    let j: serde_json::Value = serde_json::from_str(stdout.trim()).expect("json");
+    for k in [
+        "ms",
+        "open_ms",
+        "rays",
+        "samples_per_ray",
+        "mrays_per_s",
+        "hit_fraction",
+        "width",
+        "height",
+        "strategy",
+        "mode",
+        "threads",
+    ] {
+        assert!(j.get(k).is_some(), "missing key {k} in {j}");
+    }
+    assert_eq!(j["rays"], 64 * 48);
+    assert_eq!(j["width"], 64);
+    assert_eq!(j["strategy"], "exact");
+    assert_eq!(j["threads"], 2);
+    let img = image::open(&png).expect("png").to_rgb8();
+    assert_eq!((img.width(), img.height()), (64, 48));
+    // The saved state reproduces the picture.
+    let png2 = dir.path().join("again.png");
+    let (code, _, stderr) = run(
+        &[
+            "render",
+            file.to_str().expect("utf8"),
+            "-o",
+            png2.to_str().expect("utf8"),
+            "--state",
+            state.to_str().expect("utf8"),
+        ],
+        dir.path(),
+    );
+    assert_eq!(code, 0, "stderr: {stderr}");
+    let img2 = image::open(&png2).expect("png").to_rgb8();
+    assert_eq!(img.as_raw(), img2.as_raw());
+    // No temporary files are left behind.
+    let names: Vec<String> = std::fs::read_dir(dir.path())
+        .expect("ls")
+        .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(names.iter().all(|n| !n.contains(".tmp")), "{names:?}");
+
+    // --pixel explains one ray.
+    let (code, stdout, stderr) = run(
+        &[
+            "render",
+            file.to_str().expect("utf8"),
+            "--width",
+            "64",
+            "--height",
+            "48",
+            "--pixel",
+            "32,24",
+        ],
+        dir.path(),
+    );
+    assert_eq!(code, 0, "stderr: {stderr}");
+    let j: serde_json::Value = serde_json::from_str(&stdout).expect("json");
+    assert!(
+        j["rays"][0]["events"]
+            .as_array()
+            .is_some_and(|e| !e.is_empty()),
+        "{j}"
+    );
+}
+
+#[test]
+fn render_errors_are_one_line_with_exit_code_2() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    // Default file missing (cwd has no data/).
+    let (code, _, stderr) = run(&["render", "-o", "x.png"], dir.path());
+    assert_eq!(code, 2);
+    assert!(stderr.contains("data/wake_small.qbk"), "{stderr}");
+    assert_eq!(stderr.trim().lines().count(), 1, "{stderr}");
+    // Missing and garbage files.
+    let (code, _, stderr) = run(&["render", "nope.qbk", "-o", "x.png"], dir.path());
+    assert_eq!(code, 2);
+    assert!(stderr.contains("nope.qbk"), "{stderr}");
+    std::fs::write(dir.path().join("bad.qbk"), b"garbage garbage garbage").expect("write");
+    let (code, _, stderr) = run(&["render", "bad.qbk", "-o", "x.png"], dir.path());
+    assert_eq!(code, 2);
+    assert!(stderr.contains("bad.qbk"), "{stderr}");
+    // Bad flag values.
+    let file = sample(dir.path());
+    let f = file.to_str().expect("utf8");
+    for bad in [
+        vec!["render", f, "-o", "x.png", "--eye", "1,2"],
+        vec!["render", f, "-o", "x.png", "--width", "0"],
+        vec!["render", f, "--pixel", "9999,0"],
+    ] {
+        let (code, _, stderr) = run(&bad, dir.path());
+        assert_eq!(code, 2, "{bad:?}: {stderr}");
+    }
+    assert!(!dir.path().join("x.png").exists());
+}
+
+#[test]
+fn probe_prints_fields_and_gradients() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let file = sample(dir.path());
+    let f = file.to_str().expect("utf8");
+    let view = format::BrickFileView::open(&file).expect("open");
+    let names: Vec<String> = view
+        .file()
+        .fields
+        .iter()
+        .map(|f| f.name.to_string())
+        .collect();
+    let b = &view.file().bounds;
+    let (lo, hi) = (b.min.map(|x| x.to_native()), b.max.map(|x| x.to_native()));
+    // A line from outside through the data and out again.
+    let line = format!(
+        "{},{},{}:{},{},{}:21",
+        lo[0] - 1.0,
+        0.5 * (lo[1] + hi[1]),
+        0.5 * (lo[2] + hi[2]),
+        hi[0] + 1.0,
+        0.5 * (lo[1] + hi[1]),
+        0.5 * (lo[2] + hi[2])
+    );
+    let (code, stdout, stderr) = run(&["probe", f, "--line", &line, "--json"], dir.path());
+    assert_eq!(code, 0, "stderr: {stderr}");
+    let j: serde_json::Value = serde_json::from_str(&stdout).expect("json");
+    let pts = j.as_array().expect("list");
+    assert_eq!(pts.len(), 21);
+    for p in pts {
+        for k in ["x", "y", "z", "gradient"] {
+            assert!(p.get(k).is_some(), "missing {k}: {p}");
+        }
+        for n in &names {
+            assert!(p.get(n).is_some(), "missing field {n}: {p}");
+        }
+    }
+    // Outside the data: no numbers (JSON null stands for NaN); inside: numbers.
+    assert!(pts[0][names[0].as_str()].is_null() && pts[0]["gradient"][0].is_null());
+    assert!(pts[10][names[0].as_str()].is_number() && pts[10]["gradient"][2].is_number());
+
+    // CSV points with a header line; text output has a header and one row per point.
+    let csv = dir.path().join("p.csv");
+    let mid: Vec<f64> = (0..3).map(|a| 0.5 * (lo[a] + hi[a])).collect();
+    std::fs::write(
+        &csv,
+        format!(
+            "x,y,z\n{},{},{}\n{},{},{}\n",
+            mid[0],
+            mid[1],
+            mid[2],
+            lo[0] - 5.0,
+            0,
+            0
+        ),
+    )
+    .expect("csv");
+    let (code, stdout, stderr) = run(
+        &["probe", f, "--points", csv.to_str().expect("utf8")],
+        dir.path(),
+    );
+    assert_eq!(code, 0, "stderr: {stderr}");
+    let lines: Vec<&str> = stdout.lines().collect();
+    assert_eq!(lines.len(), 3, "{stdout}");
+    assert!(lines[2].contains("NaN"), "{stdout}");
+
+    // Bad input.
+    std::fs::write(&csv, "x,y,z\n1,2\n").expect("csv");
+    let (code, _, stderr) = run(
+        &["probe", f, "--points", csv.to_str().expect("utf8")],
+        dir.path(),
+    );
+    assert_eq!(code, 2);
+    assert!(stderr.contains("line 2"), "{stderr}");
+    let (code, _, _) = run(&["probe", f, "--line", "0,0,0:1,1,1:0"], dir.path());
+    assert_eq!(code, 2);
+    let (code, _, _) = run(&["probe", f], dir.path());
+    assert_eq!(code, 2);
+}
