@@ -5,22 +5,8 @@ use std::process::{Command, Output};
 
 mod util;
 
-/// Builds (if needed) and returns the `qbricks-bake` binary of this profile.
+/// The `qbricks-bake` binary that `cargo test --workspace` built.
 fn qbricks_bake() -> std::path::PathBuf {
-    let mut cmd = Command::new(env!("CARGO"));
-    cmd.args([
-        "build",
-        "--quiet",
-        "-p",
-        "qbricks-preprocess",
-        "--bin",
-        "qbricks-bake",
-    ]);
-    if !cfg!(debug_assertions) {
-        cmd.arg("--release");
-    }
-    let status = cmd.status().expect("run cargo build");
-    assert!(status.success(), "building qbricks-bake failed");
     util::bin("qbricks-bake")
 }
 

@@ -10,7 +10,14 @@ pub fn bin(name: &str) -> PathBuf {
     if dir.ends_with("deps") {
         dir.pop();
     }
-    dir.join(name)
+    let path = dir.join(name);
+    assert!(
+        path.exists(),
+        "{} is not built: run the end-to-end tests with `cargo test --workspace`, which builds \
+         every binary",
+        path.display()
+    );
+    path
 }
 
 /// Repository root.
