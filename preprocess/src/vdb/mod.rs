@@ -252,6 +252,20 @@ impl VdbFile {
             let grid_pos = pos(&mut cur)?;
             let block_pos = pos(&mut cur)?;
             let end_pos = pos(&mut cur)?;
+            // Each grid follows its descriptor and the next descriptor follows the grid, so
+            // offsets only grow; this also keeps the work linear in the file size.
+            let here = cur.pos() as u64;
+            // (Instances have no tree and store 0 as their buffer offset.)
+            let block_ok = block_pos == 0 || (grid_pos <= block_pos && block_pos <= end_pos);
+            if !(here <= grid_pos && grid_pos <= end_pos && block_ok) {
+                return Err(RawError::invalid(
+                    at,
+                    "grid descriptor",
+                    format!(
+                        "offsets grid {grid_pos}, buffers {block_pos}, end {end_pos} are out of order (descriptor ends at byte {here})"
+                    ),
+                ));
+            }
             let name = match unique_name.find('\u{1e}') {
                 Some(i) => unique_name[..i].to_string(),
                 None => unique_name.clone(),
@@ -282,7 +296,8 @@ impl VdbFile {
         for (i, parent) in parents.iter().enumerate() {
             let g = &self.grids[i];
             let name = g.name.clone();
-            let mut cur = Cursor::new(data, g.grid_pos as usize);
+            // A grid's header and tree never extend past its end offset.
+            let mut cur = Cursor::new(&data[..g.end_pos as usize], g.grid_pos as usize);
             let compression = cur.u32("grid compression flags")?;
             if compression & !0x7 != 0 {
                 return Err(RawError::invalid(
@@ -413,7 +428,10 @@ impl VdbFile {
             flags: tree_owner.compression,
             half: tree_owner.half_float,
         };
-        let mut cur = Cursor::new(&self.data, tree_owner.tree_pos);
+        let mut cur = Cursor::new(
+            &self.data[..tree_owner.end_pos as usize],
+            tree_owner.tree_pos,
+        );
         let name = g.name.clone();
         Ok(match &g.value_type {
             ValueType::Float => AnyGrid::Float(read::<f32>(&mut cur, codec, name, transform)?),
