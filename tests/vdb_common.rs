@@ -23,7 +23,14 @@ pub fn bake_bin() -> PathBuf {
         }
         let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
         let mut cmd = Command::new(cargo);
-        cmd.args(["build", "-q", "-p", "qbricks-preprocess", "--bin", "qbricks-bake"]);
+        cmd.args([
+            "build",
+            "-q",
+            "-p",
+            "qbricks-preprocess",
+            "--bin",
+            "qbricks-bake",
+        ]);
         if dir.ends_with("release") {
             cmd.arg("--release");
         }

@@ -379,9 +379,22 @@ impl VdbFile {
             .map_err(|e| e.locate(&self.name, Some(&g.name)))
     }
 
-    /// Decodes every grid, in file order.
+    /// Decodes every grid, in file order. A tree shared by instanced grids is decoded once
+    /// and copied.
     pub fn read_all(&self) -> Result<Vec<AnyGrid>, VdbError> {
-        (0..self.grids.len()).map(|i| self.read_grid(i)).collect()
+        let mut out: Vec<AnyGrid> = Vec::with_capacity(self.grids.len());
+        for (i, g) in self.grids.iter().enumerate() {
+            let decoded = match (g.instance_of, g.transform) {
+                (Some(p), Some(t)) if p < i && self.grids[p].value_type == g.value_type => {
+                    let mut copy = out[p].clone();
+                    rename(&mut copy, &g.name, t);
+                    copy
+                }
+                _ => self.read_grid(i)?,
+            };
+            out.push(decoded);
+        }
+        Ok(out)
     }
 
     fn read_grid_raw(&self, g: &GridDescriptor) -> RawResult<AnyGrid> {
@@ -446,6 +459,19 @@ impl VdbFile {
                 ))
             }
         })
+    }
+}
+
+fn rename(grid: &mut AnyGrid, name: &str, transform: Transform) {
+    fn set<V>(g: &mut Grid<V>, name: &str, transform: Transform) {
+        g.name = name.to_string();
+        g.transform = transform;
+    }
+    match grid {
+        AnyGrid::Float(g) => set(g, name, transform),
+        AnyGrid::Double(g) => set(g, name, transform),
+        AnyGrid::Vec3s(g) => set(g, name, transform),
+        AnyGrid::Vec3d(g) => set(g, name, transform),
     }
 }
 
