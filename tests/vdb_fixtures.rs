@@ -159,6 +159,9 @@ fn fixtures_cover_codecs_types_half_and_tiles() {
     // transform, so real files hold the other four (TranslationMap has a unit test).
     assert_eq!(maps.len(), 4, "scale/translate maps: {maps:?}");
     assert!(half && root_tile && internal_tile && instance && negative);
+    // One file written to a stream (no grid offsets): the stream reader path.
+    let stream = std::fs::read(fixtures().join("float_stream.vdb")).unwrap();
+    assert_eq!(stream[20], 0, "float_stream.vdb has grid offsets");
 }
 
 #[test]

@@ -3,7 +3,8 @@
 //! The reader handles file format versions 222 to 225 (OpenVDB 6 to 12) holding
 //! `Tree_{float,double,vec3s,vec3d}_5_4_3` grids, with zip, blosc (LZ4) or no compression,
 //! active-mask compression, half-float storage, active tiles at every level, instanced grids
-//! and duplicate names. It works on the whole file in memory through a bounds-checked cursor:
+//! and duplicate names, in files with grid offsets or written to a stream (without them).
+//! It works on the whole file in memory through a bounds-checked cursor:
 //! every count or size read from the file is checked against the bytes left before anything
 //! is allocated from it.
 //!
@@ -205,15 +206,7 @@ impl VdbFile {
         let has_offsets = cur.u8("file header")? != 0;
         self.uuid = String::from_utf8_lossy(cur.take(36, "file UUID")?).into_owned();
         self.metadata = metadata::read_metadata(&mut cur)?;
-        if !has_offsets {
-            return Err(RawError::new(
-                offsets_at,
-                "file header",
-                ErrorKind::Unsupported(
-                    "grids written to a stream without offsets are not supported".into(),
-                ),
-            ));
-        }
+        let _ = offsets_at;
 
         // Grid descriptors: name, type, instance parent, three offsets.
         let count_at = cur.pos();
@@ -249,9 +242,16 @@ impl VdbFile {
                         )
                     })
             };
-            let grid_pos = pos(&mut cur)?;
-            let block_pos = pos(&mut cur)?;
-            let end_pos = pos(&mut cur)?;
+            let (mut grid_pos, mut block_pos, mut end_pos) =
+                (pos(&mut cur)?, pos(&mut cur)?, pos(&mut cur)?);
+            if !has_offsets {
+                // Written to a stream: the offsets are placeholders and the grid follows
+                // its descriptor; walk it to find where it ends.
+                let ty = ValueType::from_grid_type(grid_type.trim_end_matches("_HalfFloat"));
+                grid_pos = cur.pos() as u64;
+                (block_pos, end_pos) =
+                    scan_grid(data, cur.pos(), &ty, half_float, !parent.is_empty())?;
+            }
             // Each grid follows its descriptor and the next descriptor follows the grid, so
             // offsets only grow; this also keeps the work linear in the file size.
             let here = cur.pos() as u64;
@@ -462,6 +462,41 @@ impl VdbFile {
     }
 }
 
+/// Walks one grid of a stream-written file (compression flags, metadata, transform, tree)
+/// without decoding leaf values; returns (buffer start, end) offsets.
+fn scan_grid(
+    data: &[u8],
+    start: usize,
+    ty: &ValueType,
+    half: bool,
+    instance: bool,
+) -> RawResult<(u64, u64)> {
+    let mut cur = Cursor::new(data, start);
+    let flags = cur.u32("grid compression flags")?;
+    metadata::read_metadata(&mut cur)?;
+    transform::read_transform(&mut cur)?;
+    if instance {
+        return Ok((0, cur.pos() as u64));
+    }
+    let codec = Codec { flags, half };
+    match ty {
+        ValueType::Float => drop(tree::read_tree::<f32>(&mut cur, codec, false)?),
+        ValueType::Double => drop(tree::read_tree::<f64>(&mut cur, codec, false)?),
+        ValueType::Vec3s => drop(tree::read_tree::<[f32; 3]>(&mut cur, codec, false)?),
+        ValueType::Vec3d => drop(tree::read_tree::<[f64; 3]>(&mut cur, codec, false)?),
+        ValueType::Unsupported(t) => {
+            return Err(RawError::new(
+                start,
+                "grid descriptor",
+                ErrorKind::UnsupportedGridType(t.clone()),
+            ))
+        }
+    }
+    // OpenVDB does not record where buffers start in a stream; any offset inside the grid
+    // is fine for us.
+    Ok((start as u64, cur.pos() as u64))
+}
+
 fn rename(grid: &mut AnyGrid, name: &str, transform: Transform) {
     fn set<V>(g: &mut Grid<V>, name: &str, transform: Transform) {
         g.name = name.to_string();
@@ -481,7 +516,7 @@ fn read<V: VdbValue>(
     name: String,
     transform: Transform,
 ) -> RawResult<Grid<V>> {
-    let t = tree::read_tree::<V>(cur, codec)?;
+    let t = tree::read_tree::<V>(cur, codec, true)?;
     Ok(Grid {
         name,
         transform,

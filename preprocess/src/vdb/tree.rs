@@ -359,7 +359,13 @@ fn aligned(c: [i32; 3], log2: u32) -> bool {
 }
 
 /// Reads a whole tree (topology then buffers) starting at the buffer count.
-pub(crate) fn read_tree<V: VdbValue>(cur: &mut Cursor<'_>, codec: Codec) -> RawResult<TreeData<V>> {
+/// With `decode_leaves` false the leaf buffers are only located (the cursor still ends
+/// after the tree) and no leaves are returned: how a stream-written file is walked.
+pub(crate) fn read_tree<V: VdbValue>(
+    cur: &mut Cursor<'_>,
+    codec: Codec,
+    decode_leaves: bool,
+) -> RawResult<TreeData<V>> {
     // Topology: buffer count, root background, root tiles and children.
     let start = cur.pos();
     let buffers = cur.i32("tree buffer count")?;
@@ -460,6 +466,9 @@ pub(crate) fn read_tree<V: VdbValue>(cur: &mut Cursor<'_>, codec: Codec) -> RawR
             let frame = locate_values(cur, codec, background, &t.mask, LEAF_VOXELS, "leaf buffer")?;
             frames.push((t, frame));
         }
+    }
+    if !decode_leaves {
+        frames.clear();
     }
     // Decoding (decompression, half floats, inactive values) is independent per leaf.
     let leaves = frames
