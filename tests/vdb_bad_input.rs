@@ -43,7 +43,12 @@ fn check_message(e: &VdbError, file: &str) {
 
 #[test]
 fn every_truncation_is_an_error() {
-    for name in ["float_blosc.vdb", "masks_zip.vdb", "double_half_zip.vdb"] {
+    for name in [
+        "float_blosc.vdb",
+        "masks_zip.vdb",
+        "double_half_zip.vdb",
+        "float_stream.vdb",
+    ] {
         let bytes = fixture(name);
         assert!(read(name, bytes.clone()).is_ok());
         // Every length near the start and the end, and a stride through the middle.

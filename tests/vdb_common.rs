@@ -11,8 +11,8 @@ pub fn fixtures() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures")
 }
 
-/// Path of `qbricks-bake`, built on first use when this test run did not build it (a
-/// `cargo test --test vdb_x` run builds only the root package).
+/// Path of `qbricks-bake`, (re)built once per test process: a `cargo test --test vdb_x`
+/// run builds only the root package, and a stale binary would test old code.
 pub fn bake_bin() -> PathBuf {
     static BIN: OnceLock<PathBuf> = OnceLock::new();
     BIN.get_or_init(|| {
@@ -21,25 +21,22 @@ pub fn bake_bin() -> PathBuf {
         if dir.ends_with("deps") {
             dir.pop();
         }
-        let bin = dir.join("qbricks-bake");
-        if !bin.exists() {
-            let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-            let mut cmd = Command::new(cargo);
-            cmd.args([
-                "build",
-                "-q",
-                "-p",
-                "qbricks-preprocess",
-                "--bin",
-                "qbricks-bake",
-            ]);
-            if dir.ends_with("release") {
-                cmd.arg("--release");
-            }
-            let status = cmd.status().expect("run cargo build");
-            assert!(status.success(), "building qbricks-bake failed");
+        let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+        let mut cmd = Command::new(cargo);
+        cmd.args([
+            "build",
+            "-q",
+            "-p",
+            "qbricks-preprocess",
+            "--bin",
+            "qbricks-bake",
+        ]);
+        if dir.ends_with("release") {
+            cmd.arg("--release");
         }
-        bin
+        let status = cmd.status().expect("run cargo build");
+        assert!(status.success(), "building qbricks-bake failed");
+        dir.join("qbricks-bake")
     })
     .clone()
 }

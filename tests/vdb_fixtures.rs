@@ -136,6 +136,7 @@ fn fixtures_cover_codecs_types_half_and_tiles() {
     // Guard against a regenerated fixture set silently losing coverage.
     let mut codecs = std::collections::BTreeSet::new();
     let mut types = std::collections::BTreeSet::new();
+    let mut maps = std::collections::BTreeSet::new();
     let (mut half, mut root_tile, mut internal_tile, mut instance, mut negative) =
         (false, false, false, false, false);
     for name in expected().keys() {
@@ -143,6 +144,7 @@ fn fixtures_cover_codecs_types_half_and_tiles() {
         for (i, d) in file.grids().iter().enumerate() {
             codecs.insert(d.compression & 0x5);
             types.insert(d.value_type.name().to_string());
+            maps.insert(d.map_type.clone());
             half |= d.half_float;
             instance |= d.instance_of.is_some();
             let g = flatten(&file.read_grid(i).unwrap());
@@ -153,7 +155,13 @@ fn fixtures_cover_codecs_types_half_and_tiles() {
     }
     assert_eq!(codecs.len(), 3, "none, zip and blosc");
     assert_eq!(types.len(), 4, "{types:?}");
+    // OpenVDB turns a TranslationMap into a UniformScaleTranslateMap when it builds the
+    // transform, so real files hold the other four (TranslationMap has a unit test).
+    assert_eq!(maps.len(), 4, "scale/translate maps: {maps:?}");
     assert!(half && root_tile && internal_tile && instance && negative);
+    // One file written to a stream (no grid offsets): the stream reader path.
+    let stream = std::fs::read(fixtures().join("float_stream.vdb")).unwrap();
+    assert_eq!(stream[20], 0, "float_stream.vdb has grid offsets");
 }
 
 #[test]

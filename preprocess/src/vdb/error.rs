@@ -99,3 +99,30 @@ impl RawError {
 }
 
 pub(crate) type RawResult<T> = Result<T, RawError>;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn display_is_one_line_with_file_grid_offset() {
+        let e = RawError::new(
+            1234,
+            "leaf buffer",
+            ErrorKind::Truncated {
+                expected: "512 values".into(),
+                left: 12,
+            },
+        )
+        .locate("data.vdb", Some("vel"));
+        assert_eq!(
+            e.to_string(),
+            "data.vdb: grid \"vel\": leaf buffer at byte 1234: expected 512 values, found 12 bytes left"
+        );
+        let e = RawError::new(0, "file header", ErrorKind::BadMagic(7)).locate("x.vdb", None);
+        assert_eq!(
+            e.to_string(),
+            "x.vdb: file header at byte 0: not an OpenVDB file (magic number 0x7)"
+        );
+    }
+}

@@ -3,7 +3,8 @@
 //! The reader handles file format versions 222 to 225 (OpenVDB 6 to 12) holding
 //! `Tree_{float,double,vec3s,vec3d}_5_4_3` grids, with zip, blosc (LZ4) or no compression,
 //! active-mask compression, half-float storage, active tiles at every level, instanced grids
-//! and duplicate names. It works on the whole file in memory through a bounds-checked cursor:
+//! and duplicate names, in files with grid offsets or written to a stream (without them).
+//! It works on the whole file in memory through a bounds-checked cursor:
 //! every count or size read from the file is checked against the bytes left before anything
 //! is allocated from it.
 //!
@@ -205,15 +206,7 @@ impl VdbFile {
         let has_offsets = cur.u8("file header")? != 0;
         self.uuid = String::from_utf8_lossy(cur.take(36, "file UUID")?).into_owned();
         self.metadata = metadata::read_metadata(&mut cur)?;
-        if !has_offsets {
-            return Err(RawError::new(
-                offsets_at,
-                "file header",
-                ErrorKind::Unsupported(
-                    "grids written to a stream without offsets are not supported".into(),
-                ),
-            ));
-        }
+        let _ = offsets_at;
 
         // Grid descriptors: name, type, instance parent, three offsets.
         let count_at = cur.pos();
@@ -249,9 +242,30 @@ impl VdbFile {
                         )
                     })
             };
-            let grid_pos = pos(&mut cur)?;
-            let block_pos = pos(&mut cur)?;
-            let end_pos = pos(&mut cur)?;
+            let (mut grid_pos, mut block_pos, mut end_pos) =
+                (pos(&mut cur)?, pos(&mut cur)?, pos(&mut cur)?);
+            if !has_offsets {
+                // Written to a stream: the offsets are placeholders and the grid follows
+                // its descriptor; walk it to find where it ends.
+                let ty = ValueType::from_grid_type(grid_type.trim_end_matches("_HalfFloat"));
+                grid_pos = cur.pos() as u64;
+                (block_pos, end_pos) =
+                    scan_grid(data, cur.pos(), &ty, half_float, !parent.is_empty())?;
+            }
+            // Each grid follows its descriptor and the next descriptor follows the grid, so
+            // offsets only grow; this also keeps the work linear in the file size.
+            let here = cur.pos() as u64;
+            // (Instances have no tree and store 0 as their buffer offset.)
+            let block_ok = block_pos == 0 || (grid_pos <= block_pos && block_pos <= end_pos);
+            if !(here <= grid_pos && grid_pos <= end_pos && block_ok) {
+                return Err(RawError::invalid(
+                    at,
+                    "grid descriptor",
+                    format!(
+                        "offsets grid {grid_pos}, buffers {block_pos}, end {end_pos} are out of order (descriptor ends at byte {here})"
+                    ),
+                ));
+            }
             let name = match unique_name.find('\u{1e}') {
                 Some(i) => unique_name[..i].to_string(),
                 None => unique_name.clone(),
@@ -282,7 +296,8 @@ impl VdbFile {
         for (i, parent) in parents.iter().enumerate() {
             let g = &self.grids[i];
             let name = g.name.clone();
-            let mut cur = Cursor::new(data, g.grid_pos as usize);
+            // A grid's header and tree never extend past its end offset.
+            let mut cur = Cursor::new(&data[..g.end_pos as usize], g.grid_pos as usize);
             let compression = cur.u32("grid compression flags")?;
             if compression & !0x7 != 0 {
                 return Err(RawError::invalid(
@@ -364,9 +379,22 @@ impl VdbFile {
             .map_err(|e| e.locate(&self.name, Some(&g.name)))
     }
 
-    /// Decodes every grid, in file order.
+    /// Decodes every grid, in file order. A tree shared by instanced grids is decoded once
+    /// and copied.
     pub fn read_all(&self) -> Result<Vec<AnyGrid>, VdbError> {
-        (0..self.grids.len()).map(|i| self.read_grid(i)).collect()
+        let mut out: Vec<AnyGrid> = Vec::with_capacity(self.grids.len());
+        for (i, g) in self.grids.iter().enumerate() {
+            let decoded = match (g.instance_of, g.transform) {
+                (Some(p), Some(t)) if p < i && self.grids[p].value_type == g.value_type => {
+                    let mut copy = out[p].clone();
+                    rename(&mut copy, &g.name, t);
+                    copy
+                }
+                _ => self.read_grid(i)?,
+            };
+            out.push(decoded);
+        }
+        Ok(out)
     }
 
     fn read_grid_raw(&self, g: &GridDescriptor) -> RawResult<AnyGrid> {
@@ -413,7 +441,10 @@ impl VdbFile {
             flags: tree_owner.compression,
             half: tree_owner.half_float,
         };
-        let mut cur = Cursor::new(&self.data, tree_owner.tree_pos);
+        let mut cur = Cursor::new(
+            &self.data[..tree_owner.end_pos as usize],
+            tree_owner.tree_pos,
+        );
         let name = g.name.clone();
         Ok(match &g.value_type {
             ValueType::Float => AnyGrid::Float(read::<f32>(&mut cur, codec, name, transform)?),
@@ -431,13 +462,61 @@ impl VdbFile {
     }
 }
 
+/// Walks one grid of a stream-written file (compression flags, metadata, transform, tree)
+/// without decoding leaf values; returns (buffer start, end) offsets.
+fn scan_grid(
+    data: &[u8],
+    start: usize,
+    ty: &ValueType,
+    half: bool,
+    instance: bool,
+) -> RawResult<(u64, u64)> {
+    let mut cur = Cursor::new(data, start);
+    let flags = cur.u32("grid compression flags")?;
+    metadata::read_metadata(&mut cur)?;
+    transform::read_transform(&mut cur)?;
+    if instance {
+        return Ok((0, cur.pos() as u64));
+    }
+    let codec = Codec { flags, half };
+    match ty {
+        ValueType::Float => drop(tree::read_tree::<f32>(&mut cur, codec, false)?),
+        ValueType::Double => drop(tree::read_tree::<f64>(&mut cur, codec, false)?),
+        ValueType::Vec3s => drop(tree::read_tree::<[f32; 3]>(&mut cur, codec, false)?),
+        ValueType::Vec3d => drop(tree::read_tree::<[f64; 3]>(&mut cur, codec, false)?),
+        ValueType::Unsupported(t) => {
+            return Err(RawError::new(
+                start,
+                "grid descriptor",
+                ErrorKind::UnsupportedGridType(t.clone()),
+            ))
+        }
+    }
+    // OpenVDB does not record where buffers start in a stream; any offset inside the grid
+    // is fine for us.
+    Ok((start as u64, cur.pos() as u64))
+}
+
+fn rename(grid: &mut AnyGrid, name: &str, transform: Transform) {
+    fn set<V>(g: &mut Grid<V>, name: &str, transform: Transform) {
+        g.name = name.to_string();
+        g.transform = transform;
+    }
+    match grid {
+        AnyGrid::Float(g) => set(g, name, transform),
+        AnyGrid::Double(g) => set(g, name, transform),
+        AnyGrid::Vec3s(g) => set(g, name, transform),
+        AnyGrid::Vec3d(g) => set(g, name, transform),
+    }
+}
+
 fn read<V: VdbValue>(
     cur: &mut Cursor<'_>,
     codec: Codec,
     name: String,
     transform: Transform,
 ) -> RawResult<Grid<V>> {
-    let t = tree::read_tree::<V>(cur, codec)?;
+    let t = tree::read_tree::<V>(cur, codec, true)?;
     Ok(Grid {
         name,
         transform,

@@ -51,3 +51,53 @@ pub(crate) fn read_transform(cur: &mut Cursor<'_>) -> RawResult<(String, Transfo
         },
     ))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn bytes(map: &str, vectors: &[[f64; 3]]) -> Vec<u8> {
+        let mut b = (map.len() as u32).to_le_bytes().to_vec();
+        b.extend(map.as_bytes());
+        for v in vectors {
+            for c in v {
+                b.extend(c.to_le_bytes());
+            }
+        }
+        b
+    }
+
+    #[test]
+    fn translation_map_has_unit_voxels() {
+        let b = bytes("TranslationMap", &[[1.0, -2.0, 3.5]]);
+        let (_, t) = read_transform(&mut Cursor::new(&b, 0)).unwrap();
+        assert_eq!(t.voxel_size, [1.0; 3]);
+        assert_eq!(t.translation, [1.0, -2.0, 3.5]);
+    }
+
+    #[test]
+    fn scale_translate_map_reads_translation_then_scale() {
+        let mut v = vec![[4.0, 5.0, 6.0], [0.5, 0.25, 2.0]];
+        v.extend([[9.0; 3]; 4]);
+        let b = bytes("ScaleTranslateMap", &v);
+        let mut c = Cursor::new(&b, 0);
+        let (_, t) = read_transform(&mut c).unwrap();
+        assert_eq!(t.voxel_size, [0.5, 0.25, 2.0]);
+        assert_eq!(t.translation, [4.0, 5.0, 6.0]);
+        assert_eq!(c.left(), 0);
+    }
+
+    #[test]
+    fn rotations_and_bad_scales_are_refused() {
+        let b = bytes("AffineMap", &[[1.0; 3]; 6]);
+        let e = read_transform(&mut Cursor::new(&b, 0)).unwrap_err();
+        assert_eq!(e.kind, ErrorKind::UnsupportedTransform("AffineMap".into()));
+        let mut v = vec![[0.0, 1.0, 1.0]];
+        v.extend([[1.0; 3]; 4]);
+        let b = bytes("ScaleMap", &v);
+        assert!(matches!(
+            read_transform(&mut Cursor::new(&b, 0)).unwrap_err().kind,
+            ErrorKind::Invalid(_)
+        ));
+    }
+}
