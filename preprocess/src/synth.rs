@@ -8,8 +8,8 @@
 //!
 //! * `wake`: `levels` nested boxes. The coarsest covers the scene domain
 //!   x ∈ [-2, 6], y, z ∈ [-2, 2] with voxel size `8 / n0` (so `n0` voxels along x, the longest
-//!   axis; the box snaps outward to whole voxels, which adds one voxel per side when 4 does
-//!   not divide `n0`). Each finer level halves the voxel size and covers a box interpolated
+//!   axis; the box snaps outward to the world-aligned lattice, so when 4 does not divide
+//!   `n0` each side grows by less than one voxel). Each finer level halves the voxel size and covers a box interpolated
 //!   linearly between the domain and the core box x ∈ [-0.75, 5], y, z ∈ [-0.75, 0.75]
 //!   (sphere and ring train), snapped outward to the next coarser level's cells so that
 //!   boxes nest exactly. Grids are named `vel_l0` (finest) … `vel_l{levels-1}` (coarsest)
