@@ -417,6 +417,38 @@ mod tests {
     }
 
     #[test]
+    fn layouts_nest_for_any_n0_and_level_count() {
+        for n0 in [2, 5, 15, 30, 48, 64, 161] {
+            for levels in 1..=5 {
+                let l = scene_layout("wake", n0, levels).expect("layout");
+                assert_eq!(l.len(), levels as usize);
+                let coarse = &l[l.len() - 1];
+                let nx = coarse.hi[0] - coarse.lo[0];
+                assert!(nx == i64::from(n0) || nx == i64::from(n0) + 1, "{n0}: {nx}");
+                for a in 0..3 {
+                    assert!(coarse.lo[a] as f64 * coarse.voxel_size <= WAKE_DOMAIN.min[a] + 1e-12);
+                    assert!(coarse.hi[a] as f64 * coarse.voxel_size >= WAKE_DOMAIN.max[a] - 1e-12);
+                }
+                for w in l.windows(2) {
+                    let (fine, parent) = (&w[0], &w[1]);
+                    for a in 0..3 {
+                        assert!(fine.lo[a] >= 2 * parent.lo[a] && fine.hi[a] <= 2 * parent.hi[a]);
+                        assert!(fine.lo[a] % 2 == 0 && fine.hi[a] % 2 == 0);
+                        assert!(fine.hi[a] > fine.lo[a]);
+                    }
+                }
+                if levels > 1 {
+                    let f = &l[0];
+                    for a in 0..3 {
+                        assert!(f.lo[a] as f64 * f.voxel_size <= WAKE_CORE.min[a] + 1e-12);
+                        assert!(f.hi[a] as f64 * f.voxel_size >= WAKE_CORE.max[a] - 1e-12);
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
     fn grids_hold_exact_velocities_at_voxel_centres() {
         let grids = scene_grids("wake", 16, 2).expect("grids");
         let layouts = scene_layout("wake", 16, 2).expect("layout");
