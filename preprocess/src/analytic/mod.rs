@@ -36,6 +36,12 @@ pub trait Flow: Send + Sync {
     fn q(&self, p: [f64; 3]) -> f64 {
         q_from_gradient(&self.gradient(p))
     }
+    /// Whether the velocity is smooth (at least C²) in the ball of `radius` around `p`, so
+    /// that finite-difference stencils of that reach converge there. Accuracy tests use it
+    /// to stay away from surfaces where a flow is only continuous (the wake's sphere).
+    fn is_smooth_near(&self, _p: [f64; 3], _radius: f64) -> bool {
+        true
+    }
 }
 
 /// Q = ½(‖Ω‖² − ‖S‖²) with S and Ω the symmetric and antisymmetric parts of the gradient

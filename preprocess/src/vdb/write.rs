@@ -150,7 +150,7 @@ impl WriteOptions {
 
 #[derive(Debug, Error)]
 pub enum WriteError {
-    #[error("{}: {source}", path.display())]
+    #[error("{}: cannot write", path.display())]
     Io {
         path: PathBuf,
         source: std::io::Error,
