@@ -31,19 +31,51 @@ pub fn flag_names(flags: u32) -> Vec<&'static str> {
     out
 }
 
-/// Reads one data chunk of exactly `nbytes` decoded bytes (OpenVDB `readData`).
-pub(crate) fn read_chunk<'a>(
+/// One data chunk located in the file but not decoded yet, so that decoding can run in
+/// parallel once the sequential walk over the file has found every chunk.
+#[derive(Debug, Clone, Copy)]
+pub(crate) enum Chunk<'a> {
+    Raw(&'a [u8]),
+    Zip(&'a [u8], usize),
+    Blosc(&'a [u8], usize),
+}
+
+/// A located chunk with where it starts, for error messages.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct LocatedChunk<'a> {
+    pub chunk: Chunk<'a>,
+    pub start: usize,
+    pub what: &'static str,
+}
+
+impl<'a> LocatedChunk<'a> {
+    /// The chunk's `nbytes` decoded bytes.
+    pub fn decode(&self) -> RawResult<Cow<'a, [u8]>> {
+        let decoded = match self.chunk {
+            Chunk::Raw(b) => return Ok(Cow::Borrowed(b)),
+            Chunk::Zip(src, n) => zlib_decode(src, n),
+            Chunk::Blosc(src, n) => blosc_decode(src, n),
+        };
+        decoded
+            .map(Cow::Owned)
+            .map_err(|msg| RawError::new(self.start, self.what, ErrorKind::Decompress(msg)))
+    }
+}
+
+/// Finds one data chunk of `nbytes` decoded bytes (OpenVDB `readData`) and moves past it.
+pub(crate) fn locate_chunk<'a>(
     cur: &mut Cursor<'a>,
     flags: u32,
     nbytes: usize,
     what: &'static str,
     count: usize,
-) -> RawResult<Cow<'a, [u8]>> {
+) -> RawResult<LocatedChunk<'a>> {
     let expected = || format!("{count} values");
-    if flags & (COMPRESS_BLOSC | COMPRESS_ZIP) == 0 {
-        return Ok(Cow::Borrowed(cur.take_as(nbytes, what, expected)?));
-    }
     let start = cur.pos();
+    let located = |chunk| LocatedChunk { chunk, start, what };
+    if flags & (COMPRESS_BLOSC | COMPRESS_ZIP) == 0 {
+        return Ok(located(Chunk::Raw(cur.take_as(nbytes, what, expected)?)));
+    }
     let size = cur.i64(what)?;
     if size <= 0 {
         // Stored uncompressed.
@@ -57,7 +89,7 @@ pub(crate) fn read_chunk<'a>(
                 ),
             ));
         }
-        return Ok(Cow::Borrowed(cur.take_as(nbytes, what, expected)?));
+        return Ok(located(Chunk::Raw(cur.take_as(nbytes, what, expected)?)));
     }
     let len = usize::try_from(size).unwrap_or(usize::MAX);
     if len > cur.left() {
@@ -71,14 +103,11 @@ pub(crate) fn read_chunk<'a>(
         ));
     }
     let src = cur.take(len, what)?;
-    let decoded = if flags & COMPRESS_BLOSC != 0 {
-        blosc_decode(src, nbytes)
+    Ok(located(if flags & COMPRESS_BLOSC != 0 {
+        Chunk::Blosc(src, nbytes)
     } else {
-        zlib_decode(src, nbytes)
-    };
-    decoded
-        .map(Cow::Owned)
-        .map_err(|msg| RawError::new(start, what, ErrorKind::Decompress(msg)))
+        Chunk::Zip(src, nbytes)
+    }))
 }
 
 fn zlib_decode(src: &[u8], nbytes: usize) -> Result<Vec<u8>, String> {

@@ -5,7 +5,9 @@
 //! leaves only as their value masks) followed by *buffers* (leaf values, in the same
 //! depth-first order, root children visited in sorted-coordinate order).
 
-use super::compress::{read_chunk, COMPRESS_ACTIVE_MASK};
+use rayon::prelude::*;
+
+use super::compress::{locate_chunk, LocatedChunk, COMPRESS_ACTIVE_MASK};
 use super::cursor::Cursor;
 use super::error::{ErrorKind, RawError, RawResult};
 use crate::grid::{Leaf, Tile, LEAF_VOXELS};
@@ -135,18 +137,28 @@ fn read_mask(cur: &mut Cursor<'_>, bits: usize, what: &'static str) -> RawResult
         .collect())
 }
 
-/// OpenVDB `readCompressedValues`: a metadata byte saying how inactive values are encoded,
-/// up to two inactive values and a selection mask, then the (possibly only active) values.
-/// Fills `out` (length = number of node entries) completely.
-pub(crate) fn read_values<V: VdbValue>(
-    cur: &mut Cursor<'_>,
+/// One node's stored values, located but not decoded (see [`locate_values`]).
+#[derive(Debug, Clone)]
+pub(crate) struct ValuesFrame<'a, V> {
+    inactive0: V,
+    inactive1: V,
+    selection: Option<Vec<u64>>,
+    /// Number of values stored (all, or only the active ones).
+    stored: usize,
+    chunk: Option<LocatedChunk<'a>>,
+}
+
+/// OpenVDB `readCompressedValues`, first half: a metadata byte saying how inactive values
+/// are encoded, up to two inactive values and a selection mask, then the (possibly only
+/// active) values as one data chunk, which is located but not decoded.
+pub(crate) fn locate_values<'a, V: VdbValue>(
+    cur: &mut Cursor<'a>,
     codec: Codec,
     background: V,
     value_mask: &[u64],
-    out: &mut [V],
+    count: usize,
     what: &'static str,
-) -> RawResult<()> {
-    let count = out.len();
+) -> RawResult<ValuesFrame<'a, V>> {
     let start = cur.pos();
     let meta = cur.u8(what)?;
     if meta > 6 {
@@ -181,11 +193,38 @@ pub(crate) fn read_values<V: VdbValue>(
     };
     let value_size = if codec.half { V::HALF_SIZE } else { V::SIZE };
     // Half-float writers write nothing at all for an empty buffer.
-    let bytes = if codec.half && stored == 0 {
-        std::borrow::Cow::Borrowed(&[][..])
+    let chunk = if codec.half && stored == 0 {
+        None
     } else {
-        read_chunk(cur, codec.flags, stored * value_size, what, stored)?
+        Some(locate_chunk(
+            cur,
+            codec.flags,
+            stored * value_size,
+            what,
+            stored,
+        )?)
     };
+    Ok(ValuesFrame {
+        inactive0,
+        inactive1,
+        selection,
+        stored,
+        chunk,
+    })
+}
+
+/// Second half: decodes a located frame into `out` (one value per node entry).
+pub(crate) fn decode_values<V: VdbValue>(
+    frame: &ValuesFrame<'_, V>,
+    codec: Codec,
+    value_mask: &[u64],
+    out: &mut [V],
+) -> RawResult<()> {
+    let bytes = match &frame.chunk {
+        Some(c) => c.decode()?,
+        None => std::borrow::Cow::Borrowed(&[][..]),
+    };
+    let value_size = if codec.half { V::HALF_SIZE } else { V::SIZE };
     let decode = |i: usize| -> V {
         let b = &bytes[i * value_size..(i + 1) * value_size];
         if codec.half {
@@ -194,7 +233,7 @@ pub(crate) fn read_values<V: VdbValue>(
             V::from_bytes(b)
         }
     };
-    if stored == count {
+    if frame.stored == out.len() {
         for (i, v) in out.iter_mut().enumerate() {
             *v = decode(i);
         }
@@ -204,14 +243,27 @@ pub(crate) fn read_values<V: VdbValue>(
             if mask_is_on(value_mask, n) {
                 *v = decode(next);
                 next += 1;
-            } else if selection.as_deref().is_some_and(|s| mask_is_on(s, n)) {
-                *v = inactive1;
+            } else if frame.selection.as_deref().is_some_and(|s| mask_is_on(s, n)) {
+                *v = frame.inactive1;
             } else {
-                *v = inactive0;
+                *v = frame.inactive0;
             }
         }
     }
     Ok(())
+}
+
+/// Both halves at once.
+pub(crate) fn read_values<V: VdbValue>(
+    cur: &mut Cursor<'_>,
+    codec: Codec,
+    background: V,
+    value_mask: &[u64],
+    out: &mut [V],
+    what: &'static str,
+) -> RawResult<()> {
+    let frame = locate_values(cur, codec, background, value_mask, out.len(), what)?;
+    decode_values(&frame, codec, value_mask, out)
 }
 
 /// Leaf topology kept between the topology and buffer passes.
@@ -400,27 +452,28 @@ pub(crate) fn read_tree<V: VdbValue>(cur: &mut Cursor<'_>, codec: Codec) -> RawR
         leaves: topo,
         ..
     } = reader;
-    let mut leaves = Vec::with_capacity(topo.len());
+    let mut frames = Vec::with_capacity(topo.len());
     for (_, range) in children {
         for t in &topo[range] {
             // The value mask is stored again; OpenVDB ignores the copy when seeking.
             cur.skip(64, "leaf buffer")?;
+            let frame = locate_values(cur, codec, background, &t.mask, LEAF_VOXELS, "leaf buffer")?;
+            frames.push((t, frame));
+        }
+    }
+    // Decoding (decompression, half floats, inactive values) is independent per leaf.
+    let leaves = frames
+        .par_iter()
+        .map(|(t, frame)| {
             let mut values = Box::new([V::default(); LEAF_VOXELS]);
-            read_values(
-                cur,
-                codec,
-                background,
-                &t.mask,
-                &mut values[..],
-                "leaf buffer",
-            )?;
-            leaves.push(Leaf {
+            decode_values(frame, codec, &t.mask, &mut values[..])?;
+            Ok(Leaf {
                 origin: t.origin,
                 active: t.mask,
                 values,
-            });
-        }
-    }
+            })
+        })
+        .collect::<RawResult<Vec<_>>>()?;
     Ok(TreeData {
         background,
         tiles,
