@@ -6,6 +6,24 @@
 //! (the iso field at every sample) streams through one array and never touches the colour
 //! field (speed) except at visible samples. Inside a brick, cells are ordered x fastest
 //! (`x + nx * (y + ny * z)`), so a brick's values are one slice of each field array.
+//!
+//! Layout choices for the ray caster's access pattern (front-to-back along a ray: KD walk
+//! → region → its bricks → cell values):
+//! - Everything is a flat array of fixed-size records addressed by `u32`/`u64` index: no
+//!   pointers to chase inside the archive, and each record type is packed next to its
+//!   neighbours. A `Brick` and a `Region` are 64 bytes each (one cache line: a region's
+//!   bounds and brick range arrive together); a `KdNode` is 24 bytes (tag, axis, split,
+//!   children).
+//! - A region's brick ids are one contiguous run of `region_bricks`, so visiting a region
+//!   reads one short slice instead of a linked list.
+//! - `region_ranges` is region-major (`r * fields.len() + f`): empty-space skipping asks
+//!   "can any field of this region matter?", and all fields of one region share a line.
+//! - Cell values are per field, x fastest inside a brick: the trilinear/tent stencil of a
+//!   sample touches at most 2 × 2 rows of `nx` floats, which small bricks (≤ 8³ cells,
+//!   2 KiB per field) keep within L1.
+//! - The archive starts 16-byte aligned (see `header`), so value slices can be loaded as
+//!   aligned `f32` vectors and every `f64`/`u64` is naturally aligned, as rkyv's
+//!   validation demands.
 
 use rkyv::{Archive, Deserialize, Serialize};
 

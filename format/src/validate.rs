@@ -22,7 +22,7 @@ pub fn check(file: &ArchivedBrickFile) -> Result<(), String> {
     let n_fields = file.fields.len();
 
     // Bounds.
-    check_box("bounds", &file.bounds.min, &file.bounds.max)?;
+    check_box(|| "bounds".to_owned(), &file.bounds.min, &file.bounds.max)?;
 
     // Levels.
     for (i, level) in file.levels.iter().enumerate() {
@@ -80,7 +80,7 @@ pub fn check(file: &ArchivedBrickFile) -> Result<(), String> {
     let n_entries = file.region_bricks.len() as u64;
     for (i, region) in file.regions.iter().enumerate() {
         check_box(
-            &format!("regions[{i}].bounds"),
+            || format!("regions[{i}].bounds"),
             &region.bounds.min,
             &region.bounds.max,
         )?;
@@ -123,8 +123,9 @@ pub fn check(file: &ArchivedBrickFile) -> Result<(), String> {
     check_kd(file)
 }
 
+/// `what` names the box in the error; built only on error (this runs once per region).
 fn check_box(
-    what: &str,
+    what: impl Fn() -> String,
     min: &[rkyv::Archived<f64>; 3],
     max: &[rkyv::Archived<f64>; 3],
 ) -> Result<(), String> {
@@ -132,7 +133,8 @@ fn check_box(
         let (lo, hi) = (min[a].to_native(), max[a].to_native());
         if lo.is_nan() || hi.is_nan() || lo > hi {
             return Err(format!(
-                "{what}: expected min <= max on axis {a}, found {lo} > {hi}"
+                "{}: expected min <= max on axis {a}, found {lo} > {hi}",
+                what()
             ));
         }
     }
@@ -211,4 +213,18 @@ fn check_kd(file: &ArchivedBrickFile) -> Result<(), String> {
         return Err(format!("regions[{r}]: in no KD-tree leaf"));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::schema::{ArchivedBrick, ArchivedKdNode, ArchivedRegion, ArchivedValueRange};
+
+    /// The record sizes the schema's layout notes rely on.
+    #[test]
+    fn archived_record_sizes() {
+        assert_eq!(std::mem::size_of::<ArchivedBrick>(), 64);
+        assert_eq!(std::mem::size_of::<ArchivedRegion>(), 64);
+        assert_eq!(std::mem::size_of::<ArchivedKdNode>(), 24);
+        assert_eq!(std::mem::size_of::<ArchivedValueRange>(), 8);
+    }
 }

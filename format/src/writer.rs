@@ -140,11 +140,17 @@ pub(crate) fn write_atomically(
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_else(|| "out".to_owned());
-    let mut tmp = tempfile::Builder::new()
-        .prefix(&format!(".{name}."))
-        .suffix(".tmp")
-        .tempfile_in(dir)
-        .map_err(|e| err(e.into()))?;
+    let prefix = format!(".{name}.");
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(&prefix).suffix(".tmp");
+    // Temporary files are private (0600) by default; the result is an ordinary output
+    // file, so ask for 0666 and let the umask narrow it, as `File::create` would.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        builder.permissions(std::fs::Permissions::from_mode(0o666));
+    }
+    let mut tmp = builder.tempfile_in(dir).map_err(|e| err(e.into()))?;
     let written = body(tmp.as_file_mut()).map_err(err)?;
     tmp.as_file().sync_all().map_err(|e| err(e.into()))?;
     tmp.persist(path).map_err(|e| err(e.error.into()))?;
@@ -239,6 +245,23 @@ mod tests {
         assert_eq!(n, 3);
         assert_eq!(std::fs::read(&path).expect("read"), b"new");
         assert_eq!(leftovers(dir.path()), vec!["out.qbk".to_owned()]);
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn output_permissions_follow_the_umask_like_file_create() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().expect("tempdir");
+        let plain = dir.path().join("plain");
+        File::create(&plain).expect("create");
+        let path = dir.path().join("out.qbk");
+        write_atomically(&path, |f| {
+            f.write_all(b"x")?;
+            Ok(1)
+        })
+        .expect("write");
+        let mode = |p: &Path| std::fs::metadata(p).expect("meta").permissions().mode() & 0o777;
+        assert_eq!(mode(&path), mode(&plain));
     }
 
     #[test]

@@ -231,3 +231,85 @@ fn degenerate_rays_give_nothing_not_panics() {
     assert!(query::ray_regions(file, [0.0; 3], [f64::INFINITY, 0.0, 0.0], 0.0, 1.0).is_empty());
     assert!(query::ray_regions(file, [0.0; 3], [1.0, 0.0, 0.0], 1.0, 0.0).is_empty());
 }
+
+/// A comb-shaped tree 100 levels deep: a ray walking into the comb keeps every far
+/// child on the stack, so the iterator's inline stack (32 entries) must spill.
+#[test]
+fn deep_tree_spills_the_stack_and_stays_correct() {
+    use qbricks_format::{BrickFile, Field, KdNode, Level, Provenance, Region};
+    let n = 100u32;
+    let mut regions = Vec::new();
+    let mut kd_nodes = Vec::new();
+    // Node 2i is the inner node splitting at x = i + 1; node 2i + 1 the leaf of slab i.
+    for i in 0..n {
+        let (lo, hi) = (f64::from(i), f64::from(i + 1));
+        regions.push(Region {
+            bounds: Aabb {
+                min: [lo, 0.0, 0.0],
+                max: [hi, 1.0, 1.0],
+            },
+            bricks_start: 0,
+            bricks_len: 0,
+            finest_level: 0,
+        });
+        if i + 1 < n {
+            kd_nodes.push(KdNode::Inner {
+                axis: 0,
+                split: hi,
+                left: 2 * i + 1,
+                right: 2 * i + 2,
+            });
+            kd_nodes.push(KdNode::Leaf { region: Some(i) });
+        } else {
+            kd_nodes.push(KdNode::Leaf { region: Some(i) });
+        }
+    }
+    let file = BrickFile {
+        provenance: Provenance {
+            source: String::new(),
+            grids: vec![],
+            bake_options: String::new(),
+            tool_version: String::new(),
+        },
+        bounds: Aabb {
+            min: [0.0; 3],
+            max: [f64::from(n), 1.0, 1.0],
+        },
+        levels: vec![Level {
+            cell_width: 1.0,
+            cells: 0,
+            bricks: 0,
+        }],
+        fields: vec![Field {
+            name: "q".into(),
+            min: 0.0,
+            max: 0.0,
+            histogram: vec![],
+            values: vec![],
+        }],
+        bricks: vec![],
+        region_ranges: vec![qbricks_format::ValueRange { min: 0.0, max: 0.0 }; n as usize],
+        regions,
+        region_bricks: vec![],
+        kd_nodes,
+    };
+    let bytes = writer::to_bytes(&file).expect("bytes");
+    let view = BrickFileView::from_bytes(Path::new("deep.qbk"), &bytes).expect("open");
+    let f = view.file();
+    for (o, d) in [
+        ([-1.0, 0.5, 0.5], [1.0, 0.01, 0.0]),
+        ([f64::from(n) + 1.0, 0.5, 0.5], [-1.0, 0.0, 0.001]),
+        ([50.5, 0.5, 0.5], [-1.0, 0.0, 0.0]),
+    ] {
+        let kd = query::ray_regions(f, o, d, 0.0, f64::INFINITY);
+        let bf = brute_ray(f, o, d, 0.0, f64::INFINITY);
+        assert_eq!(kd.len(), bf.len());
+        assert!(kd.len() > 40);
+        for (k, b) in kd.iter().zip(&bf) {
+            assert_eq!(k.region, b.region);
+            assert!(close(k.t_enter, b.t_enter) && close(k.t_exit, b.t_exit));
+        }
+    }
+    assert_eq!(query::region_at(f, [99.5, 0.5, 0.5]), Some(99));
+    assert_eq!(query::region_at(f, [0.0, 0.5, 0.5]), Some(0));
+}
