@@ -306,13 +306,23 @@ fn scalar_grid_is_its_own_field_and_bad_inputs_are_refused() {
     );
     assert!(matches!(r, Err(BakeError::NonPowerOfTwo { .. })));
     let r = bake(
-        vec![AnyGrid::Float(scalar)],
+        vec![AnyGrid::Float(scalar.clone())],
         &BakeOptions {
             grids: vec!["vel".into()],
             ..BakeOptions::default()
         },
     );
     assert!(matches!(r, Err(BakeError::GridNotFound { .. })));
+
+    // A 4096³ root tile is refused before anything is expanded.
+    let mut huge = scalar;
+    huge.tiles.push(preprocess::grid::Tile {
+        origin: [0, 0, 4096],
+        size: 4096,
+        value: 1.0,
+    });
+    let r = bake(vec![AnyGrid::Float(huge)], &BakeOptions::default());
+    assert!(matches!(r, Err(BakeError::TooManyCells { .. })));
 }
 
 /// Ratio-4 levels, a misaligned fine lattice and overlapping grids of one level: the file
