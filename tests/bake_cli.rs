@@ -6,8 +6,16 @@ use std::process::Command;
 
 use format::BrickFileView;
 
+/// The binary is built by `cargo test --workspace`; a lone `cargo test --test bake_cli`
+/// needs `cargo build [--release] -p qbricks-preprocess` first.
 fn qbricks_bake() -> Command {
-    Command::new(util::bin("qbricks-bake"))
+    let bin = util::bin("qbricks-bake");
+    assert!(
+        bin.exists(),
+        "{} not built: run `cargo build -p qbricks-preprocess` with the same profile",
+        bin.display()
+    );
+    Command::new(bin)
 }
 
 #[test]

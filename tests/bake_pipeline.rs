@@ -306,11 +306,114 @@ fn scalar_grid_is_its_own_field_and_bad_inputs_are_refused() {
     );
     assert!(matches!(r, Err(BakeError::NonPowerOfTwo { .. })));
     let r = bake(
-        vec![AnyGrid::Float(scalar)],
+        vec![AnyGrid::Float(scalar.clone())],
         &BakeOptions {
             grids: vec!["vel".into()],
             ..BakeOptions::default()
         },
     );
     assert!(matches!(r, Err(BakeError::GridNotFound { .. })));
+
+    // A 4096³ root tile is refused before anything is expanded.
+    let mut huge = scalar;
+    huge.tiles.push(preprocess::grid::Tile {
+        origin: [0, 0, 4096],
+        size: 4096,
+        value: 1.0,
+    });
+    let r = bake(vec![AnyGrid::Float(huge)], &BakeOptions::default());
+    assert!(matches!(r, Err(BakeError::TooManyCells { .. })));
+}
+
+/// Ratio-4 levels, a misaligned fine lattice and overlapping grids of one level: the file
+/// still partitions the supports, regions bound the reconstruction, and only fully covered
+/// cells are dropped.
+#[test]
+fn odd_layouts_keep_regions_and_bounds_exact() {
+    let coarse = sample("vel", 1.0, 0.5, [0; 3], [10, 9, 8], &abc);
+    // Width 0.25 (ratio 4), lattice shifted by 0.1: no coarse cell is exactly covered
+    // along x, but cells are still covered where the fine box spans them fully.
+    let fine = sample("vel", 0.25, 0.125 + 0.1, [8, 8, 8], [24, 20, 22], &abc);
+    // A second grid of the fine level overlapping the first.
+    let fine2 = sample("vel", 0.25, 0.125, [20, 4, 4], [30, 14, 12], &abc);
+    let grids = vec![
+        AnyGrid::Vec3d(coarse),
+        AnyGrid::Vec3d(fine),
+        AnyGrid::Vec3d(fine2),
+    ];
+    let (file, s) = bake(grids, &opts(Stencil::CrossLevel)).expect("bake");
+    assert_eq!(file.levels.len(), 2);
+    assert!(s.dropped_cells > 0 && s.dropped_cells < 10 * 9 * 8);
+    // Brute-force coverage: a coarse cell is dropped iff every point of it is inside one
+    // of the fine boxes (their active cells are boxes here).
+    let fine_boxes = [
+        ([2.1, 2.1, 2.1], [6.1, 5.1, 5.6]),
+        ([5.0, 1.0, 1.0], [7.5, 3.5, 3.0]),
+    ];
+    let covered = |lo: [f64; 3], hi: [f64; 3]| {
+        // Cut at fine-box faces; every piece must be inside some box.
+        let mut cuts: Vec<Vec<f64>> = (0..3).map(|a| vec![lo[a], hi[a]]).collect();
+        for (bl, bh) in &fine_boxes {
+            for a in 0..3 {
+                for x in [bl[a], bh[a]] {
+                    if x > lo[a] && x < hi[a] {
+                        cuts[a].push(x);
+                    }
+                }
+            }
+        }
+        for c in &mut cuts {
+            c.sort_by(f64::total_cmp);
+        }
+        let mid = |c: &Vec<f64>, i: usize| 0.5 * (c[i] + c[i + 1]);
+        (0..cuts[0].len() - 1).all(|i| {
+            (0..cuts[1].len() - 1).all(|j| {
+                (0..cuts[2].len() - 1).all(|k| {
+                    let p = [mid(&cuts[0], i), mid(&cuts[1], j), mid(&cuts[2], k)];
+                    fine_boxes
+                        .iter()
+                        .any(|(bl, bh)| (0..3).all(|a| p[a] > bl[a] && p[a] < bh[a]))
+                })
+            })
+        })
+    };
+    let mut dropped = 0;
+    for z in 0..8 {
+        for y in 0..9 {
+            for x in 0..10 {
+                let lo = [x as f64, y as f64, z as f64];
+                if covered(lo, lo.map(|v| v + 1.0)) {
+                    dropped += 1;
+                }
+            }
+        }
+    }
+    assert_eq!(s.dropped_cells, dropped);
+
+    let mut rng = Rng(7);
+    let nf = file.fields.len();
+    let all: Vec<u32> = (0..file.bricks.len() as u32).collect();
+    for _ in 0..300 {
+        let p = [0, 1, 2]
+            .map(|a| file.bounds.min[a] + rng.next() * (file.bounds.max[a] - file.bounds.min[a]));
+        let brute = file
+            .regions
+            .iter()
+            .position(|r| (0..3).all(|a| p[a] >= r.bounds.min[a] && p[a] < r.bounds.max[a]));
+        assert_eq!(locate(&file, p), brute.map(|r| r as u32));
+        let Some(r) = brute else { continue };
+        let reg = &file.regions[r];
+        let ids = &file.region_bricks
+            [reg.bricks_start as usize..(reg.bricks_start + reg.bricks_len) as usize];
+        for f in 0..nf {
+            let v_all = reconstruct(&file, &all, f, p);
+            let v = reconstruct(&file, ids, f, p);
+            assert_eq!(v.is_some(), v_all.is_some());
+            if let (Some(v), Some(va)) = (v, v_all) {
+                assert!((v - va).abs() <= 1e-9 * (1.0 + v.abs()));
+                let range = file.region_ranges[r * nf + f];
+                assert!(v >= range.min as f64 - 1e-6 && v <= range.max as f64 + 1e-6);
+            }
+        }
+    }
 }

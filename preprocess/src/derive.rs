@@ -32,7 +32,8 @@ pub fn q_from_gradient(g: &[[f64; 3]; 3]) -> f64 {
             s += gij * g[j][i];
         }
     }
-    -0.5 * s
+    // `+ 0.0` turns −0 (zero gradient) into +0 so that ranges print as 0.
+    -0.5 * s + 0.0
 }
 
 /// Euclidean norm of a velocity.

@@ -81,10 +81,12 @@ pub fn replace<T: CellValue>(set: &CellSet, values: &mut [T]) -> u64 {
                     }
                 }
             }
-            if n == 0 {
+            let avg = sum.scale(1.0 / n.max(1) as f64);
+            // No finite neighbour, or a mean that overflowed: zero.
+            if n == 0 || !avg.is_finite() {
                 T::default()
             } else {
-                sum.scale(1.0 / n as f64)
+                avg
             }
         })
         .collect();
@@ -92,4 +94,50 @@ pub fn replace<T: CellValue>(set: &CellSet, values: &mut [T]) -> u64 {
         values[s] = v;
     }
     bad.len() as u64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::grid::{leaf_offset, Grid, Leaf, Transform, LEAF_VOXELS};
+
+    #[test]
+    fn replaced_by_mean_of_finite_neighbours() {
+        let mut leaf = Leaf {
+            origin: [0; 3],
+            active: [0; 8],
+            values: Box::new([0.0f64; LEAF_VOXELS]),
+        };
+        // A row x = 0..4 at y = z = 0 plus an isolated cell at (6, 6, 6).
+        let cells = [
+            ([0, 0, 0], 1.0),
+            ([1, 0, 0], f64::NAN),
+            ([2, 0, 0], 3.0),
+            ([3, 0, 0], f64::INFINITY),
+            ([6, 6, 6], f64::NAN),
+        ];
+        for (c, v) in cells {
+            let n = leaf_offset(c[0], c[1], c[2]);
+            leaf.active[n >> 6] |= 1 << (n & 63);
+            leaf.values[n] = v;
+        }
+        let grid = Grid {
+            name: "s".into(),
+            transform: Transform {
+                voxel_size: [1.0; 3],
+                translation: [0.0; 3],
+            },
+            background: 0.0,
+            leaves: vec![leaf],
+            tiles: vec![],
+        };
+        let (set, mut vals) = CellSet::from_grid(&grid, 0, |v| v);
+        assert_eq!(count(&set, &vals).count, 3);
+        assert_eq!(replace(&set, &mut vals), 3);
+        let at = |c: [i32; 3]| vals[set.active_slot(c).expect("active")];
+        assert_eq!(at([1, 0, 0]), 2.0); // mean of 1 and 3
+        assert_eq!(at([3, 0, 0]), 3.0); // only finite neighbour: 3
+        assert_eq!(at([6, 6, 6]), 0.0); // no neighbour
+        assert_eq!(count(&set, &vals).count, 0);
+    }
 }

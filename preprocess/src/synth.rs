@@ -8,8 +8,8 @@
 //!
 //! * `wake`: `levels` nested boxes. The coarsest covers the scene domain
 //!   x ∈ [-2, 6], y, z ∈ [-2, 2] with voxel size `8 / n0` (so `n0` voxels along x, the longest
-//!   axis; the box snaps outward to whole voxels, which adds one voxel per side when 4 does
-//!   not divide `n0`). Each finer level halves the voxel size and covers a box interpolated
+//!   axis; the box snaps outward to the world-aligned lattice, so when 4 does not divide
+//!   `n0` each side grows by less than one voxel). Each finer level halves the voxel size and covers a box interpolated
 //!   linearly between the domain and the core box x ∈ [-0.75, 5], y, z ∈ [-0.75, 0.75]
 //!   (sphere and ring train), snapped outward to the next coarser level's cells so that
 //!   boxes nest exactly. Grids are named `vel_l0` (finest) … `vel_l{levels-1}` (coarsest)
@@ -413,6 +413,38 @@ mod tests {
         for a in 0..3 {
             assert!(f.lo[a] as f64 * f.voxel_size <= WAKE_CORE.min[a]);
             assert!(f.hi[a] as f64 * f.voxel_size >= WAKE_CORE.max[a]);
+        }
+    }
+
+    #[test]
+    fn layouts_nest_for_any_n0_and_level_count() {
+        for n0 in [2, 5, 15, 30, 48, 64, 161] {
+            for levels in 1..=5 {
+                let l = scene_layout("wake", n0, levels).expect("layout");
+                assert_eq!(l.len(), levels as usize);
+                let coarse = &l[l.len() - 1];
+                let nx = coarse.hi[0] - coarse.lo[0];
+                assert!(nx == i64::from(n0) || nx == i64::from(n0) + 1, "{n0}: {nx}");
+                for a in 0..3 {
+                    assert!(coarse.lo[a] as f64 * coarse.voxel_size <= WAKE_DOMAIN.min[a] + 1e-12);
+                    assert!(coarse.hi[a] as f64 * coarse.voxel_size >= WAKE_DOMAIN.max[a] - 1e-12);
+                }
+                for w in l.windows(2) {
+                    let (fine, parent) = (&w[0], &w[1]);
+                    for a in 0..3 {
+                        assert!(fine.lo[a] >= 2 * parent.lo[a] && fine.hi[a] <= 2 * parent.hi[a]);
+                        assert!(fine.lo[a] % 2 == 0 && fine.hi[a] % 2 == 0);
+                        assert!(fine.hi[a] > fine.lo[a]);
+                    }
+                }
+                if levels > 1 {
+                    let f = &l[0];
+                    for a in 0..3 {
+                        assert!(f.lo[a] as f64 * f.voxel_size <= WAKE_CORE.min[a] + 1e-12);
+                        assert!(f.hi[a] as f64 * f.voxel_size >= WAKE_CORE.max[a] - 1e-12);
+                    }
+                }
+            }
         }
     }
 

@@ -3,6 +3,7 @@
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
+use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
@@ -99,25 +100,33 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ..BakeOptions::default()
     };
 
-    // Progress: a spinner on a terminal, plain stage lines with --progress elsewhere.
+    // Progress: on a terminal a spinner naming the stage, shown once the bake has taken a
+    // second (short bakes stay silent); with --progress elsewhere, plain stage lines.
     let show = !args.quiet && (args.progress || std::io::stderr().is_terminal());
-    let bar = (show && std::io::stderr().is_terminal()).then(|| {
-        let b = ProgressBar::new_spinner();
-        b.set_style(
-            ProgressStyle::with_template("{spinner} {elapsed:>4} {msg}")
-                .unwrap_or_else(|_| ProgressStyle::default_spinner()),
-        );
-        b.enable_steady_tick(Duration::from_millis(120));
-        b
-    });
-    let lines = show && bar.is_none();
+    let terminal = std::io::stderr().is_terminal();
+    let bar: OnceLock<ProgressBar> = OnceLock::new();
     let stage = |name: &str| {
-        if let Some(b) = &bar {
-            b.set_message(name.to_string());
-        } else if lines {
+        if !show {
+            return;
+        }
+        if !terminal {
             let t = start.elapsed().as_secs_f64();
             eprintln!("qbricks-bake: {t:7.2} s  {name}");
+            return;
         }
+        if bar.get().is_none() && start.elapsed() < Duration::from_secs(1) {
+            return;
+        }
+        let b = bar.get_or_init(|| {
+            let b = ProgressBar::new_spinner().with_elapsed(start.elapsed());
+            b.set_style(
+                ProgressStyle::with_template("{spinner} {elapsed:>4} {msg}")
+                    .unwrap_or_else(|_| ProgressStyle::default_spinner()),
+            );
+            b.enable_steady_tick(Duration::from_millis(120));
+            b
+        });
+        b.set_message(name.to_string());
     };
 
     // Read only the grids that will be baked.
@@ -152,7 +161,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             forbid_overwrite_of: Some(args.input.clone()),
         },
     )?;
-    if let Some(b) = &bar {
+    if let Some(b) = bar.get() {
         b.finish_and_clear();
     }
     let seconds = start.elapsed().as_secs_f64();
