@@ -162,6 +162,7 @@ fn params(strategy: Strategy, step: f64, iso: f64) -> Params {
         field: 0,
         colour_field: Some(1),
         delta0: 1.0,
+        clip: None,
     }
 }
 
@@ -204,11 +205,30 @@ fn exact_hits_are_on_the_surface_and_miss_nothing_uniform_finds() {
         for iso in [0.3, -0.5, 1.1] {
             let mut exact = Tracer::new(&vol, params(Strategy::Exact, 1.0, iso));
             let mut reference = Tracer::new(&vol, params(Strategy::Uniform, 0.01, iso));
+            // The same, with rays clipped to the box of regions that can hold the surface.
+            let clipped = |s, step| {
+                let mut p = params(s, step, iso);
+                p.clip_to_active(&vol);
+                p
+            };
+            let mut exact_c = Tracer::new(&vol, clipped(Strategy::Exact, 1.0));
+            let mut uniform = Tracer::new(&vol, params(Strategy::Uniform, 0.5, iso));
+            let mut uniform_c = Tracer::new(&vol, clipped(Strategy::Uniform, 0.5));
             let (mut hits, mut ref_hits) = (0, 0);
             for (o, d) in rays(300) {
                 let o = vol.to_local(std::array::from_fn(|a| o[a] + offset[a]));
                 let he = exact.iso(o, d, 0.0, 1e3, 0.5);
                 let hr = reference.iso(o, d, 0.0, 1e3, 0.5);
+                assert_eq!(
+                    exact_c.iso(o, d, 0.0, 1e3, 0.5).map(|h| h.t),
+                    he.map(|h| h.t)
+                );
+                if uniform.iso(o, d, 0.0, 1e3, 0.5).is_some() {
+                    assert!(
+                        uniform_c.iso(o, d, 0.0, 1e3, 0.5).is_some(),
+                        "clipping lost a hit"
+                    );
+                }
                 if let Some(h) = he {
                     hits += 1;
                     let v = vol.value_at(h.p, 0).unwrap_or_else(|| {
