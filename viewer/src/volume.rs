@@ -157,7 +157,16 @@ impl<'a> Volume<'a> {
                     format!("{dims:?}"),
                 ));
             }
-            let n = dims.iter().map(|&d| d as u64).product::<u64>();
+            let Some(n) = dims
+                .iter()
+                .try_fold(1u64, |acc, &d| acc.checked_mul(d as u64))
+            else {
+                return Err(invalid(
+                    format!("brick {i} dims"),
+                    "a cell count that fits 64 bits",
+                    format!("{dims:?}"),
+                ));
+            };
             let first = br.first_value.to_native();
             if !fields.is_empty() && first.checked_add(n).is_none_or(|end| end > n_values as u64) {
                 return Err(invalid(
