@@ -713,9 +713,9 @@ impl Planes {
                 continue;
             }
             if nl == 8 {
-                // More lattices than we track: fall back to the finest spacing everywhere
-                // (still exact per interval only if all lattices are tracked, so keep the
-                // intervals small: half the finest cell).
+                // More than 8 distinct lattices in one region (never produced by nested
+                // grids of one refinement ratio): the remaining lattices' planes are not
+                // cut, so intervals there are only approximately cubic.
                 break;
             }
             lattices[nl] = (k, br.origin);
@@ -749,7 +749,13 @@ impl Planes {
         for i in 0..self.n {
             // Round-off can leave a plane at or just before t: step past it.
             while self.next[i] <= t + 1e-12 * self.step[i] {
-                self.next[i] += self.step[i];
+                let n = self.next[i] + self.step[i];
+                if !(n > self.next[i]) {
+                    // The spacing is below the resolution of t here: stop cutting.
+                    self.next[i] = f64::INFINITY;
+                    break;
+                }
+                self.next[i] = n;
             }
             best = best.min(self.next[i]);
         }
