@@ -750,7 +750,7 @@ impl Planes {
             // Round-off can leave a plane at or just before t: step past it.
             while self.next[i] <= t + 1e-12 * self.step[i] {
                 let n = self.next[i] + self.step[i];
-                if !(n > self.next[i]) {
+                if n <= self.next[i] || n.is_nan() {
                     // The spacing is below the resolution of t here: stop cutting.
                     self.next[i] = f64::INFINITY;
                     break;
