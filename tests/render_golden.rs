@@ -58,7 +58,7 @@ fn state_for(vol: &Volume, mode: Mode, strategy: Strategy) -> ViewState {
     s.transfer.sigma = 0.05;
     s.shadows = true;
     // Move in: the ring fills the middle of the data box.
-    let eye: [f64; 3] = std::array::from_fn(|a| C[a] + 0.32 * (s.camera.eye[a] - C[a]));
+    let eye: [f64; 3] = std::array::from_fn(|a| C[a] + 0.36 * (s.camera.eye[a] - C[a]));
     s.camera.eye = eye;
     s.camera.look_at = C;
     s.meshes = vec![MeshInstance {
