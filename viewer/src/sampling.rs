@@ -33,6 +33,9 @@ pub struct Params {
     pub colour_field: Option<usize>,
     /// Reference length of the transfer function's opacity (world units).
     pub delta0: f64,
+    /// Local box holding every region that can contribute (rays are clipped to it);
+    /// `None`: no clipping. See [`Params::clip_to_active`].
+    pub clip: Option<([f64; 3], [f64; 3])>,
 }
 
 /// Work counters of one or more rays (summed in integers: deterministic).
@@ -195,6 +198,19 @@ impl<'v> Tracer<'v> {
         }
     }
 
+    /// `[t0, t1]` clipped to the active box.
+    fn clip(&self, o: &[f64; 3], d: &[f64; 3], t0: f64, t1: f64) -> Option<(f64, f64)> {
+        match &self.params.clip {
+            None => Some((t0, t1)),
+            Some((lo, hi)) => {
+                if (0..3).any(|a| lo[a] > hi[a]) {
+                    return None;
+                }
+                crate::traverse::ray_box(lo, hi, o, &crate::traverse::inverse(d), t0, t1)
+            }
+        }
+    }
+
     fn record(&mut self, e: Event) {
         if let Some(l) = &mut self.log {
             l.push(e);
@@ -217,6 +233,7 @@ impl<'v> Tracer<'v> {
         t1: f64,
         jitter: f64,
     ) -> Option<IsoHit> {
+        let (t0, t1) = self.clip(&o, &d, t0, t1)?;
         let t = match self.params.strategy {
             Strategy::Exact => self.iso_exact(o, d, t0, t1),
             _ => self.iso_sampled(o, d, t0, t1, jitter),
@@ -236,6 +253,9 @@ impl<'v> Tracer<'v> {
 
     /// Whether anything opaque (iso mode) lies on `o + t d`, `t ∈ (t0, t1)`.
     pub fn iso_occluded(&mut self, o: [f64; 3], d: [f64; 3], t0: f64, t1: f64) -> bool {
+        let Some((t0, t1)) = self.clip(&o, &d, t0, t1) else {
+            return false;
+        };
         let saved = self.log.take();
         let hit = match self.params.strategy {
             Strategy::Exact => self.iso_exact(o, d, t0, t1),
@@ -303,6 +323,26 @@ impl<'v> Tracer<'v> {
                 }
                 prev = Some(Prev { t: seg.t1, ..here });
                 return true;
+            }
+            if prev.is_none_or(|p| !p.real) {
+                // Entry sample: a crossing between skipped space (or the clipped ray start)
+                // and this region's first sample is bracketed from here.
+                let v = vol.eval_value(r, at(&o, &d, seg.t0), params.field);
+                self.stats.samples += 1;
+                if let Some(v) = v {
+                    let cur = Prev {
+                        t: seg.t0,
+                        v,
+                        real: true,
+                    };
+                    if let Some(pv) = prev {
+                        if (pv.v >= iso) != (v >= iso) {
+                            bracket = Some((pv, cur, w));
+                            return false;
+                        }
+                    }
+                    prev = Some(cur);
+                }
             }
             let mut pos = Positions::new(
                 params.strategy,
@@ -446,11 +486,14 @@ impl<'v> Tracer<'v> {
         jitter: f64,
         shade: &mut S,
     ) -> Accum {
+        let mut acc = Accum::default();
+        let Some((t0, t1)) = self.clip(&o, &d, t0, t1) else {
+            return acc;
+        };
         let vol = self.vol;
         let params = self.params;
         let tf = params.tf;
-        let mut acc = Accum::default();
-        let mut prev: Option<(f64, Class)> = None;
+        let mut prev: Option<(f64, Class, bool)> = None;
         let mut last_t1 = f64::NEG_INFINITY;
         let mut t_next = f64::NEG_INFINITY;
         let mut stack = std::mem::take(&mut self.stack);
@@ -482,7 +525,7 @@ impl<'v> Tracer<'v> {
                 self.stats.skipped += 1;
                 if params.strategy == Strategy::Bisect {
                     let class = tf.classify(mn as f64);
-                    if let Some((pt, pc)) = prev {
+                    if let Some((pt, pc, _)) = prev {
                         if pc != class && pc != Class::Inside {
                             // The band lies between the last sample and this region.
                             self.band_search(o, d, pt, seg.t0, w, &mut acc, shade);
@@ -491,9 +534,27 @@ impl<'v> Tracer<'v> {
                             }
                         }
                     }
-                    prev = Some((seg.t1, class));
+                    prev = Some((seg.t1, class, false));
                 }
                 return true;
+            }
+            if params.strategy == Strategy::Bisect && prev.is_none_or(|p| !p.2) {
+                // Entry sample: a band crossing between skipped space (or the clipped ray
+                // start) and this region's first sample is bisected from here.
+                let v = vol.eval_value(r, at(&o, &d, seg.t0), params.field);
+                self.stats.samples += 1;
+                if let Some(v) = v {
+                    let class = tf.classify(v);
+                    if let Some((pt, pc, _)) = prev {
+                        if pc != class && pc != Class::Inside && class != Class::Inside {
+                            self.band_search(o, d, pt, seg.t0, w, &mut acc, shade);
+                            if acc.done() {
+                                return false;
+                            }
+                        }
+                    }
+                    prev = Some((seg.t0, class, true));
+                }
             }
             let mut pos = Positions::new(
                 params.strategy,
@@ -514,7 +575,7 @@ impl<'v> Tracer<'v> {
                 let class = tf.classify(v);
                 let mut delta = delta;
                 if params.strategy == Strategy::Bisect {
-                    if let Some((pt, pc)) = prev {
+                    if let Some((pt, pc, _)) = prev {
                         if pc != Class::Inside && class != Class::Inside && pc != class {
                             let tm = self.band_search(o, d, pt, t, w, &mut acc, shade);
                             if acc.done() {
@@ -525,7 +586,7 @@ impl<'v> Tracer<'v> {
                             delta = t - pt;
                         }
                     }
-                    prev = Some((t, class));
+                    prev = Some((t, class, true));
                 }
                 let alpha = tf.opacity(v);
                 let a = correct_opacity(alpha, delta, params.delta0);
@@ -779,5 +840,26 @@ pub fn first_root(c: &Cubic) -> Option<f64> {
 impl Params {
     pub fn mode(&self) -> Mode {
         self.tf.mode
+    }
+
+    /// Sets [`Params::clip`] to the bounding box of the regions whose value range can
+    /// contribute (contains iso / meets the band). Everything outside it is skipped anyway;
+    /// the strategies that track the side of skipped space take an entry sample in the first
+    /// region they process, so nothing is lost by starting there.
+    pub fn clip_to_active(&mut self, vol: &Volume) {
+        let tf = self.tf;
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for (r, reg) in vol.regions.iter().enumerate() {
+            let [mn, mx] = vol.range(r, self.field);
+            if tf.may_contribute(mn, mx) {
+                for a in 0..3 {
+                    lo[a] = lo[a].min(reg.min[a]);
+                    hi[a] = hi[a].max(reg.max[a]);
+                }
+            }
+        }
+        // Nothing can contribute: an empty box (min > max) that no ray enters.
+        self.clip = Some((lo, hi));
     }
 }
