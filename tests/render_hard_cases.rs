@@ -41,7 +41,16 @@ fn params(vol: &Volume, strategy: Strategy, step: f64, mode: Mode, iso: f64) -> 
         field: 0,
         colour_field: None,
         delta0: 0.5 * vol.finest_w,
+        clip: None,
     }
+}
+
+/// As [`params`], with rays clipped to the box of regions that can contribute (what
+/// the renderer does).
+fn params_clipped(vol: &Volume, strategy: Strategy, step: f64, mode: Mode, iso: f64) -> Params {
+    let mut p = params(vol, strategy, step, mode, iso);
+    p.clip_to_active(vol);
+    p
 }
 
 /// First iso hit along the world ray `o + t d` (`d` normalised here), as `t`.
@@ -56,9 +65,25 @@ fn iso_hit(
 ) -> Option<f64> {
     let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
     let d = d.map(|x| x / n);
+    // Without and with clipping to the active box: both must give the same hit.
     let mut tr = Tracer::new(vol, params(vol, strategy, step, Mode::Iso, iso));
-    tr.iso(vol.to_local(o), d, 0.0, f64::INFINITY, jitter)
-        .map(|h| h.t)
+    let plain = tr
+        .iso(vol.to_local(o), d, 0.0, f64::INFINITY, jitter)
+        .map(|h| h.t);
+    let mut tr = Tracer::new(vol, params_clipped(vol, strategy, step, Mode::Iso, iso));
+    let clipped = tr
+        .iso(vol.to_local(o), d, 0.0, f64::INFINITY, jitter)
+        .map(|h| h.t);
+    let same = match (plain, clipped) {
+        (None, None) => true,
+        (Some(a), Some(b)) => (a - b).abs() <= 1e-9 * (1.0 + a.abs()),
+        _ => false,
+    };
+    assert!(
+        same,
+        "{strategy} jitter {jitter}: {plain:?} unclipped, {clipped:?} clipped to the active box (ray {o:?} {d:?} iso {iso})"
+    );
+    clipped
 }
 
 fn unit(d: [f64; 3]) -> [f64; 3] {
@@ -409,17 +434,28 @@ fn iso_outside_the_data_range_hits_nothing_and_samples_nothing() {
                     "{s}: sampled regions whose bounds exclude iso {iso}"
                 );
                 assert!(tr.stats.skipped > 0, "{s}: the ray crossed no region");
+                // Clipped to the (empty) active box: nothing at all.
+                let mut tr = Tracer::new(vol, params_clipped(vol, s, STEP, Mode::Iso, iso));
+                let hit = tr.iso(vol.to_local([-1.0, -1.0, 2.0]), d, 0.0, f64::INFINITY, 0.37);
+                assert!(hit.is_none(), "{s}: hit at iso {iso} (clipped)");
+                assert_eq!(tr.stats.samples, 0, "{s}: samples at iso {iso} (clipped)");
                 // Same in dvr: nothing is composited.
-                let mut tr = Tracer::new(vol, params(vol, s, STEP, Mode::Dvr, iso));
-                let acc = tr.dvr(
-                    vol.to_local([-1.0, -1.0, 2.0]),
-                    d,
-                    0.0,
-                    f64::INFINITY,
-                    0.37,
-                    &mut |_, _| [1.0; 3],
-                );
-                assert_eq!(acc.alpha(), 0.0, "{s}: dvr opacity at iso {iso}");
+                for p in [
+                    params(vol, s, STEP, Mode::Dvr, iso),
+                    params_clipped(vol, s, STEP, Mode::Dvr, iso),
+                ] {
+                    let mut tr = Tracer::new(vol, p);
+                    let acc = tr.dvr(
+                        vol.to_local([-1.0, -1.0, 2.0]),
+                        d,
+                        0.0,
+                        f64::INFINITY,
+                        0.37,
+                        &mut |_, _| [1.0; 3],
+                    );
+                    assert_eq!(acc.alpha(), 0.0, "{s}: dvr opacity at iso {iso}");
+                    assert_eq!(tr.stats.samples, 0, "{s}: dvr samples at iso {iso}");
+                }
             }
         }
     });
