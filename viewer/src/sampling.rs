@@ -234,15 +234,20 @@ impl<'v> Tracer<'v> {
         jitter: f64,
     ) -> Option<IsoHit> {
         let (t0, t1) = self.clip(&o, &d, t0, t1)?;
-        let t = match self.params.strategy {
+        let (t, region) = match self.params.strategy {
             Strategy::Exact => self.iso_exact(o, d, t0, t1),
-            _ => self.iso_sampled(o, d, t0, t1, jitter),
+            _ => self.iso_sampled(o, d, t0, t1, jitter).map(|t| (t, None)),
         }?;
         let p = at(&o, &d, t);
         let vol = self.vol;
-        let eval = vol
-            .region_at(p)
-            .and_then(|r| vol.eval(r as usize, p, self.params.field, self.params.colour_field));
+        let eval = region
+            .or_else(|| vol.region_at(p))
+            .and_then(|r| vol.eval(r as usize, p, self.params.field, self.params.colour_field))
+            .or_else(|| {
+                // The hit may lie on the region's far face (round-off): look it up.
+                let r = vol.region_at(p)?;
+                vol.eval(r as usize, p, self.params.field, self.params.colour_field)
+            });
         self.stats.samples += 1;
         self.record(Event::Hit {
             t,
@@ -258,7 +263,7 @@ impl<'v> Tracer<'v> {
         };
         let saved = self.log.take();
         let hit = match self.params.strategy {
-            Strategy::Exact => self.iso_exact(o, d, t0, t1),
+            Strategy::Exact => self.iso_exact(o, d, t0, t1).map(|h| h.0),
             _ => self.iso_sampled(o, d, t0, t1, 0.5),
         };
         self.log = saved;
@@ -462,7 +467,13 @@ impl<'v> Tracer<'v> {
     /// Exact iso search: per region (skipped by bounds), per interval between lattice
     /// planes of every level present (inside which `Σ H (v − iso)` is a cubic), skip when
     /// all contributing cells lie on one side, else take the cubic's first root.
-    fn iso_exact(&mut self, o: [f64; 3], d: [f64; 3], t0: f64, t1: f64) -> Option<f64> {
+    fn iso_exact(
+        &mut self,
+        o: [f64; 3],
+        d: [f64; 3],
+        t0: f64,
+        t1: f64,
+    ) -> Option<(f64, Option<u32>)> {
         let vol = self.vol;
         let params = self.params;
         let iso = params.tf.iso;
@@ -507,7 +518,7 @@ impl<'v> Tracer<'v> {
                 });
                 if may_cross {
                     if let Some(x) = first_root(&cubic) {
-                        found = Some(ta + x * (tb - ta));
+                        found = Some((ta + x * (tb - ta), Some(seg.region)));
                         return false;
                     }
                 }
