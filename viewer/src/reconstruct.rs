@@ -260,7 +260,7 @@ impl Volume<'_> {
                         w0 += lin[0][i][0];
                         w1 += lin[0][i][1];
                         let v = self.value(f, yoff + ax.idx[i] as usize) as f64 - iso;
-                        any_above |= v > 0.0;
+                        any_above |= v >= 0.0;
                         any_below |= v < 0.0;
                         s0 += v * lin[0][i][0];
                         s1 += v * lin[0][i][1];

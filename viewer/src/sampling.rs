@@ -287,6 +287,8 @@ impl<'v> Tracer<'v> {
         let mut last_t1 = f64::NEG_INFINITY;
         let mut t_next = f64::NEG_INFINITY;
         let mut bracket: Option<(Prev, Prev, f64)> = None;
+        // Last region sampled and its step width: where an exit sample is taken.
+        let mut last_live: Option<(usize, f64)> = None;
         let mut stack = std::mem::take(&mut self.stack);
         let tf = params.tf;
         let skip = Skip {
@@ -298,7 +300,13 @@ impl<'v> Tracer<'v> {
             let r = seg.region as usize;
             let w = vol.step_width(seg.region);
             if seg.t0 > last_t1 + 1e-9 * w {
-                prev = None; // a gap in the data
+                // A gap in the data: a crossing between the last sample and the end of
+                // the data before the gap is bracketed by an exit sample.
+                if let Some(b) = self.exit_bracket(o, d, prev, last_live, last_t1) {
+                    bracket = Some(b);
+                    return false;
+                }
+                prev = None;
             }
             last_t1 = seg.t1;
             self.stats.segments += 1;
@@ -349,6 +357,7 @@ impl<'v> Tracer<'v> {
                     prev = Some(cur);
                 }
             }
+            last_live = Some((r, w));
             let mut pos = Positions::new(
                 params.strategy,
                 seg.t0,
@@ -383,8 +392,43 @@ impl<'v> Tracer<'v> {
             true
         });
         self.stack = stack;
+        if bracket.is_none() {
+            // The ray leaves the data (or the clipped box) after its last sample.
+            bracket = self.exit_bracket(o, d, prev, last_live, last_t1);
+        }
         let (a, b, w) = bracket?;
         Some(self.refine_iso(o, d, a, b, w))
+    }
+
+    /// Exit sample at `t_end`, the end of region `last` (step width `w`) after the real
+    /// sample `prev`: a bracket if the value there lies on the other side of the iso value.
+    fn exit_bracket(
+        &mut self,
+        o: [f64; 3],
+        d: [f64; 3],
+        prev: Option<Prev>,
+        last: Option<(usize, f64)>,
+        t_end: f64,
+    ) -> Option<(Prev, Prev, f64)> {
+        let (pv, (r, w)) = (prev?, last?);
+        if !pv.real || t_end <= pv.t || !t_end.is_finite() {
+            return None;
+        }
+        let iso = self.params.tf.iso;
+        let field = self.params.field;
+        // On the region's far face; step back by a hair if round-off puts it outside.
+        let vol = self.vol;
+        let (t, v) = [t_end, t_end - 1e-9 * w]
+            .into_iter()
+            .filter(|&t| t > pv.t)
+            .find_map(|t| vol.eval_value(r, at(&o, &d, t), field).map(|v| (t, v)))?;
+        self.stats.samples += 1;
+        self.record(Event::Sample {
+            t,
+            value: Some(v),
+            alpha: 0.0,
+        });
+        ((pv.v >= iso) != (v >= iso)).then_some((pv, Prev { t, v, real: true }, w))
     }
 
     /// Narrows a bracket `[a, b]` of the iso crossing to a position.
