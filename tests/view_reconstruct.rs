@@ -162,6 +162,7 @@ fn params(strategy: Strategy, step: f64, iso: f64) -> Params {
         field: 0,
         colour_field: Some(1),
         delta0: 1.0,
+        clip: None,
     }
 }
 
@@ -204,11 +205,30 @@ fn exact_hits_are_on_the_surface_and_miss_nothing_uniform_finds() {
         for iso in [0.3, -0.5, 1.1] {
             let mut exact = Tracer::new(&vol, params(Strategy::Exact, 1.0, iso));
             let mut reference = Tracer::new(&vol, params(Strategy::Uniform, 0.01, iso));
+            // The same, with rays clipped to the box of regions that can hold the surface.
+            let clipped = |s, step| {
+                let mut p = params(s, step, iso);
+                p.clip_to_active(&vol);
+                p
+            };
+            let mut exact_c = Tracer::new(&vol, clipped(Strategy::Exact, 1.0));
+            let mut uniform = Tracer::new(&vol, params(Strategy::Uniform, 0.5, iso));
+            let mut uniform_c = Tracer::new(&vol, clipped(Strategy::Uniform, 0.5));
             let (mut hits, mut ref_hits) = (0, 0);
             for (o, d) in rays(300) {
                 let o = vol.to_local(std::array::from_fn(|a| o[a] + offset[a]));
                 let he = exact.iso(o, d, 0.0, 1e3, 0.5);
                 let hr = reference.iso(o, d, 0.0, 1e3, 0.5);
+                assert_eq!(
+                    exact_c.iso(o, d, 0.0, 1e3, 0.5).map(|h| h.t),
+                    he.map(|h| h.t)
+                );
+                if uniform.iso(o, d, 0.0, 1e3, 0.5).is_some() {
+                    assert!(
+                        uniform_c.iso(o, d, 0.0, 1e3, 0.5).is_some(),
+                        "clipping lost a hit"
+                    );
+                }
                 if let Some(h) = he {
                     hits += 1;
                     let v = vol.value_at(h.p, 0).unwrap_or_else(|| {
@@ -325,4 +345,92 @@ fn traversal_matches_brute_force() {
             assert!(p[1].t0 >= p[0].t1 - 1e-9);
         }
     }
+}
+
+/// `exact` finds every hit of the reference, on the surface, for arbitrary rays.
+fn exact_covers_reference(vol: &Volume, iso: f64, rays: &[([f64; 3], [f64; 3])]) -> (u32, u32) {
+    let range = (vol.fields[0].max - vol.fields[0].min) as f64;
+    let mut exact = Tracer::new(vol, params(Strategy::Exact, 1.0, iso));
+    let mut reference = Tracer::new(vol, params(Strategy::Uniform, 0.01, iso));
+    let (mut e, mut r) = (0, 0);
+    for &(o, d) in rays {
+        let o = vol.to_local(o);
+        let he = exact.iso(o, d, 0.0, 1e3, 0.25);
+        if let Some(h) = he {
+            e += 1;
+            let v = vol.value_at(h.p, 0).expect("hit inside data");
+            assert!(
+                (v - iso).abs() <= 1e-4 * range.max(1e-30),
+                "B(hit) = {v}, iso {iso}"
+            );
+        }
+        if reference.iso(o, d, 0.0, 1e3, 0.25).is_some() {
+            r += 1;
+            assert!(he.is_some(), "exact missed: o {o:?} d {d:?}");
+        }
+    }
+    (e, r)
+}
+
+#[test]
+fn one_voxel_thick_grid() {
+    let g = GridSpec {
+        cell_width: 1.0,
+        origin: [0.5, 0.5, 0.5],
+        dims: [12, 10, 1],
+    };
+    let f = |p: [f64; 3]| (p[0] / 2.0).sin() + (p[1] / 3.0).cos();
+    let file = testvol::build(&[g], &[("f", &f), ("c", &f)], 8);
+    let view = testvol::open(&file).expect("open");
+    let vol = Volume::new(view.file()).expect("volume");
+    // Rays through the slab (support z in [-0.5, 1.5]) at many angles.
+    let mut rays = Vec::new();
+    let mut rng = Rng(5);
+    for _ in 0..400 {
+        let target = [rng.next() * 12.0, rng.next() * 10.0, rng.next() * 2.0 - 0.5];
+        let dir: [f64; 3] = std::array::from_fn(|_| rng.next() - 0.5);
+        let l = dir.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let d = dir.map(|x| x / l);
+        rays.push((std::array::from_fn(|a| target[a] - 30.0 * d[a]), d));
+    }
+    let (e, r) = exact_covers_reference(&vol, 0.5, &rays);
+    assert!(r > 20 && e >= r, "exact {e}, reference {r}");
+    // In a one-cell-thick grid the field is constant in z: value = 2D bilinear.
+    let s = vol.sample([3.3, 4.1, 0.9], 0).expect("inside");
+    let s2 = vol.sample([3.3, 4.1, 0.1], 0).expect("inside");
+    assert!((s.values[0] - s2.values[0]).abs() < 1e-6 && s.gradient[2].abs() < 1e-9);
+}
+
+#[test]
+fn zero_gradient_and_flat_fields() {
+    // A constant field equal to iso everywhere: every point is "on" the surface; the
+    // gradient is zero. Nothing may panic, hits must be on the data.
+    let file = testvol::nested(8, [0.0; 3], &[("f", &|_| 0.25), ("c", &|_| 0.0)], 8);
+    let view = testvol::open(&file).expect("open");
+    let vol = Volume::new(view.file()).expect("volume");
+    let mut t = Tracer::new(&vol, params(Strategy::Exact, 1.0, 0.25));
+    for (o, d) in rays(50) {
+        if let Some(h) = t.iso(vol.to_local(o), d, 0.0, 1e3, 0.5) {
+            let e = h.eval.expect("eval at hit");
+            assert!(e.grad.iter().all(|g| g.abs() < 1e-9));
+        }
+    }
+    // A saddle (x·y) has zero gradient at its centre; the iso surface through it is hit.
+    let sad = |p: [f64; 3]| (p[0] - 16.0) * (p[1] - 16.0);
+    let file = testvol::nested(16, [0.0; 3], &[("f", &sad), ("c", &sad)], 8);
+    let view = testvol::open(&file).expect("open");
+    let vol = Volume::new(view.file()).expect("volume");
+    let (e, r) = exact_covers_reference(&vol, 0.0, &rays(200));
+    assert!(r > 50 && e >= r);
+}
+
+#[test]
+fn empty_file_renders_nothing() {
+    let file = testvol::build(&[], &[("f", &|_| 0.0)], 8);
+    let view = testvol::open(&file).expect("open");
+    let vol = Volume::new(view.file()).expect("volume");
+    assert!(vol.regions.is_empty());
+    let mut t = Tracer::new(&vol, params(Strategy::Exact, 1.0, 0.0));
+    assert!(t.iso([0.0; 3], [1.0, 0.0, 0.0], 0.0, 1e3, 0.5).is_none());
+    assert!(vol.sample([0.0; 3], 0).is_none());
 }

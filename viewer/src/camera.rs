@@ -135,8 +135,8 @@ impl Camera {
     /// A camera that frames the box `min..max` from a pleasant oblique direction.
     ///
     /// The camera looks at the box centre from the (+x, −y, +z) octant, slightly from
-    /// above (`up` = +z), far enough for the box's bounding sphere to fit the vertical
-    /// field of view of [`DEFAULT_FOV_DEG`]. Inverted corners are swapped, a degenerate
+    /// above (`up` = +z), just far enough for every box corner to fit the vertical field
+    /// of view of [`DEFAULT_FOV_DEG`] (plus 5 %) on both image axes. Inverted corners are swapped, a degenerate
     /// (flat or point) box gets a size relative to its position, and non-finite input
     /// frames the unit box.
     pub fn frame(min: [f64; 3], max: [f64; 3]) -> Camera {
@@ -150,17 +150,33 @@ impl Camera {
         let floor = (centre.abs().max_element() * 1e-9).max(1e-6);
         let radius = (0.5 * (hi - lo).length()).max(floor);
         let dir = DVec3::new(1.0, -1.6, 0.9).normalize();
-        let half_fov = 0.5 * DEFAULT_FOV_DEG.to_radians();
-        let distance = 1.05 * radius / half_fov.sin();
-        let eye = centre + distance * dir;
-        Camera {
-            eye: eye.to_array(),
+        let mut cam = Camera {
+            eye: (centre + radius * dir).to_array(),
             look_at: centre.to_array(),
             up: [0.0, 0.0, 1.0],
             projection: Projection::Perspective {
                 fov_deg: DEFAULT_FOV_DEG,
             },
+        };
+        // Nearest distance at which every corner projects inside the vertical field of
+        // view on both image axes (a square image; wider images only gain room), plus
+        // 5 % margin. Tighter than the bounding sphere for elongated boxes.
+        let b = cam.basis();
+        let tan_half = (0.5 * DEFAULT_FOV_DEG.to_radians()).tan();
+        let half = 0.5 * (hi - lo).max(DVec3::splat(floor));
+        let mut distance = 0.0f64;
+        for i in 0..8 {
+            let q = DVec3::new(
+                if i & 1 == 0 { -half.x } else { half.x },
+                if i & 2 == 0 { -half.y } else { half.y },
+                if i & 4 == 0 { -half.z } else { half.z },
+            );
+            let (x, y, z) = (q.dot(b.right), q.dot(b.up), q.dot(b.forward));
+            distance = distance.max((x.abs().max(y.abs()) / tan_half) - z);
         }
+        let distance = 1.05 * distance.max(radius);
+        cam.eye = (centre + distance * dir).to_array();
+        cam
     }
 }
 

@@ -3,7 +3,7 @@
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-use glam::{DVec3, Vec3};
+pub use glam::{DVec3, Vec3};
 use serde::{Deserialize, Serialize};
 
 use crate::bvh::{intersect_triangle, Aabb, Bvh, RayShear};

@@ -40,7 +40,7 @@ struct Axis {
     dw: [f64; 2],
 }
 
-#[inline]
+#[inline(always)]
 fn axis_cells(u: f64, dim: i64, inv_w: f64) -> Axis {
     let mut ax = Axis::default();
     // floor() without a libm call (the baseline x86-64 target has no SSE4.1 round).
@@ -65,7 +65,7 @@ fn axis_cells(u: f64, dim: i64, inv_w: f64) -> Axis {
     ax
 }
 
-#[inline]
+#[inline(always)]
 fn brick_axes(b: &BrickN, p: &[f64; 3]) -> Option<[Axis; 3]> {
     let mut axes = [Axis::default(); 3];
     for a in 0..3 {

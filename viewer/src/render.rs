@@ -53,7 +53,10 @@ impl<'a> Scene<'a> {
             colour_field,
             // The seed report's opacities are per sample at step 0.5·dx of the finest grid.
             delta0: 0.5 * vol.finest_w,
+            clip: None,
         };
+        let mut params = params;
+        params.clip_to_active(vol);
         Ok(Scene {
             vol,
             state,

@@ -33,6 +33,9 @@ pub struct Params {
     pub colour_field: Option<usize>,
     /// Reference length of the transfer function's opacity (world units).
     pub delta0: f64,
+    /// Local box holding every region that can contribute (rays are clipped to it);
+    /// `None`: no clipping. See [`Params::clip_to_active`].
+    pub clip: Option<([f64; 3], [f64; 3])>,
 }
 
 /// Work counters of one or more rays (summed in integers: deterministic).
@@ -195,6 +198,19 @@ impl<'v> Tracer<'v> {
         }
     }
 
+    /// `[t0, t1]` clipped to the active box.
+    fn clip(&self, o: &[f64; 3], d: &[f64; 3], t0: f64, t1: f64) -> Option<(f64, f64)> {
+        match &self.params.clip {
+            None => Some((t0, t1)),
+            Some((lo, hi)) => {
+                if (0..3).any(|a| lo[a] > hi[a]) {
+                    return None;
+                }
+                crate::traverse::ray_box(lo, hi, o, &crate::traverse::inverse(d), t0, t1)
+            }
+        }
+    }
+
     fn record(&mut self, e: Event) {
         if let Some(l) = &mut self.log {
             l.push(e);
@@ -217,15 +233,21 @@ impl<'v> Tracer<'v> {
         t1: f64,
         jitter: f64,
     ) -> Option<IsoHit> {
-        let t = match self.params.strategy {
+        let (t0, t1) = self.clip(&o, &d, t0, t1)?;
+        let (t, region) = match self.params.strategy {
             Strategy::Exact => self.iso_exact(o, d, t0, t1),
-            _ => self.iso_sampled(o, d, t0, t1, jitter),
+            _ => self.iso_sampled(o, d, t0, t1, jitter).map(|t| (t, None)),
         }?;
         let p = at(&o, &d, t);
         let vol = self.vol;
-        let eval = vol
-            .region_at(p)
-            .and_then(|r| vol.eval(r as usize, p, self.params.field, self.params.colour_field));
+        let eval = region
+            .or_else(|| vol.region_at(p))
+            .and_then(|r| vol.eval(r as usize, p, self.params.field, self.params.colour_field))
+            .or_else(|| {
+                // The hit may lie on the region's far face (round-off): look it up.
+                let r = vol.region_at(p)?;
+                vol.eval(r as usize, p, self.params.field, self.params.colour_field)
+            });
         self.stats.samples += 1;
         self.record(Event::Hit {
             t,
@@ -236,9 +258,12 @@ impl<'v> Tracer<'v> {
 
     /// Whether anything opaque (iso mode) lies on `o + t d`, `t ∈ (t0, t1)`.
     pub fn iso_occluded(&mut self, o: [f64; 3], d: [f64; 3], t0: f64, t1: f64) -> bool {
+        let Some((t0, t1)) = self.clip(&o, &d, t0, t1) else {
+            return false;
+        };
         let saved = self.log.take();
         let hit = match self.params.strategy {
-            Strategy::Exact => self.iso_exact(o, d, t0, t1),
+            Strategy::Exact => self.iso_exact(o, d, t0, t1).map(|h| h.0),
             _ => self.iso_sampled(o, d, t0, t1, 0.5),
         };
         self.log = saved;
@@ -262,6 +287,8 @@ impl<'v> Tracer<'v> {
         let mut last_t1 = f64::NEG_INFINITY;
         let mut t_next = f64::NEG_INFINITY;
         let mut bracket: Option<(Prev, Prev, f64)> = None;
+        // Last region sampled and its step width: where an exit sample is taken.
+        let mut last_live: Option<(usize, f64)> = None;
         let mut stack = std::mem::take(&mut self.stack);
         let tf = params.tf;
         let skip = Skip {
@@ -273,7 +300,13 @@ impl<'v> Tracer<'v> {
             let r = seg.region as usize;
             let w = vol.step_width(seg.region);
             if seg.t0 > last_t1 + 1e-9 * w {
-                prev = None; // a gap in the data
+                // A gap in the data: a crossing between the last sample and the end of
+                // the data before the gap is bracketed by an exit sample.
+                if let Some(b) = self.exit_bracket(o, d, prev, last_live, last_t1) {
+                    bracket = Some(b);
+                    return false;
+                }
+                prev = None;
             }
             last_t1 = seg.t1;
             self.stats.segments += 1;
@@ -304,6 +337,27 @@ impl<'v> Tracer<'v> {
                 prev = Some(Prev { t: seg.t1, ..here });
                 return true;
             }
+            if prev.is_none_or(|p| !p.real) {
+                // Entry sample: a crossing between skipped space (or the clipped ray start)
+                // and this region's first sample is bracketed from here.
+                let v = vol.eval_value(r, at(&o, &d, seg.t0), params.field);
+                self.stats.samples += 1;
+                if let Some(v) = v {
+                    let cur = Prev {
+                        t: seg.t0,
+                        v,
+                        real: true,
+                    };
+                    if let Some(pv) = prev {
+                        if (pv.v >= iso) != (v >= iso) {
+                            bracket = Some((pv, cur, w));
+                            return false;
+                        }
+                    }
+                    prev = Some(cur);
+                }
+            }
+            last_live = Some((r, w));
             let mut pos = Positions::new(
                 params.strategy,
                 seg.t0,
@@ -338,8 +392,43 @@ impl<'v> Tracer<'v> {
             true
         });
         self.stack = stack;
+        if bracket.is_none() {
+            // The ray leaves the data (or the clipped box) after its last sample.
+            bracket = self.exit_bracket(o, d, prev, last_live, last_t1);
+        }
         let (a, b, w) = bracket?;
         Some(self.refine_iso(o, d, a, b, w))
+    }
+
+    /// Exit sample at `t_end`, the end of region `last` (step width `w`) after the real
+    /// sample `prev`: a bracket if the value there lies on the other side of the iso value.
+    fn exit_bracket(
+        &mut self,
+        o: [f64; 3],
+        d: [f64; 3],
+        prev: Option<Prev>,
+        last: Option<(usize, f64)>,
+        t_end: f64,
+    ) -> Option<(Prev, Prev, f64)> {
+        let (pv, (r, w)) = (prev?, last?);
+        if !pv.real || t_end <= pv.t || !t_end.is_finite() {
+            return None;
+        }
+        let iso = self.params.tf.iso;
+        let field = self.params.field;
+        // On the region's far face; step back by a hair if round-off puts it outside.
+        let vol = self.vol;
+        let (t, v) = [t_end, t_end - 1e-9 * w]
+            .into_iter()
+            .filter(|&t| t > pv.t)
+            .find_map(|t| vol.eval_value(r, at(&o, &d, t), field).map(|v| (t, v)))?;
+        self.stats.samples += 1;
+        self.record(Event::Sample {
+            t,
+            value: Some(v),
+            alpha: 0.0,
+        });
+        ((pv.v >= iso) != (v >= iso)).then_some((pv, Prev { t, v, real: true }, w))
     }
 
     /// Narrows a bracket `[a, b]` of the iso crossing to a position.
@@ -378,7 +467,13 @@ impl<'v> Tracer<'v> {
     /// Exact iso search: per region (skipped by bounds), per interval between lattice
     /// planes of every level present (inside which `Σ H (v − iso)` is a cubic), skip when
     /// all contributing cells lie on one side, else take the cubic's first root.
-    fn iso_exact(&mut self, o: [f64; 3], d: [f64; 3], t0: f64, t1: f64) -> Option<f64> {
+    fn iso_exact(
+        &mut self,
+        o: [f64; 3],
+        d: [f64; 3],
+        t0: f64,
+        t1: f64,
+    ) -> Option<(f64, Option<u32>)> {
         let vol = self.vol;
         let params = self.params;
         let iso = params.tf.iso;
@@ -423,7 +518,7 @@ impl<'v> Tracer<'v> {
                 });
                 if may_cross {
                     if let Some(x) = first_root(&cubic) {
-                        found = Some(ta + x * (tb - ta));
+                        found = Some((ta + x * (tb - ta), Some(seg.region)));
                         return false;
                     }
                 }
@@ -446,11 +541,14 @@ impl<'v> Tracer<'v> {
         jitter: f64,
         shade: &mut S,
     ) -> Accum {
+        let mut acc = Accum::default();
+        let Some((t0, t1)) = self.clip(&o, &d, t0, t1) else {
+            return acc;
+        };
         let vol = self.vol;
         let params = self.params;
         let tf = params.tf;
-        let mut acc = Accum::default();
-        let mut prev: Option<(f64, Class)> = None;
+        let mut prev: Option<(f64, Class, bool)> = None;
         let mut last_t1 = f64::NEG_INFINITY;
         let mut t_next = f64::NEG_INFINITY;
         let mut stack = std::mem::take(&mut self.stack);
@@ -482,7 +580,7 @@ impl<'v> Tracer<'v> {
                 self.stats.skipped += 1;
                 if params.strategy == Strategy::Bisect {
                     let class = tf.classify(mn as f64);
-                    if let Some((pt, pc)) = prev {
+                    if let Some((pt, pc, _)) = prev {
                         if pc != class && pc != Class::Inside {
                             // The band lies between the last sample and this region.
                             self.band_search(o, d, pt, seg.t0, w, &mut acc, shade);
@@ -491,9 +589,27 @@ impl<'v> Tracer<'v> {
                             }
                         }
                     }
-                    prev = Some((seg.t1, class));
+                    prev = Some((seg.t1, class, false));
                 }
                 return true;
+            }
+            if params.strategy == Strategy::Bisect && prev.is_none_or(|p| !p.2) {
+                // Entry sample: a band crossing between skipped space (or the clipped ray
+                // start) and this region's first sample is bisected from here.
+                let v = vol.eval_value(r, at(&o, &d, seg.t0), params.field);
+                self.stats.samples += 1;
+                if let Some(v) = v {
+                    let class = tf.classify(v);
+                    if let Some((pt, pc, _)) = prev {
+                        if pc != class && pc != Class::Inside && class != Class::Inside {
+                            self.band_search(o, d, pt, seg.t0, w, &mut acc, shade);
+                            if acc.done() {
+                                return false;
+                            }
+                        }
+                    }
+                    prev = Some((seg.t0, class, true));
+                }
             }
             let mut pos = Positions::new(
                 params.strategy,
@@ -514,7 +630,7 @@ impl<'v> Tracer<'v> {
                 let class = tf.classify(v);
                 let mut delta = delta;
                 if params.strategy == Strategy::Bisect {
-                    if let Some((pt, pc)) = prev {
+                    if let Some((pt, pc, _)) = prev {
                         if pc != Class::Inside && class != Class::Inside && pc != class {
                             let tm = self.band_search(o, d, pt, t, w, &mut acc, shade);
                             if acc.done() {
@@ -525,7 +641,7 @@ impl<'v> Tracer<'v> {
                             delta = t - pt;
                         }
                     }
-                    prev = Some((t, class));
+                    prev = Some((t, class, true));
                 }
                 let alpha = tf.opacity(v);
                 let a = correct_opacity(alpha, delta, params.delta0);
@@ -641,9 +757,9 @@ impl Planes {
                 continue;
             }
             if nl == 8 {
-                // More lattices than we track: fall back to the finest spacing everywhere
-                // (still exact per interval only if all lattices are tracked, so keep the
-                // intervals small: half the finest cell).
+                // More than 8 distinct lattices in one region (never produced by nested
+                // grids of one refinement ratio): the remaining lattices' planes are not
+                // cut, so intervals there are only approximately cubic.
                 break;
             }
             lattices[nl] = (k, br.origin);
@@ -677,7 +793,13 @@ impl Planes {
         for i in 0..self.n {
             // Round-off can leave a plane at or just before t: step past it.
             while self.next[i] <= t + 1e-12 * self.step[i] {
-                self.next[i] += self.step[i];
+                let n = self.next[i] + self.step[i];
+                if n <= self.next[i] || n.is_nan() {
+                    // The spacing is below the resolution of t here: stop cutting.
+                    self.next[i] = f64::INFINITY;
+                    break;
+                }
+                self.next[i] = n;
             }
             best = best.min(self.next[i]);
         }
@@ -779,5 +901,26 @@ pub fn first_root(c: &Cubic) -> Option<f64> {
 impl Params {
     pub fn mode(&self) -> Mode {
         self.tf.mode
+    }
+
+    /// Sets [`Params::clip`] to the bounding box of the regions whose value range can
+    /// contribute (contains iso / meets the band). Everything outside it is skipped anyway;
+    /// the strategies that track the side of skipped space take an entry sample in the first
+    /// region they process, so nothing is lost by starting there.
+    pub fn clip_to_active(&mut self, vol: &Volume) {
+        let tf = self.tf;
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for (r, reg) in vol.regions.iter().enumerate() {
+            let [mn, mx] = vol.range(r, self.field);
+            if tf.may_contribute(mn, mx) {
+                for a in 0..3 {
+                    lo[a] = lo[a].min(reg.min[a]);
+                    hi[a] = hi[a].max(reg.max[a]);
+                }
+            }
+        }
+        // Nothing can contribute: an empty box (min > max) that no ray enters.
+        self.clip = Some((lo, hi));
     }
 }

@@ -1,7 +1,7 @@
 //! Front-to-back region traversal along a ray by KD-tree descent, without allocation
 //! (the caller owns a reusable stack).
 
-use crate::volume::{KdN, Volume};
+use crate::volume::Volume;
 
 /// The part of a ray inside one region (local frame, `t` in world units along a unit ray).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -102,9 +102,10 @@ impl Volume<'_> {
         skip: &Skip<K>,
         mut f: F,
     ) {
-        let nf = self.fields.len();
-        let field = skip.field.min(nf.saturating_sub(1));
-        if self.kd.is_empty() {
+        let Some(nodes) = self.packed.get(skip.field).or_else(|| self.packed.first()) else {
+            return;
+        };
+        if nodes.is_empty() {
             return;
         }
         let inv = inverse(&d);
@@ -112,79 +113,62 @@ impl Volume<'_> {
         else {
             return;
         };
+        let has_fields = !self.fields.is_empty();
         stack.clear();
         stack.push((0, t0, t1));
         while let Some((mut node, ta, mut tb)) = stack.pop() {
             // The tree was checked acyclic at open; depth bounds this walk.
             loop {
-                let rng = if nf > 0 {
-                    self.kd_ranges[node as usize * nf + field]
-                } else {
-                    [0.0, 0.0]
-                };
-                match self.kd[node as usize] {
-                    KdN::Inner { .. }
-                        if nf > 0
-                            && !(skip.keep)(rng[0], rng[1])
-                            && (skip.across_gaps || self.kd_full[node as usize]) =>
-                    {
+                let n = &nodes[node as usize];
+                let axis = n.axis as usize;
+                if axis < 3 {
+                    if has_fields && (skip.across_gaps || n.full) && !(skip.keep)(n.min, n.max) {
                         if ta < tb
                             && !f(Segment {
                                 region: SKIPPED,
                                 t0: ta,
                                 t1: tb,
-                                min: rng[0],
-                                max: rng[1],
+                                min: n.min,
+                                max: n.max,
                             })
                         {
                             return;
                         }
                         break;
                     }
-                    KdN::Inner {
-                        axis,
-                        split,
-                        left,
-                        right,
-                    } => {
-                        let below_first = o[axis] < split || (o[axis] == split && d[axis] < 0.0);
-                        let (near, far) = if below_first {
-                            (left, right)
-                        } else {
-                            (right, left)
-                        };
-                        if inv[axis].is_infinite() {
-                            node = near;
-                            continue;
-                        }
-                        let ts = (split - o[axis]) * inv[axis];
-                        if ts > tb || ts <= 0.0 {
-                            node = near;
-                        } else if ts < ta {
-                            node = far;
-                        } else {
-                            stack.push((far, ts, tb));
-                            node = near;
-                            tb = ts;
-                        }
+                    let split = n.split;
+                    let below_first = o[axis] < split || (o[axis] == split && d[axis] < 0.0);
+                    let (near, far) = if below_first { (n.a, n.b) } else { (n.b, n.a) };
+                    if inv[axis].is_infinite() {
+                        node = near;
+                        continue;
                     }
-                    KdN::Leaf(region) => {
-                        if let Some(r) = region {
-                            let reg = &self.regions[r as usize];
-                            if let Some((s0, s1)) = ray_box(&reg.min, &reg.max, &o, &inv, ta, tb) {
-                                if !f(Segment {
-                                    region: r,
-                                    t0: s0,
-                                    t1: s1,
-                                    min: rng[0],
-                                    max: rng[1],
-                                }) {
-                                    return;
-                                }
+                    let ts = (split - o[axis]) * inv[axis];
+                    if ts > tb || ts <= 0.0 {
+                        node = near;
+                    } else if ts < ta {
+                        node = far;
+                    } else {
+                        stack.push((far, ts, tb));
+                        node = near;
+                        tb = ts;
+                    }
+                } else {
+                    if n.a != SKIPPED {
+                        let reg = &self.regions[n.a as usize];
+                        if let Some((s0, s1)) = ray_box(&reg.min, &reg.max, &o, &inv, ta, tb) {
+                            if !f(Segment {
+                                region: n.a,
+                                t0: s0,
+                                t1: s1,
+                                min: n.min,
+                                max: n.max,
+                            }) {
+                                return;
                             }
                         }
-                        break;
                     }
+                    break;
                 }
             }
         }

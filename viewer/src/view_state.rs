@@ -195,15 +195,17 @@ fn default_background() -> [f32; 3] {
 /// Why a view state could not be loaded or saved.
 #[derive(Debug, thiserror::Error)]
 pub enum ViewStateError {
-    #[error("{}: {source}", path.display())]
+    // The cause is part of the one-line message, not a `source` (which would print it
+    // twice in an anyhow chain).
+    #[error("{}: {error}", path.display())]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        error: std::io::Error,
     },
-    #[error("{}: not a valid view state: {source}", path.display())]
+    #[error("{}: not a valid view state: {error}", path.display())]
     Parse {
         path: PathBuf,
-        source: serde_json::Error,
+        error: serde_json::Error,
     },
     #[error("{}: {message}", path.display())]
     Invalid { path: PathBuf, message: String },
@@ -349,9 +351,9 @@ impl ViewState {
     /// Parses and validates JSON text; `path` only names the source in errors.
     pub fn from_json(path: &Path, text: &str) -> Result<ViewState, ViewStateError> {
         let state: ViewState =
-            serde_json::from_str(text).map_err(|source| ViewStateError::Parse {
+            serde_json::from_str(text).map_err(|error| ViewStateError::Parse {
                 path: path.to_path_buf(),
-                source,
+                error,
             })?;
         state
             .validate()
@@ -365,9 +367,9 @@ impl ViewState {
     /// Reads a state file (at most 16 MiB).
     pub fn load(path: &Path) -> Result<ViewState, ViewStateError> {
         const MAX_BYTES: u64 = 16 << 20;
-        let io = |source| ViewStateError::Io {
+        let io = |error| ViewStateError::Io {
             path: path.to_path_buf(),
-            source,
+            error,
         };
         let len = std::fs::metadata(path).map_err(io)?.len();
         if len > MAX_BYTES {
@@ -390,9 +392,9 @@ impl ViewState {
 
     /// Writes the state atomically: to a temporary file next to `path`, then renamed.
     pub fn save(&self, path: &Path) -> Result<(), ViewStateError> {
-        let io = |source| ViewStateError::Io {
+        let io = |error| ViewStateError::Io {
             path: path.to_path_buf(),
-            source,
+            error,
         };
         let name = path.file_name().ok_or_else(|| {
             io(std::io::Error::new(
@@ -506,6 +508,8 @@ mod tests {
             msg.starts_with("v.json: ") && msg.contains("isovalue"),
             "{msg}"
         );
+        // The cause is in the message only once (an anyhow chain would repeat a source).
+        assert!(std::error::Error::source(&e).is_none());
         // Nested: inside the camera and inside a light.
         let mut v: serde_json::Value = serde_json::from_str(&s.to_json()).expect("json");
         v["camera"]["fov"] = serde_json::json!(30);

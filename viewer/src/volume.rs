@@ -72,6 +72,23 @@ pub enum KdN {
     Leaf(Option<u32>),
 }
 
+/// A KD node packed for traversal with one field's value range (32 bytes: the node,
+/// its range and its emptiness flag share a cache line).
+#[derive(Debug, Clone, Copy)]
+pub struct PackedNode {
+    pub split: f64,
+    /// Inner: left child; leaf: region or `u32::MAX` for empty space.
+    pub a: u32,
+    /// Inner: right child.
+    pub b: u32,
+    pub min: f32,
+    pub max: f32,
+    /// 0..=2: inner node splitting this axis; 3: leaf.
+    pub axis: u8,
+    /// Every leaf below holds a region.
+    pub full: bool,
+}
+
 #[derive(Debug, Clone)]
 pub struct FieldInfo {
     pub name: String,
@@ -94,10 +111,8 @@ pub struct Volume<'a> {
     /// `[min, max]` per region and field: entry `r * fields + f`.
     pub region_ranges: Vec<[f32; 2]>,
     pub kd: Vec<KdN>,
-    /// `[min, max]` per KD node and field over the regions below it: entry `n * fields + f`.
-    pub kd_ranges: Vec<[f32; 2]>,
-    /// Every leaf below the node holds a region.
-    pub kd_full: Vec<bool>,
+    /// The KD tree packed for traversal, one copy per field (ranges of that field).
+    pub packed: Vec<Vec<PackedNode>>,
     /// Depth of the KD tree (root alone = 1).
     pub kd_depth: usize,
     /// Finest cell width in the file (reference length for opacity).
@@ -157,7 +172,16 @@ impl<'a> Volume<'a> {
                     format!("{dims:?}"),
                 ));
             }
-            let n = dims.iter().map(|&d| d as u64).product::<u64>();
+            let Some(n) = dims
+                .iter()
+                .try_fold(1u64, |acc, &d| acc.checked_mul(d as u64))
+            else {
+                return Err(invalid(
+                    format!("brick {i} dims"),
+                    "a cell count that fits 64 bits",
+                    format!("{dims:?}"),
+                ));
+            };
             let first = br.first_value.to_native();
             if !fields.is_empty() && first.checked_add(n).is_none_or(|end| end > n_values as u64) {
                 return Err(invalid(
@@ -334,9 +358,41 @@ impl<'a> Volume<'a> {
             }
         }
 
+        let packed = (0..nf.max(1))
+            .map(|f| {
+                kd.iter()
+                    .enumerate()
+                    .map(|(n, node)| {
+                        let r = if nf > 0 {
+                            kd_ranges[n * nf + f]
+                        } else {
+                            [0.0, 0.0]
+                        };
+                        let (split, a, b, axis) = match *node {
+                            KdN::Inner {
+                                axis,
+                                split,
+                                left,
+                                right,
+                            } => (split, left, right, axis as u8),
+                            KdN::Leaf(r) => (0.0, r.unwrap_or(u32::MAX), 0, 3),
+                        };
+                        PackedNode {
+                            split,
+                            a,
+                            b,
+                            min: r[0],
+                            max: r[1],
+                            axis,
+                            full: kd_full[n],
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
+
         Ok(Volume {
-            kd_ranges,
-            kd_full,
+            packed,
             frame,
             bounds_min: loc(bmin),
             bounds_max: loc(bmax),

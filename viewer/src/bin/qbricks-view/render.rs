@@ -147,6 +147,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     };
     apply_flags(&mut state, &args)?;
+    if args.state.is_none() {
+        // Data-derived defaults follow the flags: the default lights stay over the
+        // viewer's shoulder when the camera is moved, and the dvr band keeps the seed
+        // report's width relative to an iso value given on the command line.
+        state.lights = qbricks_viewer::shading::default_lights(&state.camera);
+        if args.iso.is_some() && state.iso != 0.0 {
+            state.transfer.sigma = 0.08 * state.iso.abs();
+        }
+    }
     state
         .validate()
         .map_err(|m| anyhow::anyhow!("view state: {m}"))?;
