@@ -355,6 +355,12 @@ fn camera_inside_the_volume() {
                 Some(1.0 / slope),
                 1.0,
             );
+            // A surface closer than the first (jittered) sample, either way.
+            for (dist, dir) in [(0.1, 1.0), (0.02, 1.0), (0.1, -1.0)] {
+                let iso = v0 + dir * dist;
+                let d = [dir, 0.0, 0.0];
+                check_analytic(vol, "inside, just in front", iso, o, d, Some(dist), 1.0);
+            }
         }
     });
 }
