@@ -222,7 +222,10 @@ mod tests {
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(96))]
         #[test]
-        fn regions_partition_supports(sup in layout()) {
+        fn regions_partition_supports(
+            sup in layout(),
+            pts in prop::collection::vec((0.0f64..1.0, 0.0f64..1.0, 0.0f64..1.0), 32),
+        ) {
             let (bounds, tree) = build(&sup);
             let bounds = bounds.expect("non-empty");
             let regs = leaves(&tree);
@@ -253,6 +256,19 @@ mod tests {
                 prop_assert!((covered - volume(s)).abs() <= 1e-9 * volume(s));
                 // and no region lists a brick whose support it does not overlap (checked
                 // above), so the union of regions is exactly the union of supports.
+            }
+            // The serialised KD-tree finds the same region as brute force.
+            let (nodes, flat) = crate::kdtree::flatten(&tree);
+            prop_assert_eq!(flat.len(), regs.len());
+            for (x, y, z) in pts {
+                let f = [x, y, z];
+                let p = [0, 1, 2].map(|a| bounds.min[a] + f[a] * (bounds.max[a] - bounds.min[a]));
+                let brute = flat.iter().position(|(b, _)| {
+                    (0..3).all(|a| p[a] >= b.min[a] && p[a] < b.max[a])
+                });
+                prop_assert_eq!(crate::kdtree::locate(&nodes, p), brute.map(|r| r as u32));
+                let in_support = sup.iter().any(|s| (0..3).all(|a| p[a] >= s.min[a] && p[a] < s.max[a]));
+                prop_assert_eq!(brute.is_some(), in_support);
             }
         }
     }
