@@ -3,7 +3,6 @@
 
 use std::path::PathBuf;
 use std::process::Command;
-use std::sync::OnceLock;
 
 use preprocess::grid::AnyGrid;
 
@@ -11,34 +10,21 @@ pub fn fixtures() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures")
 }
 
-/// Path of `qbricks-bake`, (re)built once per test process: a `cargo test --test vdb_x`
-/// run builds only the root package, and a stale binary would test old code.
+/// Path of the `qbricks-bake` binary that `cargo test --workspace` built (the
+/// `preprocess` package's own CLI test makes cargo build it before any test runs).
 pub fn bake_bin() -> PathBuf {
-    static BIN: OnceLock<PathBuf> = OnceLock::new();
-    BIN.get_or_init(|| {
-        let mut dir = std::env::current_exe().expect("test exe path");
+    let mut dir = std::env::current_exe().expect("test exe path");
+    dir.pop();
+    if dir.ends_with("deps") {
         dir.pop();
-        if dir.ends_with("deps") {
-            dir.pop();
-        }
-        let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-        let mut cmd = Command::new(cargo);
-        cmd.args([
-            "build",
-            "-q",
-            "-p",
-            "qbricks-preprocess",
-            "--bin",
-            "qbricks-bake",
-        ]);
-        if dir.ends_with("release") {
-            cmd.arg("--release");
-        }
-        let status = cmd.status().expect("run cargo build");
-        assert!(status.success(), "building qbricks-bake failed");
-        dir.join("qbricks-bake")
-    })
-    .clone()
+    }
+    let path = dir.join("qbricks-bake");
+    assert!(
+        path.exists(),
+        "{} is not built: run the tests with `cargo test --workspace`",
+        path.display()
+    );
+    path
 }
 
 /// Is `/usr/bin/python3 -c 'import pyopenvdb'` available?
