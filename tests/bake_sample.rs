@@ -18,7 +18,11 @@ fn bundled_qbk_matches_what_bake_writes_today() {
         .arg("--quiet")
         .output()
         .expect("run qbricks-bake");
-    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
     let want = std::fs::read(util::root().join("data/wake_small.qbk")).expect("bundled .qbk");
     let got = std::fs::read(&out).expect("baked .qbk");
     assert!(
