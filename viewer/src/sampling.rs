@@ -185,6 +185,8 @@ pub struct Tracer<'v> {
     /// Set to `Some` to record what the next rays do (`--pixel`).
     pub log: Option<Vec<Event>>,
     stack: Vec<(u32, f64, f64)>,
+    /// Region of the last refinement probe.
+    probe_hint: Option<u32>,
 }
 
 impl<'v> Tracer<'v> {
@@ -195,6 +197,7 @@ impl<'v> Tracer<'v> {
             stats: Stats::default(),
             log: None,
             stack: Vec::with_capacity(64),
+            probe_hint: None,
         }
     }
 
@@ -220,7 +223,21 @@ impl<'v> Tracer<'v> {
     /// Value at any local point (probe during refinement, regions found by KD descent).
     fn probe(&mut self, p: [f64; 3]) -> Option<f64> {
         self.stats.samples += 1;
-        self.vol.value_at(p, self.params.field)
+        let vol = self.vol;
+        // Refinement probes cluster: try the region of the previous probe before a KD descent.
+        let r = match self.probe_hint {
+            Some(r)
+                if vol
+                    .regions
+                    .get(r as usize)
+                    .is_some_and(|g| (0..3).all(|a| p[a] >= g.min[a] && p[a] < g.max[a])) =>
+            {
+                r
+            }
+            _ => vol.region_at(p)?,
+        };
+        self.probe_hint = Some(r);
+        vol.eval_value(r as usize, p, self.params.field)
     }
 
     /// First crossing of the iso value along `o + t d` (local frame, unit `d`) for `t` in
