@@ -946,7 +946,12 @@ fn dvr_opacity_across_level_boundaries_matches_the_reference() {
     // Measured worst relative errors (this commit): paper < 5 %, bisect 9 %, uniform
     // 13 %; uniform and bisect err systematically where the band meets a level boundary
     // or the data's start (uniform low before x = 4 and high at x = 12, bisect the other
-    // way), paper does not. Bounds below: these plus a margin, so a regression shows.
+    // way), paper does not. Cause: uniform weights a sample by the step after it (left
+    // Riemann sum) and bisect by the distance before it (right sum); where the step
+    // changes from h1 to h2 both leave an O((h1 - h2)/2 · opacity) term that midpoints
+    // (paper) cancel. Uniform also drops [t0, first sample) at the data's entry (the
+    // sample exactly on the support boundary has no weight and is skipped).
+    // Bounds below: the measured errors plus a margin, so a regression shows.
     let f = |p: [f64; 3]| 0.2 * p[0] + 0.05 * p[1] - 0.03 * p[2];
     let file = testvol::nested(8, [0.0; 3], &[("f", &f)], 4);
     let view = testvol::open(&file).expect("open");
