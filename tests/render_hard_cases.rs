@@ -987,3 +987,25 @@ fn dvr_opacity_across_level_boundaries_matches_the_reference() {
         }
     }
 }
+
+#[test]
+fn meshes_and_shadows_render_the_same_on_any_thread_count() {
+    let f =
+        |p: [f64; 3]| ((p[0] - 8.0).powi(2) + (p[1] - 8.0).powi(2) + (p[2] - 8.0).powi(2)).sqrt();
+    with_volume(&[grid16()], &[("f", &f)], 4, |vol| {
+        let cam = Camera::frame([0.0; 3], [16.0; 3]);
+        let meshes = Meshes::from_meshes(&[icosphere(DVec3::new(8.0, 8.0, 13.5), 1.5, 3)]);
+        for (mode, s) in [(Mode::Iso, Strategy::Exact), (Mode::Dvr, Strategy::Bisect)] {
+            let mut st = state(vol, mode, s, 4.0, cam);
+            st.shadows = true;
+            st.spp = 2;
+            st.seed = 11;
+            st.lights = viewer::shading::default_lights(&cam);
+            let scene = Scene::new(vol, &st, &meshes).expect("scene");
+            let one = viewer::render::render_with_threads(&scene, 1).expect("pool");
+            let two = viewer::render::render_with_threads(&scene, 2).expect("pool");
+            assert!(one.hits > 0);
+            assert_eq!(one, two, "{mode} {s}: thread count changed the frame");
+        }
+    });
+}
