@@ -757,9 +757,9 @@ impl Planes {
                 continue;
             }
             if nl == 8 {
-                // More lattices than we track: fall back to the finest spacing everywhere
-                // (still exact per interval only if all lattices are tracked, so keep the
-                // intervals small: half the finest cell).
+                // More than 8 distinct lattices in one region (never produced by nested
+                // grids of one refinement ratio): the remaining lattices' planes are not
+                // cut, so intervals there are only approximately cubic.
                 break;
             }
             lattices[nl] = (k, br.origin);
@@ -793,7 +793,13 @@ impl Planes {
         for i in 0..self.n {
             // Round-off can leave a plane at or just before t: step past it.
             while self.next[i] <= t + 1e-12 * self.step[i] {
-                self.next[i] += self.step[i];
+                let n = self.next[i] + self.step[i];
+                if n <= self.next[i] || n.is_nan() {
+                    // The spacing is below the resolution of t here: stop cutting.
+                    self.next[i] = f64::INFINITY;
+                    break;
+                }
+                self.next[i] = n;
             }
             best = best.min(self.next[i]);
         }
@@ -916,5 +922,73 @@ impl Params {
         }
         // Nothing can contribute: an empty box (min > max) that no ray enters.
         self.clip = Some((lo, hi));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cubic_from_roots(r: [f64; 3], scale: f64) -> Cubic {
+        // scale·(x − r0)(x − r1)(x − r2), weights constant 1.
+        let [a, b, c] = r;
+        Cubic {
+            c: [
+                -scale * a * b * c,
+                scale * (a * b + a * c + b * c),
+                -scale * (a + b + c),
+                scale,
+            ],
+            weight: [1.0, 0.0, 0.0, 0.0],
+            any_above: true,
+            any_below: true,
+        }
+    }
+
+    #[test]
+    fn first_root_of_cubics() {
+        for (roots, want) in [
+            ([0.3, 0.5, 0.9], Some(0.3)),
+            ([-1.0, 0.7, 2.0], Some(0.7)),
+            ([-1.0, 1.5, 2.0], None),
+            ([0.25, 0.2500001, 3.0], Some(0.25)), // two close roots: the first
+        ] {
+            for scale in [1.0, -3.0, 1e-6] {
+                let got = first_root(&cubic_from_roots(roots, scale));
+                match (got, want) {
+                    (Some(g), Some(w)) => assert!((g - w).abs() < 1e-9, "{roots:?}: {g} vs {w}"),
+                    (None, None) => {}
+                    _ => panic!("{roots:?} scale {scale}: got {got:?}, want {want:?}"),
+                }
+            }
+        }
+        // A zero where the weights vanish (outer support boundary) is not a surface.
+        let mut c = cubic_from_roots([0.0, 5.0, 6.0], 1.0);
+        c.weight = [0.0, 1.0, 0.0, 0.0];
+        assert_eq!(first_root(&c), None);
+    }
+
+    #[test]
+    fn paper_intervals_tile_the_segment() {
+        for jitter in [0.0, 0.3, 0.999] {
+            let (t0, t1, dt) = (1.25, 4.0, 0.4);
+            let pos: Vec<(f64, f64)> =
+                Positions::new(Strategy::Paper, t0, t1, dt, jitter, 0.0).collect();
+            let total: f64 = pos.iter().map(|p| p.1).sum();
+            assert!((total - (t1 - t0)).abs() < 1e-12);
+            let mut a = t0;
+            for &(t, delta) in &pos {
+                assert!(
+                    (t - (a + 0.5 * delta)).abs() < 1e-12 && delta > 0.0 && delta <= dt + 1e-12
+                );
+                a += delta;
+            }
+            // Uniform: fixed step, continuing a sequence that reached this segment.
+            let u: Vec<f64> = Positions::new(Strategy::Uniform, t0, t1, dt, jitter, 2.0)
+                .map(|p| p.0)
+                .collect();
+            assert_eq!(u.first().copied(), Some(2.0));
+            assert!(u.windows(2).all(|w| (w[1] - w[0] - dt).abs() < 1e-12));
+        }
     }
 }
