@@ -272,21 +272,21 @@ impl Bvh {
         let inv = ray.dir.recip();
         let mut best: Option<(u32, f64)> = None;
         let mut far = t_max;
-        let mut stack = [0u32; MAX_DEPTH + 2];
-        let mut sp = 0usize;
+        // (node, entry distance): a node is only opened if it starts before the best hit.
+        let mut stack = [(0u32, 0.0f64); MAX_DEPTH + 2];
         let root = self.nodes.first()?;
-        root.bounds.clip(ray.origin, inv, t_min, far)?;
-        stack[0] = 0;
-        sp += 1;
+        let (entry, _) = root.bounds.clip(ray.origin, inv, t_min, far)?;
+        stack[0] = (0, entry);
+        let mut sp = 1usize;
         while sp > 0 {
             sp -= 1;
-            let idx = stack[sp] as usize;
-            let Some(node) = self.nodes.get(idx) else {
-                continue;
-            };
-            if node.bounds.clip(ray.origin, inv, t_min, far).is_none() {
+            let (idx, entry) = stack[sp];
+            if entry > far {
                 continue;
             }
+            let Some(node) = self.nodes.get(idx as usize) else {
+                continue;
+            };
             if node.count > 0 {
                 let first = node.offset as usize;
                 for &p in self
@@ -303,28 +303,35 @@ impl Bvh {
                 }
                 continue;
             }
-            // Visit the nearer child first: push the farther one underneath.
-            let (a, b) = (idx + 1, node.offset as usize);
+            // Push the farther child first so the nearer one is opened next.
+            let (a, b) = (idx + 1, node.offset);
             let ta = self
                 .nodes
-                .get(a)
+                .get(a as usize)
                 .and_then(|n| n.bounds.clip(ray.origin, inv, t_min, far));
             let tb = self
                 .nodes
-                .get(b)
+                .get(b as usize)
                 .and_then(|n| n.bounds.clip(ray.origin, inv, t_min, far));
-            let order = match (ta, tb) {
-                (Some((na, _)), Some((nb, _))) if nb < na => [Some(a), Some(b)],
-                (Some(_), Some(_)) => [Some(b), Some(a)],
-                (Some(_), None) => [Some(a), None],
-                (None, Some(_)) => [Some(b), None],
-                (None, None) => [None, None],
-            };
-            for n in order.into_iter().flatten() {
+            let mut push = |n: u32, t: f64| {
                 if sp < stack.len() {
-                    stack[sp] = n as u32;
+                    stack[sp] = (n, t);
                     sp += 1;
                 }
+            };
+            match (ta, tb) {
+                (Some((na, _)), Some((nb, _))) => {
+                    if nb < na {
+                        push(a, na);
+                        push(b, nb);
+                    } else {
+                        push(b, nb);
+                        push(a, na);
+                    }
+                }
+                (Some((na, _)), None) => push(a, na),
+                (None, Some((nb, _))) => push(b, nb),
+                (None, None) => {}
             }
         }
         best

@@ -52,6 +52,41 @@ pub struct Basis {
     pub up: DVec3,
 }
 
+/// Camera rays of one image size with the basis computed once ([`Camera::ray_generator`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RayGen {
+    basis: Basis,
+    eye: DVec3,
+    w: f64,
+    h: f64,
+    half_w: f64,
+    half_h: f64,
+    ortho: bool,
+}
+
+impl RayGen {
+    /// Ray through image position (`x`, `y`) in pixels, as [`Camera::ray`].
+    #[inline]
+    pub fn ray(&self, x: f64, y: f64) -> Ray {
+        let b = &self.basis;
+        // Normalised device coordinates in [-1, 1], y up.
+        let sx = 2.0 * x / self.w - 1.0;
+        let sy = 1.0 - 2.0 * y / self.h;
+        if self.ortho {
+            Ray {
+                origin: self.eye + (sx * self.half_w) * b.right + (sy * self.half_h) * b.up,
+                dir: b.forward,
+            }
+        } else {
+            let dir = b.forward + (sx * self.half_w) * b.right + (sy * self.half_h) * b.up;
+            Ray {
+                origin: self.eye,
+                dir: dir.normalize(),
+            }
+        }
+    }
+}
+
 fn finite_vec(a: [f64; 3]) -> Option<DVec3> {
     let v = DVec3::from_array(a);
     v.is_finite().then_some(v)
@@ -95,17 +130,20 @@ impl Camera {
     ///
     /// Perspective rays start at the eye; orthographic rays start on the plane through
     /// the eye perpendicular to the view direction (so a camera inside the volume sees
-    /// what is in front of that plane) and all share the view direction.
+    /// what is in front of that plane) and all share the view direction. For many rays
+    /// use [`Camera::ray_generator`], which computes the basis once (same rays).
     pub fn ray(&self, x: f64, y: f64, width: u32, height: u32) -> Ray {
+        self.ray_generator(width, height).ray(x, y)
+    }
+
+    /// Per-frame constants of [`Camera::ray`] for a `width`×`height` image.
+    pub fn ray_generator(&self, width: u32, height: u32) -> RayGen {
         let b = self.basis();
         let w = f64::from(width.max(1));
         let h = f64::from(height.max(1));
         let aspect = w / h;
-        // Normalised device coordinates in [-1, 1], y up.
-        let sx = 2.0 * x / w - 1.0;
-        let sy = 1.0 - 2.0 * y / h;
         let eye = finite_vec(self.eye).unwrap_or(DVec3::ZERO);
-        match self.projection {
+        let (ortho, half_w, half_h) = match self.projection {
             Projection::Perspective { fov_deg } => {
                 let fov = if fov_deg.is_finite() && fov_deg > 0.0 && fov_deg < 179.0 {
                     fov_deg
@@ -113,22 +151,22 @@ impl Camera {
                     DEFAULT_FOV_DEG
                 };
                 let half_h = (0.5 * fov.to_radians()).tan();
-                let half_w = half_h * aspect;
-                let dir = b.forward + (sx * half_w) * b.right + (sy * half_h) * b.up;
-                Ray {
-                    origin: eye,
-                    dir: dir.normalize(),
-                }
+                (false, half_h * aspect, half_h)
             }
             Projection::Orthographic { width: ow } => {
                 let ow = if ow.is_finite() && ow > 0.0 { ow } else { 1.0 };
                 let half_w = 0.5 * ow;
-                let half_h = half_w / aspect;
-                Ray {
-                    origin: eye + (sx * half_w) * b.right + (sy * half_h) * b.up,
-                    dir: b.forward,
-                }
+                (true, half_w, half_w / aspect)
             }
+        };
+        RayGen {
+            basis: b,
+            eye,
+            w,
+            h,
+            half_w,
+            half_h,
+            ortho,
         }
     }
 

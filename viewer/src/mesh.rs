@@ -580,6 +580,34 @@ mod tests {
     }
 
     #[test]
+    fn nearest_of_several_meshes_gives_its_colour() {
+        let mut a = icosphere(DVec3::new(0.0, 0.0, 0.0), 1.0, 2);
+        a.colour = Vec3::new(1.0, 0.0, 0.0);
+        let mut b = icosphere(DVec3::new(0.0, 0.0, 5.0), 1.0, 2);
+        b.colour = Vec3::new(0.0, 0.0, 1.0);
+        let meshes = Meshes::from_meshes(&[a, b]);
+        assert_eq!(meshes.triangle_count(), 2 * 320);
+        let down = Ray {
+            origin: DVec3::new(0.01, 0.02, 10.0),
+            dir: DVec3::NEG_Z,
+        };
+        let h = meshes.intersect(&down, 0.0, f64::INFINITY).expect("hit");
+        assert_eq!(h.colour, Vec3::new(0.0, 0.0, 1.0));
+        assert!((h.t - 4.0).abs() < 0.02);
+        // Starting between them, the first sphere is the nearest.
+        let h = meshes.intersect(&down, 6.5, f64::INFINITY).expect("hit");
+        assert_eq!(h.colour, Vec3::new(1.0, 0.0, 0.0));
+        assert!((h.t - 9.0).abs() < 0.02);
+        let b = meshes.bounds().expect("bounds");
+        assert!((b.min - DVec3::new(-1.0, -1.0, -1.0)).length() < 1e-9);
+        assert!((b.max - DVec3::new(1.0, 1.0, 6.0)).length() < 1e-9);
+        assert!(Meshes::empty().bounds().is_none());
+        assert!(Meshes::empty()
+            .intersect(&down, 0.0, f64::INFINITY)
+            .is_none());
+    }
+
+    #[test]
     fn parse_cli_spec() {
         let m = MeshInstance::parse("data/sphere.obj@1,2,3,0.5").expect("parse");
         assert_eq!(m.path, PathBuf::from("data/sphere.obj"));

@@ -85,7 +85,8 @@ pub struct Cubic {
     pub c: [f64; 4],
     /// `Σ H_C` along the same interval (zero on the outer support boundary).
     pub weight: [f64; 4],
-    /// Some contributing cell has `v > iso` / `v < iso` (if not both, no root inside).
+    /// Some contributing cell has `v ≥ iso` / `v < iso` (if not both, no root inside and
+    /// the coefficients are not computed: all zero).
     pub any_above: bool,
     pub any_below: bool,
 }
@@ -220,9 +221,38 @@ impl Volume<'_> {
         let h = tb - ta;
         let tm = 0.5 * (ta + tb);
         let pm: [f64; 3] = std::array::from_fn(|a| o[a] + tm * d[a]);
+        // Dual-cell bound test first (values only): most intervals lie on one side of
+        // iso and need no polynomial at all.
+        let (mut any_above, mut any_below) = (false, false);
+        for &b in self.region_brick_ids(r) {
+            let br = &self.bricks[b as usize];
+            let Some([ax, ay, az]) = brick_axes(br, &pm) else {
+                continue;
+            };
+            let nx = br.dims[0] as usize;
+            let nxy = nx * br.dims[1] as usize;
+            for k in 0..az.n {
+                let zoff = br.first + az.idx[k] as usize * nxy;
+                for j in 0..ay.n {
+                    let yoff = zoff + ay.idx[j] as usize * nx;
+                    for i in 0..ax.n {
+                        let v = self.value(f, yoff + ax.idx[i] as usize) as f64 - iso;
+                        any_above |= v >= 0.0;
+                        any_below |= v < 0.0;
+                    }
+                }
+            }
+        }
+        if !(any_above && any_below) {
+            return Cubic {
+                c: [0.0; 4],
+                weight: [0.0; 4],
+                any_above,
+                any_below,
+            };
+        }
         let mut c = [0.0f64; 4];
         let mut wc = [0.0f64; 4];
-        let (mut any_above, mut any_below) = (false, false);
         for &b in self.region_brick_ids(r) {
             let br = &self.bricks[b as usize];
             let Some(axes) = brick_axes(br, &pm) else {
@@ -260,8 +290,6 @@ impl Volume<'_> {
                         w0 += lin[0][i][0];
                         w1 += lin[0][i][1];
                         let v = self.value(f, yoff + ax.idx[i] as usize) as f64 - iso;
-                        any_above |= v >= 0.0;
-                        any_below |= v < 0.0;
                         s0 += v * lin[0][i][0];
                         s1 += v * lin[0][i][1];
                     }

@@ -8,7 +8,7 @@
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
-use crate::camera::Ray;
+use crate::camera::{Ray, RayGen};
 use crate::mesh::{MeshHit, Meshes};
 use crate::reconstruct::Eval;
 use crate::sampling::{Event, Params, Stats, Strategy, Tracer};
@@ -26,6 +26,8 @@ pub struct Scene<'a> {
     pub state: &'a ViewState,
     pub meshes: &'a Meshes,
     pub params: Params,
+    /// Camera rays with the camera basis computed once per frame.
+    pub rays: RayGen,
 }
 
 impl<'a> Scene<'a> {
@@ -62,6 +64,7 @@ impl<'a> Scene<'a> {
             state,
             meshes,
             params,
+            rays: state.camera.ray_generator(state.width, state.height),
         })
     }
 }
@@ -138,9 +141,7 @@ impl<'s> Worker<'s> {
             } else {
                 (jitter(x, y, s, st.seed, 1), jitter(x, y, s, st.seed, 2))
             };
-            let ray = st
-                .camera
-                .ray(x as f64 + jx, y as f64 + jy, st.width, st.height);
+            let ray = self.scene.rays.ray(x as f64 + jx, y as f64 + jy);
             let c = self.trace(&ray, jitter(x, y, s, st.seed, 0));
             for a in 0..3 {
                 sum[a] += c[a];
@@ -407,9 +408,7 @@ pub fn trace_pixel(scene: &Scene, x: u32, y: u32) -> PixelTrace {
         } else {
             (jitter(x, y, s, st.seed, 1), jitter(x, y, s, st.seed, 2))
         };
-        let ray = st
-            .camera
-            .ray(x as f64 + jx, y as f64 + jy, st.width, st.height);
+        let ray = scene.rays.ray(x as f64 + jx, y as f64 + jy);
         let jit = jitter(x, y, s, st.seed, 0);
         worker.main.log = Some(Vec::new());
         let c = worker.trace(&ray, jit);

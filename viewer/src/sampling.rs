@@ -185,6 +185,8 @@ pub struct Tracer<'v> {
     /// Set to `Some` to record what the next rays do (`--pixel`).
     pub log: Option<Vec<Event>>,
     stack: Vec<(u32, f64, f64)>,
+    /// Region of the last refinement probe.
+    probe_hint: Option<u32>,
 }
 
 impl<'v> Tracer<'v> {
@@ -195,6 +197,7 @@ impl<'v> Tracer<'v> {
             stats: Stats::default(),
             log: None,
             stack: Vec::with_capacity(64),
+            probe_hint: None,
         }
     }
 
@@ -220,7 +223,21 @@ impl<'v> Tracer<'v> {
     /// Value at any local point (probe during refinement, regions found by KD descent).
     fn probe(&mut self, p: [f64; 3]) -> Option<f64> {
         self.stats.samples += 1;
-        self.vol.value_at(p, self.params.field)
+        let vol = self.vol;
+        // Refinement probes cluster: try the region of the previous probe before a KD descent.
+        let r = match self.probe_hint {
+            Some(r)
+                if vol
+                    .regions
+                    .get(r as usize)
+                    .is_some_and(|g| (0..3).all(|a| p[a] >= g.min[a] && p[a] < g.max[a])) =>
+            {
+                r
+            }
+            _ => vol.region_at(p)?,
+        };
+        self.probe_hint = Some(r);
+        vol.eval_value(r as usize, p, self.params.field)
     }
 
     /// First crossing of the iso value along `o + t d` (local frame, unit `d`) for `t` in
@@ -922,5 +939,73 @@ impl Params {
         }
         // Nothing can contribute: an empty box (min > max) that no ray enters.
         self.clip = Some((lo, hi));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cubic_from_roots(r: [f64; 3], scale: f64) -> Cubic {
+        // scale·(x − r0)(x − r1)(x − r2), weights constant 1.
+        let [a, b, c] = r;
+        Cubic {
+            c: [
+                -scale * a * b * c,
+                scale * (a * b + a * c + b * c),
+                -scale * (a + b + c),
+                scale,
+            ],
+            weight: [1.0, 0.0, 0.0, 0.0],
+            any_above: true,
+            any_below: true,
+        }
+    }
+
+    #[test]
+    fn first_root_of_cubics() {
+        for (roots, want) in [
+            ([0.3, 0.5, 0.9], Some(0.3)),
+            ([-1.0, 0.7, 2.0], Some(0.7)),
+            ([-1.0, 1.5, 2.0], None),
+            ([0.25, 0.2500001, 3.0], Some(0.25)), // two close roots: the first
+        ] {
+            for scale in [1.0, -3.0, 1e-6] {
+                let got = first_root(&cubic_from_roots(roots, scale));
+                match (got, want) {
+                    (Some(g), Some(w)) => assert!((g - w).abs() < 1e-9, "{roots:?}: {g} vs {w}"),
+                    (None, None) => {}
+                    _ => panic!("{roots:?} scale {scale}: got {got:?}, want {want:?}"),
+                }
+            }
+        }
+        // A zero where the weights vanish (outer support boundary) is not a surface.
+        let mut c = cubic_from_roots([0.0, 5.0, 6.0], 1.0);
+        c.weight = [0.0, 1.0, 0.0, 0.0];
+        assert_eq!(first_root(&c), None);
+    }
+
+    #[test]
+    fn paper_intervals_tile_the_segment() {
+        for jitter in [0.0, 0.3, 0.999] {
+            let (t0, t1, dt) = (1.25, 4.0, 0.4);
+            let pos: Vec<(f64, f64)> =
+                Positions::new(Strategy::Paper, t0, t1, dt, jitter, 0.0).collect();
+            let total: f64 = pos.iter().map(|p| p.1).sum();
+            assert!((total - (t1 - t0)).abs() < 1e-12);
+            let mut a = t0;
+            for &(t, delta) in &pos {
+                assert!(
+                    (t - (a + 0.5 * delta)).abs() < 1e-12 && delta > 0.0 && delta <= dt + 1e-12
+                );
+                a += delta;
+            }
+            // Uniform: fixed step, continuing a sequence that reached this segment.
+            let u: Vec<f64> = Positions::new(Strategy::Uniform, t0, t1, dt, jitter, 2.0)
+                .map(|p| p.0)
+                .collect();
+            assert_eq!(u.first().copied(), Some(2.0));
+            assert!(u.windows(2).all(|w| (w[1] - w[0] - dt).abs() < 1e-12));
+        }
     }
 }
