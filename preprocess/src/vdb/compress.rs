@@ -203,8 +203,9 @@ pub(crate) fn blosc_decode(src: &[u8], nbytes: usize) -> Result<Vec<u8>, String>
     let shuffle = flags & BLOSC_DOSHUFFLE != 0 && typesize > 1;
     let dont_split = flags & BLOSC_DONT_SPLIT != 0;
     let mut out = vec![0u8; nbytes];
+    // `blocksize` comes from the frame: never allocate more than the expected output.
     let mut tmp = if shuffle {
-        vec![0u8; blocksize]
+        vec![0u8; blocksize.min(nbytes)]
     } else {
         Vec::new()
     };
@@ -320,6 +321,22 @@ mod tests {
         for cut in 0..frame.len() {
             assert!(blosc_decode(&frame[..cut], data.len()).is_err());
         }
+    }
+
+    #[test]
+    fn huge_block_size_does_not_allocate() {
+        let mut frame = vec![2, 1, BLOSC_DOSHUFFLE | (BLOSC_LZ4 << 5), 4];
+        frame.extend(8u32.to_le_bytes());
+        frame.extend(u32::MAX.to_le_bytes());
+        frame.extend(32u32.to_le_bytes());
+        frame.extend(20u32.to_le_bytes());
+        frame.extend(8u32.to_le_bytes());
+        frame.extend([1, 2, 3, 4, 5, 6, 7, 8]);
+        // Stored split (cbytes == block size): decodes, with a block buffer of 8 bytes.
+        assert_eq!(
+            blosc_decode(&frame, 8).unwrap(),
+            vec![1, 3, 5, 7, 2, 4, 6, 8]
+        );
     }
 
     #[test]
