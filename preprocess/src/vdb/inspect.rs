@@ -113,7 +113,22 @@ struct Stats {
     hi: [i32; 3],
 }
 
-fn stats<V: Copy>(g: &Grid<V>, comps: impl Fn(&V) -> [f64; 3], n: usize) -> Stats {
+fn add_value(s: &mut Stats, c: &[f64; 3], weight: u64, n_comps: usize) {
+    s.count += weight;
+    for (sum, c) in s.sum.iter_mut().zip(c) {
+        *sum += c * weight as f64;
+    }
+    if n_comps == 1 {
+        s.min = s.min.min(c[0]);
+        s.max = s.max.max(c[0]);
+    } else {
+        s.max_mag = s
+            .max_mag
+            .max((c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt());
+    }
+}
+
+fn stats<V: Copy>(g: &Grid<V>, comps: impl Fn(&V) -> [f64; 3], n_comps: usize) -> Stats {
     let mut s = Stats {
         count: 0,
         sum: [0.0; 3],
@@ -123,31 +138,42 @@ fn stats<V: Copy>(g: &Grid<V>, comps: impl Fn(&V) -> [f64; 3], n: usize) -> Stat
         lo: [i32::MAX; 3],
         hi: [i32::MIN; 3],
     };
-    let mut add = |v: &V, weight: u64, lo: [i32; 3], hi: [i32; 3]| {
-        let c = comps(v);
-        s.count += weight;
-        for k in 0..3 {
-            s.sum[k] += c[k] * weight as f64;
-            s.lo[k] = s.lo[k].min(lo[k]);
-            s.hi[k] = s.hi[k].max(hi[k]);
-        }
-        if n == 1 {
-            s.min = s.min.min(c[0]);
-            s.max = s.max.max(c[0]);
-        } else {
-            s.max_mag = s
-                .max_mag
-                .max((c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt());
-        }
-    };
     for leaf in &g.leaves {
-        for (ijk, v) in leaf.active_voxels() {
-            add(&v, 1, ijk, ijk);
+        // Bounds from the mask (word x holds bits y*8+z), values one by one.
+        let any: u64 = leaf.active.iter().fold(0, |a, w| a | w);
+        if any == 0 {
+            continue;
+        }
+        let xs: Vec<i32> = (0..8)
+            .filter(|&x| leaf.active[x] != 0)
+            .map(|x| x as i32)
+            .collect();
+        let ys: Vec<i32> = (0..8i32)
+            .filter(|&y| (any >> (8 * y)) & 0xff != 0)
+            .collect();
+        let zbits = (0..8).fold(0u64, |a, y| a | ((any >> (8 * y)) & 0xff));
+        let zs: Vec<i32> = (0..8i32).filter(|&z| (zbits >> z) & 1 != 0).collect();
+        let (o, first, last) = (leaf.origin, |v: &[i32]| v[0], |v: &[i32]| v[v.len() - 1]);
+        for (k, axis) in [&xs, &ys, &zs].iter().enumerate() {
+            s.lo[k] = s.lo[k].min(o[k] + first(axis));
+            s.hi[k] = s.hi[k].max(o[k] + last(axis));
+        }
+        for (w, &word) in leaf.active.iter().enumerate() {
+            let mut bits = word;
+            while bits != 0 {
+                let n = w * 64 + bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                add_value(&mut s, &comps(&leaf.values[n]), 1, n_comps);
+            }
         }
     }
     for t in &g.tiles {
         let hi = t.origin.map(|o| o.saturating_add(t.size as i32 - 1));
-        add(&t.value, u64::from(t.size).pow(3), t.origin, hi);
+        for (k, &h) in hi.iter().enumerate() {
+            s.lo[k] = s.lo[k].min(t.origin[k]);
+            s.hi[k] = s.hi[k].max(h);
+        }
+        add_value(&mut s, &comps(&t.value), u64::from(t.size).pow(3), n_comps);
     }
     s
 }

@@ -229,29 +229,32 @@ impl VdbFile {
                 grid_type.truncate(grid_type.len() - "_HalfFloat".len());
             }
             let parent = cur.string("grid descriptor")?;
-            let pos = |c: &mut Cursor<'_>| -> RawResult<u64> {
-                let p = c.i64("grid descriptor")?;
-                u64::try_from(p)
-                    .ok()
-                    .filter(|&p| p <= data.len() as u64)
-                    .ok_or_else(|| {
-                        RawError::invalid(
-                            at,
-                            "grid descriptor",
-                            format!("offset {p} is outside the {}-byte file", data.len()),
-                        )
-                    })
-            };
-            let (mut grid_pos, mut block_pos, mut end_pos) =
-                (pos(&mut cur)?, pos(&mut cur)?, pos(&mut cur)?);
-            if !has_offsets {
+            let raw = [
+                cur.i64("grid descriptor")?,
+                cur.i64("grid descriptor")?,
+                cur.i64("grid descriptor")?,
+            ];
+            let (grid_pos, block_pos, end_pos) = if has_offsets {
+                let pos = |p: i64| -> RawResult<u64> {
+                    u64::try_from(p)
+                        .ok()
+                        .filter(|&p| p <= data.len() as u64)
+                        .ok_or_else(|| {
+                            RawError::invalid(
+                                at,
+                                "grid descriptor",
+                                format!("offset {p} is outside the {}-byte file", data.len()),
+                            )
+                        })
+                };
+                (pos(raw[0])?, pos(raw[1])?, pos(raw[2])?)
+            } else {
                 // Written to a stream: the offsets are placeholders and the grid follows
                 // its descriptor; walk it to find where it ends.
-                let ty = ValueType::from_grid_type(grid_type.trim_end_matches("_HalfFloat"));
-                grid_pos = cur.pos() as u64;
-                (block_pos, end_pos) =
-                    scan_grid(data, cur.pos(), &ty, half_float, !parent.is_empty())?;
-            }
+                let ty = ValueType::from_grid_type(&grid_type);
+                let (block, end) = scan_grid(data, cur.pos(), &ty, half_float, !parent.is_empty())?;
+                (cur.pos() as u64, block, end)
+            };
             // Each grid follows its descriptor and the next descriptor follows the grid, so
             // offsets only grow; this also keeps the work linear in the file size.
             let here = cur.pos() as u64;
