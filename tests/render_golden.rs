@@ -9,7 +9,7 @@ use viewer::film;
 use viewer::mesh::{MeshInstance, Meshes};
 use viewer::render::{render, Scene};
 use viewer::testvol;
-use viewer::view_state::{FieldRange, Mode, Strategy, ViewState};
+use viewer::view_state::{Mode, Strategy, ViewState};
 use viewer::volume::Volume;
 
 /// Centre of the scene: testvol::nested(16, ..) covers [0, 32]^3, fine grid [8, 24]^3.
@@ -36,20 +36,7 @@ fn speed(p: [f64; 3]) -> f64 {
 }
 
 fn state_for(vol: &Volume, mode: Mode, strategy: Strategy) -> ViewState {
-    let fields: Vec<FieldRange> = vol
-        .fields
-        .iter()
-        .map(|f| FieldRange {
-            name: f.name.clone(),
-            min: f.min,
-            max: f.max,
-        })
-        .collect();
-    let mut s = ViewState::default_for(
-        vol.to_world(vol.bounds_min),
-        vol.to_world(vol.bounds_max),
-        &fields,
-    );
+    let mut s = ViewState::default_for_volume(vol);
     s.width = 128;
     s.height = 96;
     s.mode = mode;

@@ -611,7 +611,7 @@ use viewer::camera::{Camera, Projection};
 use viewer::mesh::{icosphere, DVec3, Meshes};
 use viewer::render::{render, Frame, Scene};
 use viewer::shading::{Light, Material};
-use viewer::view_state::{FieldRange, ViewState};
+use viewer::view_state::ViewState;
 
 const ALL_MODES: [(Mode, Strategy); 6] = [
     (Mode::Iso, Strategy::Uniform),
@@ -623,20 +623,7 @@ const ALL_MODES: [(Mode, Strategy); 6] = [
 ];
 
 fn state(vol: &Volume, mode: Mode, strategy: Strategy, iso: f64, camera: Camera) -> ViewState {
-    let fields: Vec<FieldRange> = vol
-        .fields
-        .iter()
-        .map(|f| FieldRange {
-            name: f.name.clone(),
-            min: f.min,
-            max: f.max,
-        })
-        .collect();
-    let mut s = ViewState::default_for(
-        vol.to_world(vol.bounds_min),
-        vol.to_world(vol.bounds_max),
-        &fields,
-    );
+    let mut s = ViewState::default_for_volume(vol);
     s.iso_field = "f".into();
     s.mode = mode;
     s.strategy = strategy;

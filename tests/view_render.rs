@@ -5,7 +5,7 @@ use viewer::render::{render, render_with_threads, Scene};
 use viewer::sampling::Strategy;
 use viewer::testvol;
 use viewer::transfer::Mode;
-use viewer::view_state::{FieldRange, ViewState};
+use viewer::view_state::ViewState;
 use viewer::volume::Volume;
 
 fn field(p: [f64; 3]) -> f64 {
@@ -17,20 +17,7 @@ fn speed(p: [f64; 3]) -> f64 {
 }
 
 fn state_for(vol: &Volume) -> ViewState {
-    let fields: Vec<FieldRange> = vol
-        .fields
-        .iter()
-        .map(|f| FieldRange {
-            name: f.name.clone(),
-            min: f.min,
-            max: f.max,
-        })
-        .collect();
-    let mut s = ViewState::default_for(
-        vol.to_world(vol.bounds_min),
-        vol.to_world(vol.bounds_max),
-        &fields,
-    );
+    let mut s = ViewState::default_for_volume(vol);
     s.width = 40;
     s.height = 32;
     s.iso = 0.4;

@@ -212,6 +212,24 @@ pub enum ViewStateError {
 }
 
 impl ViewState {
+    /// [`ViewState::default_for`] the bounds and field ranges of an opened volume.
+    pub fn default_for_volume(vol: &crate::volume::Volume) -> ViewState {
+        let fields: Vec<FieldRange> = vol
+            .fields
+            .iter()
+            .map(|f| FieldRange {
+                name: f.name.clone(),
+                min: f.min,
+                max: f.max,
+            })
+            .collect();
+        ViewState::default_for(
+            vol.to_world(vol.bounds_min),
+            vol.to_world(vol.bounds_max),
+            &fields,
+        )
+    }
+
     /// A state that shows any data set reasonably on first open: the camera frames the
     /// box `min..max`, the iso field is `q` (else the first field), the iso value is
     /// 10 % of its positive maximum (else the middle of its range), colour by `speed`

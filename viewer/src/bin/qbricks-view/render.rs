@@ -9,7 +9,7 @@ use qbricks_viewer::mesh::{MeshInstance, Meshes};
 use qbricks_viewer::render::{self, effective_strategy, Scene};
 use qbricks_viewer::sampling::Strategy;
 use qbricks_viewer::transfer::Mode;
-use qbricks_viewer::view_state::{FieldRange, ViewState};
+use qbricks_viewer::view_state::ViewState;
 use qbricks_viewer::volume::Volume;
 use qbricks_viewer::{film, probe};
 
@@ -129,22 +129,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // View state: file, defaults, then flags.
     let mut state = match &args.state {
         Some(s) => ViewState::load(s)?,
-        None => {
-            let fields: Vec<FieldRange> = vol
-                .fields
-                .iter()
-                .map(|f| FieldRange {
-                    name: f.name.clone(),
-                    min: f.min,
-                    max: f.max,
-                })
-                .collect();
-            ViewState::default_for(
-                vol.to_world(vol.bounds_min),
-                vol.to_world(vol.bounds_max),
-                &fields,
-            )
-        }
+        None => ViewState::default_for_volume(&vol),
     };
     apply_flags(&mut state, &args)?;
     if args.state.is_none() {
