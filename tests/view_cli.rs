@@ -256,3 +256,48 @@ fn probe_prints_fields_and_gradients() {
     let (code, _, _) = run(&["probe", f], dir.path());
     assert_eq!(code, 2);
 }
+
+/// `--mode dvr` without `--strategy` uses the dvr strategy `bisect` quietly, while an
+/// explicit `--strategy exact` in dvr mode says what it does instead; a negative step is
+/// refused by the view-state check (not mistaken for a flag).
+#[test]
+fn dvr_default_strategy_and_negative_step() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let file = sample(dir.path());
+    let f = file.to_str().expect("utf-8 path");
+    let (code, out, err) = run(
+        &[
+            "render", f, "-o", "d.png", "--mode", "dvr", "--width", "16", "--height", "12",
+            "--json",
+        ],
+        dir.path(),
+    );
+    assert_eq!(code, 0, "{err}");
+    let j: serde_json::Value = serde_json::from_str(&out).expect("json");
+    assert_eq!(j["strategy"], "bisect");
+    assert!(!err.contains("note"), "{err}");
+
+    let (code, _, err) = run(
+        &[
+            "render",
+            f,
+            "-o",
+            "e.png",
+            "--mode",
+            "dvr",
+            "--strategy",
+            "exact",
+            "--width",
+            "16",
+            "--height",
+            "12",
+        ],
+        dir.path(),
+    );
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("samples as `bisect`"), "{err}");
+
+    let (code, _, err) = run(&["render", f, "-o", "n.png", "--step", "-1"], dir.path());
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("step") && err.contains("-1"), "{err}");
+}

@@ -42,7 +42,7 @@ pub struct Args {
     #[arg(long, value_enum)]
     pub strategy: Option<Strategy>,
     /// Sample step in units of the local cell width.
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub step: Option<f64>,
     /// Jittered rays per pixel.
     #[arg(long)]
@@ -147,17 +147,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(p) = &args.save_state {
         state.save(p)?;
     }
+    if state.mode == Mode::Dvr && state.strategy == Strategy::Exact && args.strategy.is_none() {
+        // The default strategy (exact) is for iso mode; a dvr request without an explicit
+        // strategy gets the one dvr uses anyway, without a note.
+        state.strategy = Strategy::Bisect;
+    } else if state.mode == Mode::Dvr && state.strategy == Strategy::Exact {
+        eprintln!(
+            "qbricks-view: note: `exact` is an iso-surface strategy; dvr samples as `bisect`"
+        );
+    }
     let meshes = if state.meshes.is_empty() {
         Meshes::empty()
     } else {
         Meshes::load(&state.meshes)?
     };
     let scene = Scene::new(&vol, &state, &meshes).with_context(|| format!("{}", path.display()))?;
-    if state.mode == Mode::Dvr && state.strategy == Strategy::Exact {
-        eprintln!(
-            "qbricks-view: note: `exact` is an iso-surface strategy; dvr samples as `bisect`"
-        );
-    }
 
     let mut builder = rayon::ThreadPoolBuilder::new();
     if let Some(n) = args.threads {
