@@ -97,6 +97,12 @@ impl Cubic {
         ((self.c[3] * x + self.c[2]) * x + self.c[1]) * x + self.c[0]
     }
 
+    /// `dg/dx`.
+    #[inline]
+    pub fn slope(&self, x: f64) -> f64 {
+        (3.0 * self.c[3] * x + 2.0 * self.c[2]) * x + self.c[1]
+    }
+
     #[inline]
     pub fn weight_at(&self, x: f64) -> f64 {
         ((self.weight[3] * x + self.weight[2]) * x + self.weight[1]) * x + self.weight[0]
