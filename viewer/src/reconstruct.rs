@@ -97,6 +97,12 @@ impl Cubic {
         ((self.c[3] * x + self.c[2]) * x + self.c[1]) * x + self.c[0]
     }
 
+    /// `dg/dx`.
+    #[inline]
+    pub fn slope(&self, x: f64) -> f64 {
+        (3.0 * self.c[3] * x + 2.0 * self.c[2]) * x + self.c[1]
+    }
+
     #[inline]
     pub fn weight_at(&self, x: f64) -> f64 {
         ((self.weight[3] * x + self.weight[2]) * x + self.weight[1]) * x + self.weight[0]
@@ -160,6 +166,7 @@ impl Volume<'_> {
     #[inline]
     pub fn eval_value(&self, r: usize, p: [f64; 3], f: usize) -> Option<f64> {
         let (mut sh, mut shv) = (0.0f64, 0.0f64);
+        let vals = self.values[f];
         for &b in self.region_brick_ids(r) {
             let br = &self.bricks[b as usize];
             let Some([ax, ay, az]) = brick_axes(br, &p) else {
@@ -175,7 +182,7 @@ impl Volume<'_> {
                     for i in 0..ax.n {
                         let h = ax.w[i] * wyz;
                         sh += h;
-                        shv += h * self.value(f, yoff + ax.idx[i] as usize) as f64;
+                        shv += h * vals[yoff + ax.idx[i] as usize].to_native() as f64;
                     }
                 }
             }
@@ -224,6 +231,7 @@ impl Volume<'_> {
         // Dual-cell bound test first (values only): most intervals lie on one side of
         // iso and need no polynomial at all.
         let (mut any_above, mut any_below) = (false, false);
+        let vals = self.values[f];
         for &b in self.region_brick_ids(r) {
             let br = &self.bricks[b as usize];
             let Some([ax, ay, az]) = brick_axes(br, &pm) else {
@@ -236,11 +244,15 @@ impl Volume<'_> {
                 for j in 0..ay.n {
                     let yoff = zoff + ay.idx[j] as usize * nx;
                     for i in 0..ax.n {
-                        let v = self.value(f, yoff + ax.idx[i] as usize) as f64 - iso;
+                        let v = vals[yoff + ax.idx[i] as usize].to_native() as f64 - iso;
                         any_above |= v >= 0.0;
                         any_below |= v < 0.0;
                     }
                 }
+            }
+            if any_above && any_below {
+                // Both sides seen: the polynomial is needed whatever the other bricks hold.
+                break;
             }
         }
         if !(any_above && any_below) {

@@ -760,7 +760,12 @@ impl Planes {
         let ids = vol.region_brick_ids(r);
         let mut lattices: [(usize, [f64; 3]); 8] = [(0, [0.0; 3]); 8];
         let mut nl = 0;
+        // One level and one lattice (checked at open): the first brick's planes are all.
+        let single = vol.regions[r].single_lattice;
         for (k, &b) in ids.iter().enumerate() {
+            if single && nl == 1 {
+                break;
+            }
             let br = &vol.bricks[b as usize];
             let same = |&(j, _): &(usize, [f64; 3])| {
                 let o2 = &vol.bricks[ids[j] as usize];
@@ -827,6 +832,19 @@ impl Planes {
 /// First root of the cubic on `[0, 1]` (a sign change or an exact zero), refined by
 /// bisection to round-off.
 pub fn first_root(c: &Cubic) -> Option<f64> {
+    // Bernstein coefficients on [0, 1]: g lies in their convex hull, so when all of them
+    // are clearly of one sign g has no zero there (most intervals whose cells straddle
+    // the iso value), without the critical points and evaluations below.
+    let b = [
+        c.c[0],
+        c.c[0] + c.c[1] / 3.0,
+        c.c[0] + (2.0 * c.c[1] + c.c[2]) / 3.0,
+        c.c[0] + c.c[1] + c.c[2] + c.c[3],
+    ];
+    let margin = 1e-9 * (c.c[0].abs() + c.c[1].abs() + c.c[2].abs() + c.c[3].abs());
+    if b.iter().all(|&x| x > margin) || b.iter().all(|&x| x < -margin) {
+        return None;
+    }
     // Where the weights vanish (outer support boundary) g is zero without a surface.
     let wscale = c.weight.iter().map(|x| x.abs()).sum::<f64>();
     let real_zero = |x: f64| c.weight_at(x) > 1e-7 * wscale;
@@ -885,26 +903,36 @@ pub fn first_root(c: &Cubic) -> Option<f64> {
             continue;
         }
         if (ga < 0.0) != (gb < 0.0) {
+            // g is monotone on [xa, xb]: Newton steps kept inside the shrinking bracket
+            // (bisection where a step would leave it), to round-off.
             let (mut lo, mut hi) = (xa, xb);
-            for _ in 0..60 {
-                let m = 0.5 * (lo + hi);
-                if m <= lo || m >= hi {
-                    break;
-                }
-                let gm = c.eval(m);
+            let mut x = 0.5 * (lo + hi);
+            for _ in 0..100 {
+                let gm = c.eval(x);
                 if gm == 0.0 {
-                    if real_zero(m) {
-                        return Some(m);
+                    if real_zero(x) {
+                        return Some(x);
                     }
                     break;
                 }
                 if (gm < 0.0) == (ga < 0.0) {
-                    lo = m;
+                    lo = x;
                 } else {
-                    hi = m;
+                    hi = x;
                 }
+                let dg = c.slope(x);
+                let newton = x - gm / dg;
+                let next = if newton > lo && newton < hi {
+                    newton
+                } else {
+                    0.5 * (lo + hi)
+                };
+                if next <= lo || next >= hi || (next - x).abs() <= 4.0 * f64::EPSILON {
+                    x = next.clamp(lo, hi);
+                    break;
+                }
+                x = next;
             }
-            let x = 0.5 * (lo + hi);
             if real_zero(x) {
                 return Some(x);
             }

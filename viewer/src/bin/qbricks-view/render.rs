@@ -205,6 +205,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "open_ms": open_ms,
             "rays": frame.rays,
             "samples_per_ray": frame.stats.samples as f64 / rays as f64,
+            "segments_per_ray": frame.stats.segments as f64 / rays as f64,
+            "skipped_per_ray": frame.stats.skipped as f64 / rays as f64,
             "mrays_per_s": frame.rays as f64 / (ms * 1e3),
             "hit_fraction": frame.hits as f64 / rays as f64,
             "width": frame.width,
