@@ -220,6 +220,23 @@ impl<'v> Tracer<'v> {
         }
     }
 
+    /// Counts a region segment the ray enters (and whether its bounds let it be skipped)
+    /// and logs it for `--pixel`.
+    fn enter_segment(&mut self, seg: &crate::traverse::Segment, skipped: bool) {
+        self.stats.segments += 1;
+        if skipped {
+            self.stats.skipped += 1;
+        }
+        self.record(Event::Segment {
+            region: seg.region,
+            t0: seg.t0,
+            t1: seg.t1,
+            min: seg.min,
+            max: seg.max,
+            skipped,
+        });
+    }
+
     /// Value at any local point (probe during refinement, regions found by KD descent).
     fn probe(&mut self, p: [f64; 3]) -> Option<f64> {
         self.stats.samples += 1;
@@ -326,19 +343,10 @@ impl<'v> Tracer<'v> {
                 prev = None;
             }
             last_t1 = seg.t1;
-            self.stats.segments += 1;
             let (mn, mx) = (seg.min, seg.max);
             let skipped = seg.region == SKIPPED || !params.tf.may_contribute(mn, mx);
-            self.record(Event::Segment {
-                region: seg.region,
-                t0: seg.t0,
-                t1: seg.t1,
-                min: mn,
-                max: mx,
-                skipped,
-            });
+            self.enter_segment(&seg, skipped);
             if skipped {
-                self.stats.skipped += 1;
                 let side = if mn as f64 > iso { mn } else { mx } as f64;
                 let here = Prev {
                     t: seg.t0,
@@ -503,19 +511,10 @@ impl<'v> Tracer<'v> {
         };
         vol.segments_skipping(o, d, t0, t1, &mut stack, &skip, |seg| {
             let r = seg.region as usize;
-            self.stats.segments += 1;
             let (mn, mx) = (seg.min, seg.max);
             let skipped = seg.region == SKIPPED || !(mn as f64 <= iso && iso <= mx as f64);
-            self.record(Event::Segment {
-                region: seg.region,
-                t0: seg.t0,
-                t1: seg.t1,
-                min: mn,
-                max: mx,
-                skipped,
-            });
+            self.enter_segment(&seg, skipped);
             if skipped {
-                self.stats.skipped += 1;
                 return true;
             }
             let mut planes = Planes::new(vol, r, &o, &d, seg.t0);
@@ -582,19 +581,10 @@ impl<'v> Tracer<'v> {
                 prev = None;
             }
             last_t1 = seg.t1;
-            self.stats.segments += 1;
             let (mn, mx) = (seg.min, seg.max);
             let skipped = seg.region == SKIPPED || !tf.may_contribute(mn, mx);
-            self.record(Event::Segment {
-                region: seg.region,
-                t0: seg.t0,
-                t1: seg.t1,
-                min: mn,
-                max: mx,
-                skipped,
-            });
+            self.enter_segment(&seg, skipped);
             if skipped {
-                self.stats.skipped += 1;
                 if params.strategy == Strategy::Bisect {
                     let class = tf.classify(mn as f64);
                     if let Some((pt, pc, _)) = prev {
