@@ -13,7 +13,7 @@ use crate::bricks::{make_bricks, BrickBox};
 use crate::cells::{classify_leaves, CellSet};
 use crate::derive::{gradient, q_from_gradient, speed, Stencil, VelocityField};
 use crate::fields::{range_and_histogram, region_ranges, FieldKind, RangeInput};
-use crate::grid::{AnyGrid, Grid, Transform};
+use crate::grid::{AnyGrid, Transform};
 use crate::levels::assign_levels;
 use crate::nonfinite::{self, CellValue};
 use crate::regions::{self, Bbox};
@@ -284,13 +284,17 @@ enum Input {
     Scalar(Vec<CellSet>, Vec<Vec<f64>>, String),
 }
 
-fn to_sets<V: Copy + Sync, T: Copy + Default + Send>(
-    grids: &[(&Grid<V>, u32)],
-    conv: fn(V) -> T,
+/// Cell sets of the grids that `one` converts, in file order (rayon keeps the order, so
+/// the output does not depend on the thread count).
+fn to_sets<T: Send>(
+    grids: &[AnyGrid],
+    levels: &[u32],
+    one: impl Fn(&AnyGrid, u32) -> Option<(CellSet, Vec<T>)> + Sync,
 ) -> (Vec<CellSet>, Vec<Vec<T>>) {
     grids
         .par_iter()
-        .map(|(g, l)| CellSet::from_grid(g, *l, conv))
+        .zip(levels)
+        .filter_map(|(g, &l)| one(g, l))
         .collect::<Vec<_>>()
         .into_iter()
         .unzip()
@@ -373,68 +377,22 @@ fn run(
                 return Err(BakeError::NoFields);
             }
         }
-        let mut s32 = vec![];
-        let mut s64 = vec![];
-        let mut order = vec![];
-        for (g, &l) in grids.iter().zip(&levels) {
-            match g {
-                AnyGrid::Vec3s(g) => {
-                    order.push((false, s32.len()));
-                    s32.push((g, l));
-                }
-                AnyGrid::Vec3d(g) => {
-                    order.push((true, s64.len()));
-                    s64.push((g, l));
-                }
-                _ => {}
-            }
-        }
-        let (a_sets, a_vals) = to_sets(&s32, |v: [f32; 3]| v.map(f64::from));
-        let (b_sets, b_vals) = to_sets(&s64, |v: [f64; 3]| v);
-        let mut a = a_sets.into_iter().zip(a_vals).map(Some).collect::<Vec<_>>();
-        let mut b = b_sets.into_iter().zip(b_vals).map(Some).collect::<Vec<_>>();
-        let (mut sets, mut vals) = (vec![], vec![]);
-        for (dbl, i) in order {
-            let slot = if dbl { &mut b[i] } else { &mut a[i] };
-            if let Some((s, v)) = slot.take() {
-                sets.push(s);
-                vals.push(v);
-            }
-        }
+        let (sets, vals) = to_sets(&grids, &levels, |g, l| match g {
+            AnyGrid::Vec3s(g) => Some(CellSet::from_grid(g, l, |v: [f32; 3]| v.map(f64::from))),
+            AnyGrid::Vec3d(g) => Some(CellSet::from_grid(g, l, |v: [f64; 3]| v)),
+            _ => None,
+        });
         Input::Vector(sets, vals)
     } else {
         let name = grid_name(&grids[0]).to_string();
         if opts.fields.is_some() {
             return Err(BakeError::FieldsForScalar { grid: name });
         }
-        let mut s32 = vec![];
-        let mut s64 = vec![];
-        let mut order = vec![];
-        for (g, &l) in grids.iter().zip(&levels) {
-            match g {
-                AnyGrid::Float(g) => {
-                    order.push((false, s32.len()));
-                    s32.push((g, l));
-                }
-                AnyGrid::Double(g) => {
-                    order.push((true, s64.len()));
-                    s64.push((g, l));
-                }
-                _ => {}
-            }
-        }
-        let (a_sets, a_vals) = to_sets(&s32, f64::from);
-        let (b_sets, b_vals) = to_sets(&s64, |v: f64| v);
-        let mut a = a_sets.into_iter().zip(a_vals).map(Some).collect::<Vec<_>>();
-        let mut b = b_sets.into_iter().zip(b_vals).map(Some).collect::<Vec<_>>();
-        let (mut sets, mut vals) = (vec![], vec![]);
-        for (dbl, i) in order {
-            let slot = if dbl { &mut b[i] } else { &mut a[i] };
-            if let Some((s, v)) = slot.take() {
-                sets.push(s);
-                vals.push(v);
-            }
-        }
+        let (sets, vals) = to_sets(&grids, &levels, |g, l| match g {
+            AnyGrid::Float(g) => Some(CellSet::from_grid(g, l, f64::from)),
+            AnyGrid::Double(g) => Some(CellSet::from_grid(g, l, |v: f64| v)),
+            _ => None,
+        });
         Input::Scalar(sets, vals, name)
     };
     drop(grids);
