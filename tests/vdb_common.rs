@@ -130,6 +130,25 @@ pub fn json_comps(v: &serde_json::Value) -> Vec<f64> {
     }
 }
 
+/// A JSON list of `[i, j, k, size, value]` tiles as (origin, size, components), sorted by
+/// origin and size.
+pub fn json_tiles(v: &serde_json::Value) -> Vec<([i32; 3], u32, Vec<f64>)> {
+    let mut tiles: Vec<([i32; 3], u32, Vec<f64>)> = v
+        .as_array()
+        .expect("tiles: a JSON list")
+        .iter()
+        .map(|t| {
+            (
+                json_ijk(t),
+                t[3].as_u64().expect("tile size") as u32,
+                json_comps(&t[4]),
+            )
+        })
+        .collect();
+    tiles.sort_by_key(|t| (t.0, t.1));
+    tiles
+}
+
 pub fn json_ijk(v: &serde_json::Value) -> [i32; 3] {
     let a = v.as_array().expect("array");
     [0, 1, 2].map(|k| a[k].as_i64().expect("int") as i32)

@@ -116,19 +116,7 @@ fn compare(path: &std::path::Path, expected: &[Value]) {
         for (a, b) in g.voxels.iter().zip(&voxels) {
             assert!(a.0 == b.0 && same(&a.1, &b.1), "{ctx}: {a:?} != {b:?}");
         }
-        let mut tiles: Vec<([i32; 3], u32, Vec<f64>)> = eg["tiles"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|t| {
-                (
-                    json_ijk(t),
-                    t[3].as_u64().unwrap() as u32,
-                    json_comps(&t[4]),
-                )
-            })
-            .collect();
-        tiles.sort_by_key(|t| (t.0, t.1));
+        let tiles = json_tiles(&eg["tiles"]);
         assert_eq!(g.tiles, tiles, "{ctx}: tiles");
         // Inactive leaf values other than the background (OpenVDB lists those only).
         let inactive = entries(&eg["inactive"]);

@@ -73,19 +73,7 @@ fn check_file(name: &str, exp: &Value) {
             );
         }
 
-        let mut tiles: Vec<([i32; 3], u32, Vec<f64>)> = eg["tiles"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|t| {
-                (
-                    json_ijk(t),
-                    t[3].as_u64().unwrap() as u32,
-                    json_comps(&t[4]),
-                )
-            })
-            .collect();
-        tiles.sort_by_key(|t| (t.0, t.1));
+        let tiles = json_tiles(&eg["tiles"]);
         assert_eq!(g.tiles.len(), tiles.len(), "{ctx}: tile count");
         for (got, want) in g.tiles.iter().zip(&tiles) {
             assert_eq!((got.0, got.1), (want.0, want.1), "{ctx}: tile");
