@@ -78,50 +78,53 @@ impl Compression {
     }
 }
 
-/// A metadata value of one of the types OpenVDB registers by default.
-#[derive(Debug, Clone, PartialEq)]
-pub enum MetaValue {
-    Bool(bool),
-    Int32(i32),
-    Int64(i64),
-    Float(f32),
-    Double(f64),
-    String(String),
-    Vec3i([i32; 3]),
-    Vec3s([f32; 3]),
-    Vec3d([f64; 3]),
-}
+/// The reader's metadata value type: what `inspect` shows is what the writer takes.
+pub use super::metadata::MetaValue;
 
-impl MetaValue {
-    fn type_name(&self) -> &'static str {
-        match self {
-            MetaValue::Bool(_) => "bool",
-            MetaValue::Int32(_) => "int32",
-            MetaValue::Int64(_) => "int64",
-            MetaValue::Float(_) => "float",
-            MetaValue::Double(_) => "double",
-            MetaValue::String(_) => "string",
-            MetaValue::Vec3i(_) => "vec3i",
-            MetaValue::Vec3s(_) => "vec3s",
-            MetaValue::Vec3d(_) => "vec3d",
+/// OpenVDB type name and little-endian bytes of a metadata value; `Other` (a type the
+/// reader only names) cannot be written.
+fn meta_encoding(value: &MetaValue) -> Result<(&'static str, Vec<u8>), String> {
+    let mut b = Vec::new();
+    let name = match value {
+        MetaValue::Bool(v) => {
+            b.push(u8::from(*v));
+            "bool"
         }
-    }
-
-    fn bytes(&self) -> Vec<u8> {
-        let mut b = Vec::new();
-        match self {
-            MetaValue::Bool(v) => b.push(u8::from(*v)),
-            MetaValue::Int32(v) => b.extend_from_slice(&v.to_le_bytes()),
-            MetaValue::Int64(v) => b.extend_from_slice(&v.to_le_bytes()),
-            MetaValue::Float(v) => b.extend_from_slice(&v.to_le_bytes()),
-            MetaValue::Double(v) => b.extend_from_slice(&v.to_le_bytes()),
-            MetaValue::String(v) => b.extend_from_slice(v.as_bytes()),
-            MetaValue::Vec3i(v) => v.iter().for_each(|c| b.extend_from_slice(&c.to_le_bytes())),
-            MetaValue::Vec3s(v) => v.iter().for_each(|c| b.extend_from_slice(&c.to_le_bytes())),
-            MetaValue::Vec3d(v) => v.iter().for_each(|c| b.extend_from_slice(&c.to_le_bytes())),
+        MetaValue::Int32(v) => {
+            b.extend_from_slice(&v.to_le_bytes());
+            "int32"
         }
-        b
-    }
+        MetaValue::Int64(v) => {
+            b.extend_from_slice(&v.to_le_bytes());
+            "int64"
+        }
+        MetaValue::Float(v) => {
+            b.extend_from_slice(&v.to_le_bytes());
+            "float"
+        }
+        MetaValue::Double(v) => {
+            b.extend_from_slice(&v.to_le_bytes());
+            "double"
+        }
+        MetaValue::String(v) => {
+            b.extend_from_slice(v.as_bytes());
+            "string"
+        }
+        MetaValue::Vec3i(v) => {
+            v.iter().for_each(|c| b.extend_from_slice(&c.to_le_bytes()));
+            "vec3i"
+        }
+        MetaValue::Vec3s(v) => {
+            v.iter().for_each(|c| b.extend_from_slice(&c.to_le_bytes()));
+            "vec3s"
+        }
+        MetaValue::Vec3d(v) => {
+            v.iter().for_each(|c| b.extend_from_slice(&c.to_le_bytes()));
+            "vec3d"
+        }
+        MetaValue::Other(t) => return Err(format!("cannot write metadata of type {t:?}")),
+    };
+    Ok((name, b))
 }
 
 /// Metadata by name; a `BTreeMap` so entries come out sorted, as OpenVDB writes them.
@@ -161,6 +164,8 @@ pub enum WriteError {
         grid: String,
         reason: String,
     },
+    #[error("{}: file {reason}", path.display())]
+    InvalidMetadata { path: PathBuf, reason: String },
 }
 
 /// Writes `grids` to `path` with the given compression. Returns the file size in bytes.
@@ -209,7 +214,10 @@ pub fn write_vdb_with(
     file_meta
         .entry("creator".to_string())
         .or_insert_with(|| MetaValue::String(format!("qbricks {}", env!("CARGO_PKG_VERSION"))));
-    write_meta_map(&mut head, &file_meta);
+    write_meta_map(&mut head, &file_meta).map_err(|reason| WriteError::InvalidMetadata {
+        path: path.to_path_buf(),
+        reason,
+    })?;
     head.extend_from_slice(&(grids.len() as i32).to_le_bytes());
 
     // Grid descriptors with their offsets, each followed by the grid body.
@@ -371,15 +379,17 @@ fn write_string(out: &mut Vec<u8>, s: &str) {
     out.extend_from_slice(s.as_bytes());
 }
 
-fn write_meta_map(out: &mut Vec<u8>, meta: &MetaMap) {
+fn write_meta_map(out: &mut Vec<u8>, meta: &MetaMap) -> Result<(), String> {
     out.extend_from_slice(&(meta.len() as u32).to_le_bytes());
     for (name, value) in meta {
+        let (type_name, bytes) =
+            meta_encoding(value).map_err(|e| format!("metadata {name:?}: {e}"))?;
         write_string(out, name);
-        write_string(out, value.type_name());
-        let bytes = value.bytes();
+        write_string(out, type_name);
         out.extend_from_slice(&(bytes.len() as u32).to_le_bytes());
         out.extend_from_slice(&bytes);
     }
+    Ok(())
 }
 
 /// A value type OpenVDB stores in a standard tree.
@@ -631,7 +641,7 @@ fn encode_grid<V: VdbValue>(
     let flags = compression.flags();
     let mut head = Vec::new();
     head.extend_from_slice(&flags.to_le_bytes());
-    write_meta_map(&mut head, &grid_metadata(grid, compression, extra));
+    write_meta_map(&mut head, &grid_metadata(grid, compression, extra))?;
     write_transform(&mut head, &t);
 
     // Topology.
@@ -972,6 +982,26 @@ fn write_zipped(out: &mut Vec<u8>, raw: &[u8]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn metadata_encodes_as_openvdb_types_and_refuses_unknown_ones() {
+        let mut out = Vec::new();
+        let mut meta = MetaMap::new();
+        meta.insert("dx".into(), MetaValue::Double(0.5));
+        write_meta_map(&mut out, &meta).expect("double metadata");
+        let mut want = 1u32.to_le_bytes().to_vec();
+        for s in ["dx", "double"] {
+            want.extend_from_slice(&(s.len() as u32).to_le_bytes());
+            want.extend_from_slice(s.as_bytes());
+        }
+        want.extend_from_slice(&8u32.to_le_bytes());
+        want.extend_from_slice(&0.5f64.to_le_bytes());
+        assert_eq!(out, want);
+
+        meta.insert("m".into(), MetaValue::Other("mat4d".into()));
+        let err = write_meta_map(&mut Vec::new(), &meta).expect_err("unknown type");
+        assert!(err.contains("\"m\"") && err.contains("mat4d"), "{err}");
+    }
 
     #[test]
     fn node_indices_follow_openvdb_bit_layout() {
