@@ -80,13 +80,7 @@ fn sample() -> BrickFile {
 }
 
 fn view(args: &[&str]) -> std::process::Output {
-    let bin = util::bin("qbricks-view");
-    assert!(
-        bin.exists(),
-        "{} not built: run `cargo test --workspace` or `cargo build -p qbricks-viewer` first",
-        bin.display()
-    );
-    Command::new(bin)
+    Command::new(util::bin("qbricks-view"))
         .args(args)
         .output()
         .expect("run qbricks-view")

@@ -4,6 +4,7 @@
 
 #[path = "vdb_common.rs"]
 mod common;
+mod util;
 
 use std::process::Command;
 
@@ -257,7 +258,7 @@ fn absurd_compressed_chunk_sizes_are_refused() {
 }
 
 fn run_cli(path: &std::path::Path) -> (i32, String) {
-    let out = Command::new(bake_bin())
+    let out = Command::new(util::bin("qbricks-bake"))
         .arg("inspect")
         .arg(path)
         .output()

@@ -10,23 +10,6 @@ pub fn fixtures() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures")
 }
 
-/// Path of the `qbricks-bake` binary that `cargo test --workspace` built (the
-/// `preprocess` package's own CLI test makes cargo build it before any test runs).
-pub fn bake_bin() -> PathBuf {
-    let mut dir = std::env::current_exe().expect("test exe path");
-    dir.pop();
-    if dir.ends_with("deps") {
-        dir.pop();
-    }
-    let path = dir.join("qbricks-bake");
-    assert!(
-        path.exists(),
-        "{} is not built: run the tests with `cargo test --workspace`",
-        path.display()
-    );
-    path
-}
-
 /// Is `/usr/bin/python3 -c 'import pyopenvdb'` available?
 pub fn have_pyopenvdb() -> bool {
     Command::new("/usr/bin/python3")

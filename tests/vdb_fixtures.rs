@@ -4,6 +4,7 @@
 
 #[path = "vdb_common.rs"]
 mod common;
+mod util;
 
 use std::process::Command;
 
@@ -242,7 +243,7 @@ fn inspect_json_matches_openvdb() {
         "half_zip.vdb",
         "float_none.vdb",
     ] {
-        let out = Command::new(bake_bin())
+        let out = Command::new(util::bin("qbricks-bake"))
             .args(["inspect", "--json"])
             .arg(fixtures().join(name))
             .output()
@@ -320,7 +321,7 @@ fn inspect_json_matches_openvdb() {
         }
     }
     // Metadata of a known grid.
-    let out = Command::new(bake_bin())
+    let out = Command::new(util::bin("qbricks-bake"))
         .args(["inspect", "--json"])
         .arg(fixtures().join("double_zip.vdb"))
         .output()
@@ -335,7 +336,7 @@ fn inspect_json_matches_openvdb() {
 
 #[test]
 fn inspect_table_names_every_grid() {
-    let out = Command::new(bake_bin())
+    let out = Command::new(util::bin("qbricks-bake"))
         .arg("inspect")
         .arg(fixtures().join("multi_blosc.vdb"))
         .output()
