@@ -372,6 +372,7 @@ fn write_scene_output_reads_back_in_pyopenvdb() {
             levels: 3,
             compression: Compression::Zip,
             speed_grids: false,
+            staggered: false,
         };
         write_scene(&path, &opts).expect("write");
         let want = scene_grids(scene, 12, 3).expect("grids");
@@ -497,6 +498,7 @@ fn vdb_print_lists_every_grid_type_we_write() {
         levels: 3,
         compression: Compression::Zip,
         speed_grids: true,
+        staggered: false,
     };
     let (summary, _) = write_scene(&path, &opts).expect("write");
     let listed = vdb_print(&path);
@@ -524,6 +526,7 @@ fn writer_is_deterministic_and_atomic() {
         levels: 2,
         compression: Compression::Zip,
         speed_grids: true,
+        staggered: false,
     };
     let a = dir.path().join("a.vdb");
     let b = dir.path().join("b.vdb");

@@ -71,6 +71,7 @@ fn write_scene_metadata_reads_back() {
         levels: 3,
         compression: Compression::Zip,
         speed_grids: true,
+        staggered: false,
     };
     let (summary, _) = write_scene(&path, &opts).expect("write");
     let file = VdbFile::open(&path).expect("open");

@@ -18,6 +18,7 @@ fn options() -> SynthOptions {
         levels: 3,
         compression: Compression::Zip,
         speed_grids: false,
+        staggered: false,
     }
 }
 

@@ -11,7 +11,7 @@ use format::{Aabb, Brick, BrickFile, Field, Level, Provenance, Region, SourceGri
 
 use crate::bricks::{make_bricks, BrickBox};
 use crate::cells::{classify_leaves, CellSet};
-use crate::derive::{gradient, q_from_gradient, speed, Stencil, VelocityField};
+use crate::derive::{centre_from_faces, gradient, q_from_gradient, speed, Stencil, VelocityField};
 use crate::fields::{range_and_histogram, region_ranges, FieldKind, RangeInput};
 use crate::grid::{AnyGrid, Transform};
 use crate::levels::assign_levels;
@@ -37,6 +37,11 @@ pub struct BakeOptions {
     pub max_brick: u32,
     /// Refuse non-finite input values instead of replacing them.
     pub strict: bool,
+    /// Names of vec3 grids whose values sit on cell faces (OpenVDB class `staggered`, see
+    /// [`crate::derive`]); the CLI fills it from the grid class. Recorded only when not
+    /// empty, so that the provenance of cell-centred bakes stays as it was.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub staggered: Vec<String>,
     /// Source file name recorded in the provenance (not part of the options JSON).
     #[serde(skip)]
     pub source: String,
@@ -57,6 +62,7 @@ impl Default for BakeOptions {
             stencil: Stencil::Central,
             max_brick: DEFAULT_MAX_BRICK,
             strict: false,
+            staggered: Vec::new(),
             source: String::new(),
             max_cells: DEFAULT_MAX_CELLS,
             threads: None,
@@ -280,7 +286,8 @@ fn select(grids: Vec<AnyGrid>, names: &[String]) -> Result<Vec<AnyGrid>, BakeErr
 
 /// Cell sets and values of the selected grids.
 enum Input {
-    Vector(Vec<CellSet>, Vec<Vec<[f64; 3]>>),
+    /// Cell sets, cell-centred velocities, and the face values of staggered grids.
+    Vector(Vec<CellSet>, Vec<Vec<[f64; 3]>>, Vec<Option<Vec<[f64; 3]>>>),
     Scalar(Vec<CellSet>, Vec<Vec<f64>>, String),
 }
 
@@ -382,7 +389,7 @@ fn run(
             AnyGrid::Vec3d(g) => Some(CellSet::from_grid(g, l, |v: [f64; 3]| v)),
             _ => None,
         });
-        Input::Vector(sets, vals)
+        Input::Vector(sets, vals, Vec::new())
     } else {
         let name = grid_name(&grids[0]).to_string();
         if opts.fields.is_some() {
@@ -400,17 +407,31 @@ fn run(
     // Non-finite values.
     let mut warnings = Vec::new();
     let nonfinite = match &mut input {
-        Input::Vector(sets, vals) => fix_nonfinite(sets, vals, opts.strict, &mut warnings)?,
+        Input::Vector(sets, vals, _) => fix_nonfinite(sets, vals, opts.strict, &mut warnings)?,
         Input::Scalar(sets, vals, _) => fix_nonfinite(sets, vals, opts.strict, &mut warnings)?,
     };
+
+    // Staggered grids: keep the (repaired) face values, bake from cell-centred ones.
+    if let Input::Vector(sets, vals, faces) = &mut input {
+        *faces = sets
+            .iter()
+            .zip(vals.iter_mut())
+            .map(|(set, v)| {
+                opts.staggered.contains(&set.name).then(|| {
+                    let centred = centre_from_faces(set, v);
+                    std::mem::replace(v, centred)
+                })
+            })
+            .collect();
+    }
 
     // Leaf cells.
     stage("classifying leaf cells");
     match &mut input {
-        Input::Vector(s, _) | Input::Scalar(s, _, _) => classify_leaves(s),
+        Input::Vector(s, _, _) | Input::Scalar(s, _, _) => classify_leaves(s),
     };
     let sets: &[CellSet] = match &input {
-        Input::Vector(s, _) | Input::Scalar(s, _, _) => s,
+        Input::Vector(s, _, _) | Input::Scalar(s, _, _) => s,
     };
     let leaf_cells: u64 = sets.iter().map(|s| s.leaf_count()).sum();
 
@@ -427,7 +448,7 @@ fn run(
     // Field values, brick after brick.
     stage("deriving fields");
     let (names, values) = match &input {
-        Input::Vector(sets, vals) => {
+        Input::Vector(sets, vals, faces) => {
             let kinds = opts
                 .fields
                 .clone()
@@ -436,7 +457,11 @@ fn run(
                 .iter()
                 .flat_map(|k| k.names().iter().map(|n| n.to_string()))
                 .collect();
-            let field = VelocityField { sets, values: vals };
+            let field = VelocityField {
+                sets,
+                values: vals,
+                faces,
+            };
             let values = per_brick(&bricks, names.len(), |b, out| {
                 let set = &sets[b.set];
                 let v = &vals[b.set];

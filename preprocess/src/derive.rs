@@ -8,10 +8,24 @@
 //!   reconstruction [`reconstruct`] (the basis method, over all active cells of all grids,
 //!   see [`CellChoice::Active`]) and keeps the central difference; where the
 //!   reconstruction has no support it falls back to one-sided.
+//!
+//! # Staggered (MAC) grids
+//! A grid of OpenVDB class `staggered` stores component `c` of voxel `i` on the *lower* face
+//! of cell `i` along axis `c`, at index position `i − ½ e_c` (OpenVDB's
+//! `StaggeredBoxSampler`/`StaggeredPointSampler` in `tools/Interpolation.h` read component
+//! `c` at index point `p` by sampling the grid at `p + ½ e_c`). For such a grid
+//! [`centre_from_faces`] gives the cell-centred velocity (mean of the two faces), which speed,
+//! the velocity fields, the off-diagonal gradient terms and the cross-level reconstruction use;
+//! the diagonal terms `∂u_c/∂x_c` come straight from the two faces of the cell
+//! ([`gradient`] with [`VelocityField::faces`]): a compact central difference over one cell,
+//! second order like the cell-centred stencil. Treating the faces as centres instead puts
+//! every value half a cell off and makes Q first order.
 
 use serde::Serialize;
 
-use crate::cells::CellSet;
+use rayon::prelude::*;
+
+use crate::cells::{CellSet, BLOCK_CELLS};
 
 /// Gradient stencil at grid edges and next to missing cells.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Default)]
@@ -44,7 +58,63 @@ pub fn speed(u: &[f64; 3]) -> f64 {
 /// Velocity grids with their values (one per slot).
 pub struct VelocityField<'a> {
     pub sets: &'a [CellSet],
+    /// Cell-centred velocity per slot (for a staggered grid: [`centre_from_faces`]).
     pub values: &'a [Vec<[f64; 3]>],
+    /// Per grid: the face values of a staggered grid (as stored), `None` for a
+    /// cell-centred one. May be shorter than `sets` (missing entries: cell-centred).
+    pub faces: &'a [Option<Vec<[f64; 3]>>],
+}
+
+/// Cell-centred velocity of a staggered grid from its face values (see the module docs):
+/// component `c` of cell `i` is the mean of the faces `i − ½` (voxel `i`) and `i + ½`
+/// (voxel `i + e_c`). Where the upper face's voxel is not active (grid edge, inactive
+/// neighbour) the value is extrapolated linearly from the two lower faces (second order,
+/// like the one-sided differences), or is the lower face alone when only it exists.
+/// Inactive slots hold zero.
+pub fn centre_from_faces(set: &CellSet, faces: &[[f64; 3]]) -> Vec<[f64; 3]> {
+    let mut out = vec![[0.0; 3]; faces.len()];
+    out.par_chunks_mut(BLOCK_CELLS)
+        .enumerate()
+        .for_each(|(b, block)| {
+            for (n, v) in block.iter_mut().enumerate() {
+                let slot = b * BLOCK_CELLS + n;
+                if !set.is_active(slot) {
+                    continue;
+                }
+                let ijk = set.ijk(slot);
+                let f = faces[slot];
+                for c in 0..3 {
+                    v[c] = match set.active_neighbour(slot, ijk, c, 1) {
+                        Some(up) => 0.5 * (f[c] + faces[up][c]),
+                        None => match set.active_neighbour(slot, ijk, c, -1) {
+                            Some(down) => 1.5 * f[c] - 0.5 * faces[down][c],
+                            None => f[c],
+                        },
+                    };
+                }
+            }
+        });
+    out
+}
+
+/// `∂u_a/∂x_a` at cell `ijk` (slot `slot`) of a staggered grid from its face values: the
+/// difference of the cell's two faces over one cell; without the upper face, the
+/// second-order one-sided difference over the faces `i − ½`, `i − 3/2`, `i − 5/2`
+/// (weights 2, −3, 1), or the first-order one over two faces, or zero.
+fn face_derivative(set: &CellSet, faces: &[[f64; 3]], slot: usize, ijk: [i32; 3], a: usize) -> f64 {
+    let h = set.width;
+    let f0 = faces[slot][a];
+    if let Some(up) = set.active_neighbour(slot, ijk, a, 1) {
+        return (faces[up][a] - f0) / h;
+    }
+    match (
+        set.active_neighbour(slot, ijk, a, -1),
+        set.active_neighbour(slot, ijk, a, -2),
+    ) {
+        (Some(m), Some(mm)) => (2.0 * f0 - 3.0 * faces[m][a] + faces[mm][a]) / h,
+        (Some(m), None) => (f0 - faces[m][a]) / h,
+        _ => 0.0,
+    }
 }
 
 /// Below this total weight the reconstruction counts as "no data" (outer support edge).
@@ -159,6 +229,11 @@ pub fn gradient(f: &VelocityField, s: usize, ijk: [i32; 3], stencil: Stencil) ->
         };
         for i in 0..3 {
             g[i][a] = d[i];
+        }
+    }
+    if let Some(Some(faces)) = f.faces.get(s) {
+        for (a, row) in g.iter_mut().enumerate() {
+            row[a] = face_derivative(set, faces, slot, ijk, a);
         }
     }
     g

@@ -194,18 +194,36 @@ fn check_range(what: &'static str, found: u32, min: u32, max: u32) -> Result<(),
 
 /// Samples scene `scene` onto its grids (see the module docs for the layout), finest first.
 pub fn scene_grids(scene: &str, n0: u32, levels: u32) -> Result<Vec<Grid<Vec3>>, SynthError> {
+    scene_grids_with(scene, n0, levels, false)
+}
+
+/// As [`scene_grids`]; with `staggered`, as MAC grids (see [`sample_grid_with`]).
+pub fn scene_grids_with(
+    scene: &str,
+    n0: u32,
+    levels: u32,
+    staggered: bool,
+) -> Result<Vec<Grid<Vec3>>, SynthError> {
     let layouts = scene_layout(scene, n0, levels)?;
     let flow = analytic::scene(scene).ok_or_else(|| SynthError::UnknownScene {
         name: scene.to_string(),
     })?;
     Ok(layouts
         .iter()
-        .map(|layout| sample_grid(flow.as_ref(), layout))
+        .map(|layout| sample_grid_with(flow.as_ref(), layout, staggered))
         .collect())
 }
 
 /// Samples `flow` at the voxel centres of `layout`'s box.
 pub fn sample_grid(flow: &dyn Flow, layout: &GridLayout) -> Grid<Vec3> {
+    sample_grid_with(flow, layout, false)
+}
+
+/// Samples `flow` on `layout`'s box: at voxel centres, or with `staggered` as a MAC grid in
+/// OpenVDB's convention (component `c` of voxel `i` at the lower face, centre − ½h·e_c).
+/// The active voxels are the same either way, so the upper faces of the last cells along
+/// each axis are not stored (as in a solver's MAC grid of the same size as its cell grid).
+pub fn sample_grid_with(flow: &dyn Flow, layout: &GridLayout, staggered: bool) -> Grid<Vec3> {
     let d = i64::from(LEAF_DIM);
     let first = layout.lo.map(|v| v.div_euclid(d) * d);
     let counts: Vec<i64> = (0..3)
@@ -221,7 +239,7 @@ pub fn sample_grid(flow: &dyn Flow, layout: &GridLayout) -> Grid<Vec3> {
     }
     let leaves = origins
         .par_iter()
-        .map(|&origin| sample_leaf(flow, layout, origin))
+        .map(|&origin| sample_leaf(flow, layout, origin, staggered))
         .collect();
     Grid {
         name: layout.name.clone(),
@@ -232,7 +250,12 @@ pub fn sample_grid(flow: &dyn Flow, layout: &GridLayout) -> Grid<Vec3> {
     }
 }
 
-fn sample_leaf(flow: &dyn Flow, layout: &GridLayout, origin: [i64; 3]) -> Leaf<Vec3> {
+fn sample_leaf(
+    flow: &dyn Flow,
+    layout: &GridLayout,
+    origin: [i64; 3],
+    staggered: bool,
+) -> Leaf<Vec3> {
     let mut active = [0u64; 8];
     let mut values = Box::new([[0.0f32; 3]; LEAF_VOXELS]);
     let inside = |a: usize, v: i64| v >= layout.lo[a] && v < layout.hi[a];
@@ -252,8 +275,17 @@ fn sample_leaf(flow: &dyn Flow, layout: &GridLayout, origin: [i64; 3]) -> Leaf<V
                     continue;
                 }
                 let n = leaf_offset(x, y, z);
-                let u = flow.velocity(layout.centre([i, j, k]));
-                values[n] = [u[0] as f32, u[1] as f32, u[2] as f32];
+                let p = layout.centre([i, j, k]);
+                values[n] = if staggered {
+                    std::array::from_fn(|c| {
+                        let mut f = p;
+                        f[c] -= 0.5 * layout.voxel_size;
+                        flow.velocity(f)[c] as f32
+                    })
+                } else {
+                    let u = flow.velocity(p);
+                    [u[0] as f32, u[1] as f32, u[2] as f32]
+                };
                 active[n >> 6] |= 1u64 << (n & 63);
             }
         }
@@ -276,6 +308,9 @@ pub struct SynthOptions {
     /// Also write the speed `|u|` of each velocity grid as a float grid named
     /// `speed` / `speed_l<k>` with the same active voxels (a scalar-grid test input).
     pub speed_grids: bool,
+    /// Write the velocity grids as MAC grids (class `staggered`, see
+    /// [`sample_grid_with`]); speed grids stay cell-centred.
+    pub staggered: bool,
 }
 
 /// One written grid, for the command's summary.
@@ -298,7 +333,7 @@ pub fn write_scene(
     opts: &SynthOptions,
 ) -> Result<(Vec<GridSummary>, u64), SynthError> {
     let layouts = scene_layout(&opts.scene, opts.n0, opts.levels)?;
-    let velocity = scene_grids(&opts.scene, opts.n0, opts.levels)?;
+    let velocity = scene_grids_with(&opts.scene, opts.n0, opts.levels, opts.staggered)?;
     let mut grids: Vec<AnyGrid> = Vec::new();
     let mut metadata: Vec<MetaMap> = Vec::new();
     let mut summary = Vec::new();
@@ -321,9 +356,19 @@ pub fn write_scene(
             active_voxels: grid.active_voxel_count(),
             leaves: grid.leaves.len(),
         });
-        metadata.push(meta_for(layout, level));
+        let mut m = meta_for(layout, level);
+        if opts.staggered {
+            m.insert("class".into(), MetaValue::String("staggered".into()));
+        }
+        metadata.push(m);
     }
-    let speed: Vec<Grid<f32>> = if opts.speed_grids {
+    let speed: Vec<Grid<f32>> = if opts.speed_grids && opts.staggered {
+        let mut centred = scene_grids(&opts.scene, opts.n0, opts.levels)?;
+        for (c, v) in centred.iter_mut().zip(&velocity) {
+            c.name.clone_from(&v.name);
+        }
+        centred.iter().map(speed_grid).collect()
+    } else if opts.speed_grids {
         velocity.iter().map(speed_grid).collect()
     } else {
         Vec::new()

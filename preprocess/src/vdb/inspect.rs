@@ -19,6 +19,8 @@ pub struct Report {
 pub struct GridReport {
     pub name: String,
     pub value_type: String,
+    /// Grid class (`unknown`, `level set`, `fog volume`, `staggered`).
+    pub class: String,
     pub voxel_size: [f64; 3],
     pub translation: [f64; 3],
     pub compression: Vec<&'static str>,
@@ -62,6 +64,7 @@ pub fn report(file: &VdbFile) -> Result<Report, VdbError> {
         grids.push(GridReport {
             name: d.name.clone(),
             value_type: d.value_type.name().to_string(),
+            class: d.class().to_string(),
             voxel_size: transform.voxel_size,
             translation: transform.translation,
             compression: compress::flag_names(d.compression),

@@ -114,6 +114,22 @@ pub struct GridDescriptor {
     transform_error: Option<RawError>,
 }
 
+impl GridDescriptor {
+    /// The grid class (metadata `class`: `unknown`, `level set`, `fog volume`,
+    /// `staggered`); `unknown` when the entry is missing or not a string, as in OpenVDB.
+    pub fn class(&self) -> &str {
+        match self.metadata.get("class") {
+            Some(MetaValue::String(s)) => s,
+            _ => "unknown",
+        }
+    }
+
+    /// A MAC grid: vector components on the lower cell faces (see [`crate::derive`]).
+    pub fn is_staggered(&self) -> bool {
+        self.class() == "staggered"
+    }
+}
+
 /// An opened VDB file: header, file metadata and grid descriptors. Grids are decoded on
 /// demand with [`VdbFile::read_grid`].
 #[derive(Debug, Clone)]

@@ -26,6 +26,16 @@ pub enum StencilArg {
     CrossLevel,
 }
 
+#[derive(Clone, Copy, ValueEnum)]
+pub enum LayoutArg {
+    /// From each grid's class: `staggered` grids are MAC grids, others cell-centred.
+    Auto,
+    /// Every vec3 grid holds velocities at cell centres, whatever its class says.
+    Centred,
+    /// Every vec3 grid is a MAC grid (component c on the lower face along axis c).
+    Staggered,
+}
+
 #[derive(clap::Args)]
 pub struct Args {
     /// Input OpenVDB file.
@@ -45,6 +55,9 @@ pub struct Args {
     /// Velocity gradient stencil at grid edges and next to missing cells.
     #[arg(long, value_enum, default_value_t = StencilArg::Central)]
     pub stencil: StencilArg,
+    /// Where velocity components sit: auto (from the grid class), centred or staggered.
+    #[arg(long, value_enum, default_value_t = LayoutArg::Auto)]
+    pub layout: LayoutArg,
     /// Largest brick edge in cells.
     #[arg(long, default_value_t = DEFAULT_MAX_BRICK)]
     pub max_brick: u32,
@@ -83,7 +96,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 .collect::<anyhow::Result<Vec<_>>>()?,
         ),
     };
-    let opts = BakeOptions {
+    let mut opts = BakeOptions {
         grids: args.grids.clone(),
         fields,
         stencil: match args.stencil {
@@ -145,6 +158,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         })
         .collect();
     let chosen = select_grids(&kinds, &opts.grids).with_context(|| input_name.clone())?;
+    opts.staggered = chosen
+        .iter()
+        .map(|&i| &file.grids()[i])
+        .filter(|g| {
+            g.value_type.is_vector()
+                && match args.layout {
+                    LayoutArg::Auto => g.is_staggered(),
+                    LayoutArg::Centred => false,
+                    LayoutArg::Staggered => true,
+                }
+        })
+        .map(|g| g.name.clone())
+        .collect();
     let grids = chosen
         .iter()
         .map(|&i| file.read_grid(i))

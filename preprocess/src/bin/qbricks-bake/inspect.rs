@@ -59,6 +59,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             g.value_type,
             if g.half_float { " (half)" } else { "" }
         )?;
+        writeln!(out, "    class        {}", g.class)?;
         writeln!(out, "    voxel size   {:?}", g.voxel_size)?;
         writeln!(out, "    translation  {:?}", g.translation)?;
         writeln!(out, "    compression  {compression}")?;

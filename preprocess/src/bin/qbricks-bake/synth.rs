@@ -37,6 +37,10 @@ pub struct Args {
     /// Also write the speed |u| of every velocity grid as a float grid (speed_l<k>).
     #[arg(long)]
     pub float: bool,
+    /// Write velocity as a MAC grid (class "staggered": component c on the lower face
+    /// along axis c, OpenVDB's convention).
+    #[arg(long)]
+    pub staggered: bool,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -51,6 +55,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             CompressionArg::None => Compression::None,
         },
         speed_grids: args.float,
+        staggered: args.staggered,
     };
     let (grids, bytes) =
         write_scene(&args.output, &opts).with_context(|| format!("synth {}", args.scene))?;
