@@ -10,7 +10,7 @@ mod util;
 use std::process::Command;
 
 use bake_common::{cells, field};
-use preprocess::analytic::{self, Flow};
+use preprocess::analytic;
 use preprocess::bake::{bake, BakeOptions};
 use preprocess::grid::AnyGrid;
 use preprocess::synth::scene_grids_with;
