@@ -34,9 +34,11 @@ fn params(vol: &Volume, strategy: Strategy, step: f64, mode: Mode, iso: f64) -> 
         tf: Transfer {
             mode,
             iso,
-            sigma: 0.1,
-            peak: 1.6,
-            k: 2.0,
+            band: viewer::transfer::Band {
+                sigma: 0.1,
+                peak: 1.6,
+                k: 2.0,
+            },
         },
         field: 0,
         colour_field: None,
@@ -899,7 +901,7 @@ fn dvr_clipping_to_the_active_box_changes_nothing() {
                 for s in [Strategy::Uniform, Strategy::Paper, Strategy::Bisect] {
                     for j in JITTERS {
                         let mut p = params(&vol, s, STEP, Mode::Dvr, iso);
-                        p.tf.sigma = 0.02;
+                        p.tf.band.sigma = 0.02;
                         let mut pc = p;
                         pc.clip_to_active(&vol);
                         let (o, d) = ([-1.0, y, z], [1.0, 0.0, 0.0]);
@@ -948,9 +950,9 @@ fn dvr_opacity_across_level_boundaries_matches_the_reference() {
             let iso = f([x_band, y, z]);
             let (o, d) = ([-1.0, y, z], [1.0, 0.0, 0.0]);
             let mut rp = params(&vol, Strategy::Uniform, REF_STEP, Mode::Dvr, iso);
-            rp.tf.sigma = 0.2;
-            rp.tf.k = 4.0;
-            rp.tf.peak = 0.05;
+            rp.tf.band.sigma = 0.2;
+            rp.tf.band.k = 4.0;
+            rp.tf.band.peak = 0.05;
             let want = dvr_alpha(&vol, rp, o, d, 0.5);
             assert!(want > 0.05, "reference sees no band at x={x_band}");
             for (s, bound) in [

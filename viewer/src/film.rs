@@ -1,8 +1,73 @@
-//! Images to PNG files, written atomically (temporary file in the target directory,
-//! fsync, rename), so a reader never sees a partial PNG.
+//! The film: per-pixel sums of ray colours, filled tile by tile and sample wave by
+//! sample wave, resolved to an image; and images to PNG files, written atomically
+//! (temporary file in the target directory, fsync, rename), so a reader never sees a
+//! partial PNG.
+//!
+//! Sums are kept in `f64` and every pixel adds its samples in sample order, so an image
+//! accumulated over several waves is bit-identical to one rendered in a single pass.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
+
+use crate::render::{Tile, TileResult};
+
+/// Accumulated samples of a `width`×`height` image.
+#[derive(Debug, Clone)]
+pub struct Film {
+    pub width: u32,
+    pub height: u32,
+    sum: Vec<[f64; 3]>,
+    /// Samples added per pixel.
+    samples: Vec<u32>,
+}
+
+impl Film {
+    pub fn new(width: u32, height: u32) -> Film {
+        let n = width as usize * height as usize;
+        Film {
+            width,
+            height,
+            sum: vec![[0.0; 3]; n],
+            samples: vec![0; n],
+        }
+    }
+
+    /// Adds a rendered tile (its pixels' sums over its sample range).
+    pub fn add(&mut self, r: &TileResult) {
+        let Tile { x0, y0, x1, y1 } = r.tile;
+        let n = r.samples.len() as u32;
+        let tw = (x1 - x0) as usize;
+        for y in y0..y1.min(self.height) {
+            for x in x0..x1.min(self.width) {
+                let i = (y * self.width + x) as usize;
+                let c = r.sum[(y - y0) as usize * tw + (x - x0) as usize];
+                for a in 0..3 {
+                    self.sum[i][a] += c[a];
+                }
+                self.samples[i] += n;
+            }
+        }
+    }
+
+    /// Samples added to pixel (`x`, `y`).
+    pub fn samples_at(&self, x: u32, y: u32) -> u32 {
+        self.samples[(y * self.width + x) as usize]
+    }
+
+    /// Mean colour of pixel `i` (row-major), `None` before its first sample.
+    #[inline]
+    pub fn pixel(&self, i: usize) -> Option<[f32; 3]> {
+        let n = self.samples[i];
+        (n > 0).then(|| self.sum[i].map(|c| (c / n as f64) as f32))
+    }
+
+    /// The image: each pixel's mean over its samples (black where none yet).
+    pub fn resolve(&self) -> Vec<[f32; 3]> {
+        (0..self.sum.len())
+            .map(|i| self.pixel(i).unwrap_or([0.0; 3]))
+            .collect()
+    }
+}
 
 #[derive(Debug, thiserror::Error)]
 #[error("{}: {message}", path.display())]

@@ -8,11 +8,14 @@
 pub mod bvh;
 pub mod camera;
 pub mod colormap;
+pub mod dataset;
 pub mod film;
 pub mod info;
 pub mod integrate;
 pub mod mesh;
 pub mod probe;
+pub mod progressive;
+pub mod ray;
 pub mod reconstruct;
 pub mod render;
 pub mod sampling;

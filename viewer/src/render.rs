@@ -1,21 +1,30 @@
-//! Whole images: tiles in parallel with rayon, one ray per (pixel, sample), shading.
+//! Whole images: which rays to cast and where their colours go.
 //!
-//! Every pixel is a pure function of the scene, its coordinates, the sample index and
-//! the seed (the sub-pixel offset and the interleaved-sampling offset of the first sample
-//! come from a hash of those), and work counters are summed as integers, so the image and
-//! the statistics are the same whatever the number of threads.
+//! A frame is a list of tiles times a range of sample indices. Tiles run in parallel on a
+//! [`Renderer`]'s persistent rayon pool; each finished tile goes to a sink (the film of a
+//! headless render, or the progressive viewer's display), and a [`CancelToken`] stops a
+//! frame that a newer view has made stale between tile rows. Every pixel is a pure
+//! function of the scene, its coordinates, the sample index and the seed (see
+//! [`crate::ray`]), and work counters are summed as integers, so the image and the
+//! statistics are the same whatever the number of threads or the order of the tiles.
 
-use glam::{DVec3, Vec3};
+use std::ops::Range;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+
 use rayon::prelude::*;
+use serde::Serialize;
 
-use crate::camera::{Ray, RayGen};
-use crate::mesh::{MeshHit, Meshes};
-use crate::reconstruct::Eval;
-use crate::sampling::{Event, Params, Stats, Strategy, Tracer};
-use crate::shading::phong;
+use crate::camera::RayGen;
+use crate::film::Film;
+use crate::mesh::Meshes;
+use crate::ray::RayCaster;
+use crate::sampling::{Event, Params, Stats, Strategy};
 use crate::transfer::{Mode, Transfer};
 use crate::view_state::ViewState;
 use crate::volume::{Volume, VolumeError};
+
+pub use crate::ray::jitter;
 
 /// Tile edge in pixels.
 pub const TILE: u32 = 16;
@@ -40,16 +49,13 @@ impl<'a> Scene<'a> {
     ) -> Result<Self, VolumeError> {
         let field = vol.field_index(&state.iso_field)?;
         let colour_field = vol.field_index(&state.colormap.field).ok();
-        let strategy = effective_strategy(state.mode, state.strategy);
         let params = Params {
-            strategy,
+            strategy: state.effective_strategy(),
             step: state.step,
             tf: Transfer {
                 mode: state.mode,
                 iso: state.iso,
-                sigma: state.transfer.sigma,
-                peak: state.transfer.peak,
-                k: state.transfer.k,
+                band: state.transfer,
             },
             field,
             colour_field,
@@ -69,7 +75,8 @@ impl<'a> Scene<'a> {
     }
 }
 
-/// The strategy actually used: `exact` in dvr mode samples as `bisect`.
+/// The strategy actually used: `exact` in dvr mode samples as `bisect`
+/// (see [`ViewState::effective_strategy`]).
 pub fn effective_strategy(mode: Mode, strategy: Strategy) -> Strategy {
     match (mode, strategy) {
         (Mode::Dvr, Strategy::Exact) => Strategy::Bisect,
@@ -89,290 +96,241 @@ pub struct Frame {
     pub hits: u64,
 }
 
-/// Per-thread state of a tile.
-struct Worker<'s> {
-    scene: &'s Scene<'s>,
-    main: Tracer<'s>,
-    shadow: Tracer<'s>,
-    hits: u64,
-    rays: u64,
+/// A rectangle of pixels `[x0, x1) × [y0, y1)`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Tile {
+    pub x0: u32,
+    pub y0: u32,
+    pub x1: u32,
+    pub y1: u32,
 }
 
-/// splitmix64 finaliser.
-#[inline]
-fn mix(mut z: u64) -> u64 {
-    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
+/// The [`TILE`]-sized tiles of a `width`×`height` image, row by row from the top left.
+pub fn tiles(width: u32, height: u32) -> Vec<Tile> {
+    let (tx, ty) = (width.div_ceil(TILE), height.div_ceil(TILE));
+    (0..ty)
+        .flat_map(|j| {
+            (0..tx).map(move |i| Tile {
+                x0: i * TILE,
+                y0: j * TILE,
+                x1: ((i + 1) * TILE).min(width),
+                y1: ((j + 1) * TILE).min(height),
+            })
+        })
+        .collect()
 }
 
-/// Uniform number in `[0, 1)` from (pixel, sample, seed, purpose).
-#[inline]
-pub fn jitter(x: u32, y: u32, sample: u32, seed: u64, purpose: u64) -> f64 {
-    let h = mix(seed ^ mix(((x as u64) << 32 | y as u64) ^ mix((sample as u64) << 8 | purpose)));
-    (h >> 11) as f64 / (1u64 << 53) as f64
+/// One rendered tile: per pixel (row-major inside the tile) the sum of the colours of
+/// samples `samples`, plus the work it took.
+#[derive(Debug, Clone)]
+pub struct TileResult {
+    pub tile: Tile,
+    pub samples: Range<u32>,
+    pub sum: Vec<[f64; 3]>,
+    pub stats: Stats,
+    pub rays: u64,
+    pub hits: u64,
 }
 
-impl<'s> Worker<'s> {
-    fn new(scene: &'s Scene<'s>) -> Self {
-        let mut shadow_params = scene.params;
-        if shadow_params.strategy != Strategy::Exact {
-            // Shadow rays only need the occlusion, sampled a little coarser.
-            shadow_params.step = shadow_params.step.max(1.0);
-        }
-        Worker {
-            scene,
-            main: Tracer::new(scene.vol, scene.params),
-            shadow: Tracer::new(scene.vol, shadow_params),
-            hits: 0,
-            rays: 0,
-        }
-    }
+/// Tells a frame in flight to stop. Clones share the flag. It also counts the pixel rows
+/// started under it, which shows how far a frame got (and that a cancel stops it).
+#[derive(Debug, Clone, Default)]
+pub struct CancelToken(Arc<(AtomicBool, AtomicU64)>);
 
-    /// Colour of pixel (x, y), averaged over `spp` jittered rays.
-    fn pixel(&mut self, x: u32, y: u32) -> [f32; 3] {
-        let st = self.scene.state;
-        let spp = st.spp.max(1);
-        let mut sum = [0.0f64; 3];
-        for s in 0..spp {
-            let (jx, jy) = if spp == 1 {
-                (0.5, 0.5)
-            } else {
-                (jitter(x, y, s, st.seed, 1), jitter(x, y, s, st.seed, 2))
-            };
-            let ray = self.scene.rays.ray(x as f64 + jx, y as f64 + jy);
-            let c = self.trace(&ray, jitter(x, y, s, st.seed, 0));
-            for a in 0..3 {
-                sum[a] += c[a];
-            }
+impl CancelToken {
+    pub fn new() -> Self {
+        Self::default()
+    }
+    pub fn cancel(&self) {
+        self.0 .0.store(true, Ordering::Relaxed);
+    }
+    pub fn is_cancelled(&self) -> bool {
+        self.0 .0.load(Ordering::Relaxed)
+    }
+    /// Pixel rows started so far by frames under this token.
+    pub fn rows_started(&self) -> u64 {
+        self.0 .1.load(Ordering::Relaxed)
+    }
+    /// Checked before every row: false once cancelled.
+    fn start_row(&self) -> bool {
+        if self.is_cancelled() {
+            return false;
         }
-        sum.map(|c| (c / spp as f64) as f32)
-    }
-
-    /// Colour seen along one camera ray.
-    fn trace(&mut self, ray: &Ray, jit: f64) -> [f64; 3] {
-        let scene = self.scene;
-        let st = scene.state;
-        let vol = scene.vol;
-        self.rays += 1;
-        let o = vol.to_local(ray.origin.to_array());
-        let d = ray.dir.to_array();
-        let mesh_hit = if scene.meshes.is_empty() {
-            None
-        } else {
-            scene.meshes.intersect(ray, 0.0, f64::INFINITY)
-        };
-        let t_max = mesh_hit.map_or(f64::INFINITY, |h| h.t);
-        let bg = st.background.map(f64::from);
-        let behind = |w: &mut Self| match mesh_hit {
-            Some(h) => w.shade_mesh(ray, &h),
-            None => bg,
-        };
-        match scene.params.tf.mode {
-            Mode::Iso => match self.main.iso(o, d, 0.0, t_max, jit) {
-                Some(hit) => {
-                    self.hits += 1;
-                    let e = hit.eval.unwrap_or_default();
-                    self.shade_surface(ray, &hit.p, &e, hit.eval.is_some())
-                }
-                None => behind(self),
-            },
-            Mode::Dvr => {
-                let shadows = st.shadows;
-                let (main, shadow) = (&mut self.main, &mut self.shadow);
-                let acc = main.dvr(o, d, 0.0, t_max, jit, &mut |p, e| {
-                    shade_sample(scene, shadow, shadows, ray, p, e)
-                });
-                if acc.alpha() >= 0.01 {
-                    self.hits += 1;
-                }
-                let back = if acc.done() { [0.0; 3] } else { behind(self) };
-                acc.over(back)
-            }
-        }
-    }
-
-    fn shade_mesh(&mut self, ray: &Ray, h: &MeshHit) -> [f64; 3] {
-        let st = self.scene.state;
-        let p = ray.at(h.t);
-        let n = if h.normal.dot(ray.dir) > 0.0 {
-            -h.normal
-        } else {
-            h.normal
-        };
-        let vis = self.visibility(p, n, true);
-        phong(h.colour, n, -ray.dir, p, &st.lights, &vis, &st.material)
-            .to_array()
-            .map(f64::from)
-    }
-
-    /// Phong-shaded iso-surface point (local `p`).
-    fn shade_surface(&mut self, ray: &Ray, p: &[f64; 3], e: &Eval, has_eval: bool) -> [f64; 3] {
-        let scene = self.scene;
-        let st = scene.state;
-        let base = base_colour(scene, e, has_eval);
-        let n = normal(e, ray.dir);
-        let pw = DVec3::from_array(scene.vol.to_world(*p));
-        let vis = self.visibility(pw, n, false);
-        phong(base, n, -ray.dir, pw, &st.lights, &vis, &st.material)
-            .to_array()
-            .map(f64::from)
-    }
-
-    /// Shadow transmittance towards every light from world point `p` with normal `n`.
-    fn visibility(&mut self, p: DVec3, n: DVec3, _on_mesh: bool) -> Vec<f32> {
-        let scene = self.scene;
-        let st = scene.state;
-        if !st.shadows {
-            return Vec::new();
-        }
-        st.lights
-            .iter()
-            .map(|l| light_visibility(scene, &mut self.shadow, p, n, l))
-            .collect()
+        self.0 .1.fetch_add(1, Ordering::Relaxed);
+        true
     }
 }
 
-fn light_visibility(
+/// Renders samples `samples` of every tile in `tiles` on the current rayon pool, handing
+/// each finished tile to `sink` (from the worker threads, in any order). Tiles check
+/// `cancel` before every pixel row: a cancelled frame stops within one row per worker,
+/// and the unfinished tiles are not delivered. Returns whether every tile was delivered.
+pub fn render_tiles(
     scene: &Scene,
-    shadow: &mut Tracer,
-    p: DVec3,
-    n: DVec3,
-    light: &crate::shading::Light,
-) -> f32 {
-    let (l, dist) = light.towards(p);
-    if n.dot(l) <= 0.0 {
-        return 1.0; // phong ignores lights behind the surface anyway
-    }
-    let eps = 1e-3 * scene.vol.finest_w;
-    let origin = p + eps * n;
-    let ray = Ray { origin, dir: l };
-    if !scene.meshes.is_empty() && scene.meshes.occluded(&ray, 0.0, dist) {
-        return 0.0;
-    }
-    let o = scene.vol.to_local(origin.to_array());
-    let d = l.to_array();
-    let t_max = if dist.is_finite() {
-        dist
-    } else {
-        f64::INFINITY
-    };
-    match scene.params.tf.mode {
-        Mode::Iso => {
-            if shadow.iso_occluded(o, d, 0.0, t_max) {
-                0.0
-            } else {
-                1.0
+    tiles: &[Tile],
+    samples: Range<u32>,
+    cancel: &CancelToken,
+    sink: &(dyn Fn(TileResult) + Sync),
+) -> bool {
+    tiles.par_iter().all(|&tile| {
+        if cancel.is_cancelled() {
+            return false;
+        }
+        let mut caster = RayCaster::new(scene);
+        let n = ((tile.x1 - tile.x0) * (tile.y1 - tile.y0)) as usize;
+        let mut sum = Vec::with_capacity(n);
+        for y in tile.y0..tile.y1 {
+            if !cancel.start_row() {
+                return false;
+            }
+            for x in tile.x0..tile.x1 {
+                let mut c = [0.0f64; 3];
+                for s in samples.clone() {
+                    let v = caster.sample(x, y, s);
+                    for a in 0..3 {
+                        c[a] += v[a];
+                    }
+                }
+                sum.push(c);
             }
         }
-        Mode::Dvr => shadow.transmittance(o, d, 0.0, t_max) as f32,
-    }
+        sink(TileResult {
+            tile,
+            samples: samples.clone(),
+            sum,
+            stats: caster.stats(),
+            rays: caster.rays,
+            hits: caster.hits,
+        });
+        true
+    })
 }
 
-/// Unit normal from the gradient, facing the viewer; the view direction when the
-/// gradient vanishes.
-fn normal(e: &Eval, dir: DVec3) -> DVec3 {
-    let g = DVec3::from_array(e.grad);
-    let len = g.length();
-    if !(len > 0.0 && len.is_finite()) {
-        return -dir;
-    }
-    let n = g / len;
-    if n.dot(dir) > 0.0 {
-        -n
-    } else {
-        n
-    }
+/// Work counters of a frame, summed over its tiles.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Counts {
+    pub stats: Stats,
+    pub rays: u64,
+    pub hits: u64,
 }
 
-fn base_colour(scene: &Scene, e: &Eval, has_eval: bool) -> Vec3 {
-    match (scene.params.colour_field, has_eval) {
-        (Some(_), true) => Vec3::from_array(scene.state.colormap.colour(e.colour as f32)),
-        _ => Vec3::splat(0.8),
+impl Counts {
+    pub fn add(&mut self, r: &TileResult) {
+        self.stats += r.stats;
+        self.rays += r.rays;
+        self.hits += r.hits;
     }
-}
-
-/// Colour of a visible dvr sample at local `p`.
-fn shade_sample(
-    scene: &Scene,
-    shadow: &mut Tracer,
-    shadows: bool,
-    ray: &Ray,
-    p: &[f64; 3],
-    e: &Eval,
-) -> [f64; 3] {
-    let st = scene.state;
-    let base = base_colour(scene, e, true);
-    let g = DVec3::from_array(e.grad);
-    if g.length() <= 0.0 || g.is_nan() {
-        return base.to_array().map(f64::from);
-    }
-    let n = normal(e, ray.dir);
-    let pw = DVec3::from_array(scene.vol.to_world(*p));
-    let vis: Vec<f32> = if shadows {
-        st.lights
-            .iter()
-            .map(|l| light_visibility(scene, shadow, pw, n, l))
-            .collect()
-    } else {
-        Vec::new()
-    };
-    phong(base, n, -ray.dir, pw, &st.lights, &vis, &st.material)
-        .to_array()
-        .map(f64::from)
 }
 
 /// Renders the whole image on the current rayon pool.
 pub fn render(scene: &Scene) -> Frame {
     let (w, h) = (scene.state.width, scene.state.height);
-    let tiles_x = w.div_ceil(TILE);
-    let tiles_y = h.div_ceil(TILE);
-    let tiles: Vec<(u32, u32)> = (0..tiles_y)
-        .flat_map(|ty| (0..tiles_x).map(move |tx| (tx, ty)))
-        .collect();
-    let done: Vec<(Vec<[f32; 3]>, Stats, u64, u64)> = tiles
-        .par_iter()
-        .map(|&(tx, ty)| {
-            let mut worker = Worker::new(scene);
-            let x0 = tx * TILE;
-            let y0 = ty * TILE;
-            let x1 = (x0 + TILE).min(w);
-            let y1 = (y0 + TILE).min(h);
-            let mut px = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
-            for y in y0..y1 {
-                for x in x0..x1 {
-                    px.push(worker.pixel(x, y));
-                }
-            }
-            let mut stats = worker.main.stats;
-            stats += worker.shadow.stats;
-            (px, stats, worker.rays, worker.hits)
-        })
-        .collect();
-    let mut rgb = vec![[0.0f32; 3]; w as usize * h as usize];
-    let mut stats = Stats::default();
-    let (mut rays, mut hits) = (0, 0);
-    for (&(tx, ty), (px, s, r, hi)) in tiles.iter().zip(done) {
-        let x0 = tx * TILE;
-        let y0 = ty * TILE;
-        let tw = (x0 + TILE).min(w) - x0;
-        for (i, c) in px.into_iter().enumerate() {
-            let x = x0 + i as u32 % tw;
-            let y = y0 + i as u32 / tw;
-            rgb[(y * w + x) as usize] = c;
-        }
-        stats += s;
-        rays += r;
-        hits += hi;
-    }
+    let acc = Mutex::new((Film::new(w, h), Counts::default()));
+    let sink = |r: TileResult| {
+        // A poisoned lock only means another tile panicked; its panic propagates anyway.
+        let mut g = acc.lock().unwrap_or_else(|e| e.into_inner());
+        g.0.add(&r);
+        g.1.add(&r);
+    };
+    render_tiles(
+        scene,
+        &tiles(w, h),
+        0..scene.state.spp.max(1),
+        &CancelToken::new(),
+        &sink,
+    );
+    let (film, counts) = acc.into_inner().unwrap_or_else(|e| e.into_inner());
     Frame {
         width: w,
         height: h,
-        rgb,
-        stats,
-        rays,
-        hits,
+        rgb: film.resolve(),
+        stats: counts.stats,
+        rays: counts.rays,
+        hits: counts.hits,
+    }
+}
+
+/// A persistent pool of render threads (building a pool costs more than a small frame).
+pub struct Renderer {
+    pool: rayon::ThreadPool,
+}
+
+impl Renderer {
+    /// A pool of `threads` workers (`None` or 0: one per core).
+    pub fn new(threads: Option<usize>) -> Result<Renderer, rayon::ThreadPoolBuildError> {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads.unwrap_or(0))
+            .thread_name(|i| format!("qbricks-render-{i}"))
+            .build()?;
+        Ok(Renderer { pool })
+    }
+
+    pub fn threads(&self) -> usize {
+        self.pool.current_num_threads()
+    }
+
+    /// [`render`] on this pool.
+    pub fn render(&self, scene: &Scene) -> Frame {
+        self.pool.install(|| render(scene))
+    }
+
+    /// [`render_tiles`] on this pool.
+    pub fn render_tiles(
+        &self,
+        scene: &Scene,
+        tiles: &[Tile],
+        samples: Range<u32>,
+        cancel: &CancelToken,
+        sink: &(dyn Fn(TileResult) + Sync),
+    ) -> bool {
+        self.pool
+            .install(|| render_tiles(scene, tiles, samples, cancel, sink))
+    }
+
+    /// [`trace_pixel`] on this pool.
+    pub fn trace_pixel(&self, scene: &Scene, x: u32, y: u32) -> PixelTrace {
+        self.pool.install(|| trace_pixel(scene, x, y))
+    }
+}
+
+/// What `render --json` prints about a frame: timing, work per ray, hits.
+#[derive(Debug, Clone, Serialize)]
+pub struct FrameReport {
+    /// Wall time of one frame (the median when repeated), ms.
+    pub ms: f64,
+    /// Opening the file and building the volume tables, ms.
+    pub open_ms: f64,
+    pub rays: u64,
+    pub samples_per_ray: f64,
+    pub segments_per_ray: f64,
+    pub skipped_per_ray: f64,
+    pub mrays_per_s: f64,
+    pub hit_fraction: f64,
+    pub width: u32,
+    pub height: u32,
+    pub strategy: &'static str,
+    pub mode: &'static str,
+    pub threads: usize,
+}
+
+impl FrameReport {
+    pub fn new(frame: &Frame, state: &ViewState, ms: f64, open_ms: f64, threads: usize) -> Self {
+        let rays = frame.rays.max(1) as f64;
+        FrameReport {
+            ms,
+            open_ms,
+            rays: frame.rays,
+            samples_per_ray: frame.stats.samples as f64 / rays,
+            segments_per_ray: frame.stats.segments as f64 / rays,
+            skipped_per_ray: frame.stats.skipped as f64 / rays,
+            mrays_per_s: frame.rays as f64 / (ms * 1e3),
+            hit_fraction: frame.hits as f64 / rays,
+            width: frame.width,
+            height: frame.height,
+            strategy: state.effective_strategy().as_str(),
+            mode: state.mode.as_str(),
+            threads,
+        }
     }
 }
 
@@ -397,21 +355,14 @@ pub struct RayTrace {
 /// Renders one pixel and records its rays' region segments, samples and hits
 /// (`t` along each unit-length ray from its origin).
 pub fn trace_pixel(scene: &Scene, x: u32, y: u32) -> PixelTrace {
-    let st = scene.state;
-    let mut worker = Worker::new(scene);
-    let spp = st.spp.max(1);
+    let spp = scene.state.spp.max(1);
+    let mut caster = RayCaster::new(scene);
     let mut rays = Vec::new();
     let mut sum = [0.0f64; 3];
     for s in 0..spp {
-        let (jx, jy) = if spp == 1 {
-            (0.5, 0.5)
-        } else {
-            (jitter(x, y, s, st.seed, 1), jitter(x, y, s, st.seed, 2))
-        };
-        let ray = scene.rays.ray(x as f64 + jx, y as f64 + jy);
-        let jit = jitter(x, y, s, st.seed, 0);
-        worker.main.log = Some(Vec::new());
-        let c = worker.trace(&ray, jit);
+        let (ray, jit) = caster.camera_ray(x, y, s);
+        caster.main.log = Some(Vec::new());
+        let c = caster.trace(&ray, jit);
         for a in 0..3 {
             sum[a] += c[a];
         }
@@ -419,7 +370,7 @@ pub fn trace_pixel(scene: &Scene, x: u32, y: u32) -> PixelTrace {
             origin: ray.origin.to_array(),
             dir: ray.dir.to_array(),
             jitter: jit,
-            events: worker.main.log.take().unwrap_or_default(),
+            events: caster.main.log.take().unwrap_or_default(),
         });
     }
     PixelTrace {
@@ -435,8 +386,5 @@ pub fn render_with_threads(
     scene: &Scene,
     threads: usize,
 ) -> Result<Frame, rayon::ThreadPoolBuildError> {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()?;
-    Ok(pool.install(|| render(scene)))
+    Ok(Renderer::new(Some(threads))?.render(scene))
 }

@@ -7,7 +7,10 @@
 //! on the other side, the band was crossed in between and is searched for there, so
 //! skipping never loses a crossing.
 
-use serde::Serialize;
+use std::fmt;
+use std::str::FromStr;
+
+use serde::{Deserialize, Serialize};
 
 use crate::integrate::{correct_opacity, Accum};
 use crate::reconstruct::{Cubic, Eval};
@@ -15,10 +18,57 @@ use crate::transfer::{Class, Mode, Transfer};
 use crate::traverse::{Skip, SKIPPED};
 use crate::volume::Volume;
 
-pub use crate::view_state::Strategy;
-
 /// Smallest bisection interval of `bisect`, in cell widths.
 pub const BISECT_RESOLUTION: f64 = 0.005;
+
+/// Sampling strategy along a ray (see DESIGN.md, "Sampling strategies").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Strategy {
+    /// Fixed step in units of the local cell width.
+    Uniform,
+    /// ExaBricks adaptive sampling at interval midpoints.
+    Paper,
+    /// Adaptive sampling plus bisection into the transfer function's band.
+    Bisect,
+    /// Root finding on the trilinear cubic per dual cell (iso mode).
+    Exact,
+}
+
+impl Strategy {
+    pub const ALL: [Strategy; 4] = [
+        Strategy::Uniform,
+        Strategy::Paper,
+        Strategy::Bisect,
+        Strategy::Exact,
+    ];
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Strategy::Uniform => "uniform",
+            Strategy::Paper => "paper",
+            Strategy::Bisect => "bisect",
+            Strategy::Exact => "exact",
+        }
+    }
+}
+
+impl fmt::Display for Strategy {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl FromStr for Strategy {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Strategy::ALL
+            .into_iter()
+            .find(|m| m.as_str() == s)
+            .ok_or_else(|| {
+                format!("unknown strategy `{s}`: expected uniform, paper, bisect or exact")
+            })
+    }
+}
 
 /// What a ray needs to know about the volume's transfer and sampling.
 #[derive(Debug, Clone, Copy, PartialEq)]

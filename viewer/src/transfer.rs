@@ -1,9 +1,68 @@
 //! Transfer functions: an opaque iso-surface, or a Gaussian opacity band around the iso
 //! value (the seed report's direct volume rendering).
 
+use std::fmt;
+use std::str::FromStr;
+
 use serde::{Deserialize, Serialize};
 
-pub use crate::view_state::Mode;
+/// Render mode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    /// Opaque surface at the iso value, Phong-shaded from the analytic gradient.
+    Iso,
+    /// Semi-transparent Gaussian band around the iso value (direct volume rendering).
+    Dvr,
+}
+
+impl Mode {
+    pub const ALL: [Mode; 2] = [Mode::Iso, Mode::Dvr];
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Mode::Iso => "iso",
+            Mode::Dvr => "dvr",
+        }
+    }
+}
+
+impl fmt::Display for Mode {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl FromStr for Mode {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Mode::ALL
+            .into_iter()
+            .find(|m| m.as_str() == s)
+            .ok_or_else(|| format!("unknown mode `{s}`: expected iso or dvr"))
+    }
+}
+
+/// Shape of the dvr opacity band around the iso value:
+/// `min(1, peak·exp(-½((v-iso)/sigma)²))` inside `iso ± k·sigma`, zero outside.
+/// This is the `transfer` object of a view state.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Band {
+    pub sigma: f64,
+    pub peak: f64,
+    /// Half-width of the band in units of sigma.
+    pub k: f64,
+}
+
+impl Band {
+    /// The seed report's shape for iso 0.05: sigma = 0.004 (8 % of iso), peak 1.6, k = 2
+    /// (band 0.042–0.058).
+    pub const SEED_REPORT: Band = Band {
+        sigma: 0.004,
+        peak: 1.6,
+        k: 2.0,
+    };
+}
 
 /// Where a value lies relative to the transfer function's non-zero band.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -20,10 +79,7 @@ pub enum Class {
 pub struct Transfer {
     pub mode: Mode,
     pub iso: f64,
-    pub sigma: f64,
-    pub peak: f64,
-    /// Half-width of the band in units of σ.
-    pub k: f64,
+    pub band: Band,
 }
 
 impl Default for Transfer {
@@ -32,9 +88,7 @@ impl Default for Transfer {
         Transfer {
             mode: Mode::Iso,
             iso: 0.05,
-            sigma: 0.004,
-            peak: 1.6,
-            k: 2.0,
+            band: Band::SEED_REPORT,
         }
     }
 }
@@ -45,8 +99,8 @@ impl Transfer {
         match self.mode {
             Mode::Iso => (self.iso, self.iso),
             Mode::Dvr => (
-                self.iso - self.k * self.sigma,
-                self.iso + self.k * self.sigma,
+                self.iso - self.band.k * self.band.sigma,
+                self.iso + self.band.k * self.band.sigma,
             ),
         }
     }
@@ -58,8 +112,8 @@ impl Transfer {
         if !(v >= lo && v <= hi) {
             return 0.0;
         }
-        let z = (v - self.iso) / self.sigma;
-        (self.peak * (-0.5 * z * z).exp()).min(1.0)
+        let z = (v - self.iso) / self.band.sigma;
+        (self.band.peak * (-0.5 * z * z).exp()).min(1.0)
     }
 
     #[inline]

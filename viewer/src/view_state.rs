@@ -5,133 +5,17 @@
 //! pixel. Unknown fields are rejected (a typo must not silently fall back to a default);
 //! values serde cannot check are checked by [`ViewState::validate`], which `load` calls.
 
-use std::fmt;
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
 use crate::camera::{Camera, Projection};
 use crate::colormap::ColorMap;
 use crate::mesh::MeshInstance;
+pub use crate::sampling::Strategy;
 use crate::shading::{default_lights, Light, Material};
-
-/// Render mode.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "lowercase")]
-pub enum Mode {
-    /// Opaque surface at the iso value, Phong-shaded from the analytic gradient.
-    Iso,
-    /// Semi-transparent Gaussian band around the iso value (direct volume rendering).
-    Dvr,
-}
-
-/// Sampling strategy along a ray (see DESIGN.md, "Sampling strategies").
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "lowercase")]
-pub enum Strategy {
-    /// Fixed step in units of the local cell width.
-    Uniform,
-    /// ExaBricks adaptive sampling at interval midpoints.
-    Paper,
-    /// Adaptive sampling plus bisection into the transfer function's band.
-    Bisect,
-    /// Root finding on the trilinear cubic per dual cell (iso mode).
-    Exact,
-}
-
-impl Mode {
-    pub const ALL: [Mode; 2] = [Mode::Iso, Mode::Dvr];
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Mode::Iso => "iso",
-            Mode::Dvr => "dvr",
-        }
-    }
-}
-
-impl Strategy {
-    pub const ALL: [Strategy; 4] = [
-        Strategy::Uniform,
-        Strategy::Paper,
-        Strategy::Bisect,
-        Strategy::Exact,
-    ];
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Strategy::Uniform => "uniform",
-            Strategy::Paper => "paper",
-            Strategy::Bisect => "bisect",
-            Strategy::Exact => "exact",
-        }
-    }
-}
-
-impl fmt::Display for Mode {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.as_str())
-    }
-}
-
-impl fmt::Display for Strategy {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.as_str())
-    }
-}
-
-impl FromStr for Mode {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        Mode::ALL
-            .into_iter()
-            .find(|m| m.as_str() == s)
-            .ok_or_else(|| format!("unknown mode `{s}`: expected iso or dvr"))
-    }
-}
-
-impl FromStr for Strategy {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        Strategy::ALL
-            .into_iter()
-            .find(|m| m.as_str() == s)
-            .ok_or_else(|| {
-                format!("unknown strategy `{s}`: expected uniform, paper, bisect or exact")
-            })
-    }
-}
-
-/// DVR opacity around the iso value: `min(1, peak·exp(-½((v-iso)/σ)²))` inside
-/// `iso ± k·σ`, zero outside.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct TransferFunction {
-    pub sigma: f64,
-    pub peak: f64,
-    pub k: f64,
-}
-
-impl TransferFunction {
-    /// The seed report's shape for iso 0.05: σ = 0.004 (8 % of iso), peak 1.6, k = 2
-    /// (band 0.042–0.058).
-    pub fn seed_report() -> TransferFunction {
-        TransferFunction {
-            sigma: 0.004,
-            peak: 1.6,
-            k: 2.0,
-        }
-    }
-
-    /// Opacity for value `v` around `iso` (per reference step, before opacity correction).
-    pub fn opacity(&self, v: f64, iso: f64) -> f64 {
-        let x = (v - iso) / self.sigma;
-        if x.is_nan() || x.abs() > self.k {
-            return 0.0;
-        }
-        (self.peak * (-0.5 * x * x).exp()).min(1.0)
-    }
-}
+pub use crate::transfer::{Band, Mode};
 
 /// Range of one field of the file (from its regions' value bounds).
 #[derive(Debug, Clone, PartialEq)]
@@ -164,7 +48,7 @@ pub struct ViewState {
     /// Seed of the per-pixel jitter (interleaved sampling).
     #[serde(default)]
     pub seed: u64,
-    pub transfer: TransferFunction,
+    pub transfer: Band,
     pub colormap: ColorMap,
     pub lights: Vec<Light>,
     #[serde(default)]
@@ -280,7 +164,7 @@ impl ViewState {
             step: 0.5,
             spp: 1,
             seed: 0,
-            transfer: TransferFunction {
+            transfer: Band {
                 sigma,
                 peak: 1.6,
                 k: 2.0,
@@ -292,6 +176,30 @@ impl ViewState {
             background: DEFAULT_BACKGROUND,
             width: 800,
             height: 600,
+        }
+    }
+
+    /// The strategy the rays use: `exact` finds iso-surface roots; a dvr band has no
+    /// single root, so in dvr mode it samples as `bisect`.
+    pub fn effective_strategy(&self) -> Strategy {
+        match (self.mode, self.strategy) {
+            (Mode::Dvr, Strategy::Exact) => Strategy::Bisect,
+            (_, s) => s,
+        }
+    }
+
+    /// Puts the default lights back over the viewer's shoulder for the current camera
+    /// (used whenever the camera moves and the lights were not chosen by hand).
+    pub fn lights_follow_camera(&mut self) {
+        self.lights = default_lights(&self.camera);
+    }
+
+    /// Sets the iso value and keeps the dvr band's width at 8 % of it, as in the seed
+    /// report (σ 0.004 at iso 0.05); an iso value of 0 keeps the current width.
+    pub fn set_iso(&mut self, iso: f64) {
+        self.iso = iso;
+        if iso != 0.0 && iso.is_finite() {
+            self.transfer.sigma = 0.08 * iso.abs();
         }
     }
 
@@ -435,6 +343,130 @@ impl ViewState {
             let _ = std::fs::remove_file(&tmp);
         }
         result.map_err(io)
+    }
+}
+
+/// Command-line changes to a view state (`qbricks-view render` flags). They live here,
+/// next to the state they change, so the window and the headless renderer apply the same
+/// rules.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct Overrides {
+    /// Image width in pixels.
+    #[arg(long)]
+    pub width: Option<u32>,
+    /// Image height in pixels.
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// Render mode.
+    #[arg(long, value_enum)]
+    pub mode: Option<Mode>,
+    /// Iso value of the iso field.
+    #[arg(long, allow_hyphen_values = true)]
+    pub iso: Option<f64>,
+    /// Sampling strategy (`exact` is for iso mode; in dvr it samples as `bisect`).
+    #[arg(long, value_enum)]
+    pub strategy: Option<Strategy>,
+    /// Sample step in units of the local cell width.
+    #[arg(long, allow_hyphen_values = true)]
+    pub step: Option<f64>,
+    /// Jittered rays per pixel.
+    #[arg(long)]
+    pub spp: Option<u32>,
+    /// Shadow rays towards every light (through meshes and the volume).
+    #[arg(long)]
+    pub shadows: bool,
+    /// OBJ mesh, optionally placed: PATH[@x,y,z,scale]. Repeatable; replaces the state's meshes.
+    #[arg(long = "mesh")]
+    pub meshes: Vec<String>,
+    /// Camera position x,y,z (world units).
+    #[arg(long, allow_hyphen_values = true)]
+    pub eye: Option<String>,
+    /// Point the camera looks at, x,y,z.
+    #[arg(long = "look-at", allow_hyphen_values = true)]
+    pub look_at: Option<String>,
+    /// Camera up vector x,y,z.
+    #[arg(long, allow_hyphen_values = true)]
+    pub up: Option<String>,
+    /// Orthographic projection with this view width (world units).
+    #[arg(long, conflicts_with = "fov")]
+    pub ortho: Option<f64>,
+    /// Perspective projection with this vertical field of view (degrees).
+    #[arg(long)]
+    pub fov: Option<f64>,
+}
+
+impl Overrides {
+    /// Applies the flags to `state`. `from_file`: the state came from a state file, so
+    /// its lights and band are the user's; otherwise the data-derived defaults follow
+    /// the flags (lights over the viewer's shoulder after `--eye`, σ at 8 % of `--iso`).
+    /// Returns notes worth telling the user.
+    pub fn apply(&self, state: &mut ViewState, from_file: bool) -> Result<Vec<String>, String> {
+        let mut notes = Vec::new();
+        if let Some(v) = self.width {
+            state.width = v;
+        }
+        if let Some(v) = self.height {
+            state.height = v;
+        }
+        if let Some(v) = self.mode {
+            state.mode = v;
+        }
+        if let Some(v) = self.iso {
+            if from_file {
+                state.iso = v;
+            } else {
+                state.set_iso(v);
+            }
+        }
+        if let Some(v) = self.strategy {
+            state.strategy = v;
+        }
+        if let Some(v) = self.step {
+            state.step = v;
+        }
+        if let Some(v) = self.spp {
+            state.spp = v;
+        }
+        if self.shadows {
+            state.shadows = true;
+        }
+        if !self.meshes.is_empty() {
+            state.meshes = self
+                .meshes
+                .iter()
+                .map(|m| MeshInstance::parse(m).map_err(|e| format!("--mesh: {e}")))
+                .collect::<Result<_, _>>()?;
+        }
+        let vec =
+            |name: &str, s: &str| crate::probe::parse_xyz(s).map_err(|e| format!("--{name}: {e}"));
+        if let Some(s) = &self.eye {
+            state.camera.eye = vec("eye", s)?;
+        }
+        if let Some(s) = &self.look_at {
+            state.camera.look_at = vec("look-at", s)?;
+        }
+        if let Some(s) = &self.up {
+            state.camera.up = vec("up", s)?;
+        }
+        if let Some(w) = self.ortho {
+            state.camera.projection = Projection::Orthographic { width: w };
+        }
+        if let Some(f) = self.fov {
+            state.camera.projection = Projection::Perspective { fov_deg: f };
+        }
+        if !from_file {
+            state.lights_follow_camera();
+        }
+        if state.mode == Mode::Dvr && state.strategy == Strategy::Exact {
+            if self.strategy.is_none() {
+                // The default strategy (exact) is for iso mode; a dvr request without an
+                // explicit strategy gets the one dvr uses anyway, without a note.
+                state.strategy = Strategy::Bisect;
+            } else {
+                notes.push("`exact` is an iso-surface strategy; dvr samples as `bisect`".into());
+            }
+        }
+        Ok(notes)
     }
 }
 
@@ -603,12 +635,16 @@ mod tests {
 
     #[test]
     fn transfer_function_matches_the_seed_report() {
-        let tf = TransferFunction::seed_report();
-        assert_eq!(tf.opacity(0.05, 0.05), 1.0); // peak 1.6 clamps to 1
-        assert_eq!(tf.opacity(0.0419, 0.05), 0.0);
-        assert_eq!(tf.opacity(0.0581, 0.05), 0.0);
+        let tf = crate::transfer::Transfer {
+            mode: Mode::Dvr,
+            iso: 0.05,
+            band: Band::SEED_REPORT,
+        };
+        assert_eq!(tf.opacity(0.05), 1.0); // peak 1.6 clamps to 1
+        assert_eq!(tf.opacity(0.0419), 0.0);
+        assert_eq!(tf.opacity(0.0581), 0.0);
         let x: f64 = 1.5;
         let want = 1.6 * (-0.5 * x * x).exp();
-        assert!((tf.opacity(0.05 + 1.5 * 0.004, 0.05) - want).abs() < 1e-12);
+        assert!((tf.opacity(0.05 + 1.5 * 0.004) - want).abs() < 1e-12);
     }
 }

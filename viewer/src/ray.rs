@@ -1,0 +1,278 @@
+//! One camera ray: trace it through meshes and volume, shade what it sees, send shadow
+//! rays. The frame loop ([`crate::render`]) decides which rays to cast; this module
+//! decides what colour each one returns.
+//!
+//! A ray's colour is a pure function of the scene, the pixel, the sample index and the
+//! seed: the sub-pixel offset and the interleaved-sampling offset of the first sample
+//! come from a hash of those, so the same pixel gets the same colour on any thread, in
+//! any order, in one frame or spread over progressive sample waves.
+
+use glam::{DVec3, Vec3};
+
+use crate::camera::Ray;
+use crate::mesh::MeshHit;
+use crate::reconstruct::Eval;
+use crate::render::Scene;
+use crate::sampling::{Stats, Strategy, Tracer};
+use crate::shading::{phong, Light};
+use crate::transfer::Mode;
+
+/// splitmix64 finaliser.
+#[inline]
+fn mix(mut z: u64) -> u64 {
+    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// Uniform number in `[0, 1)` from (pixel, sample, seed, purpose).
+#[inline]
+pub fn jitter(x: u32, y: u32, sample: u32, seed: u64, purpose: u64) -> f64 {
+    let h = mix(seed ^ mix(((x as u64) << 32 | y as u64) ^ mix((sample as u64) << 8 | purpose)));
+    (h >> 11) as f64 / (1u64 << 53) as f64
+}
+
+/// Per-thread ray casting state: the tracers (with their reusable stacks) and counters.
+pub struct RayCaster<'s> {
+    scene: &'s Scene<'s>,
+    pub(crate) main: Tracer<'s>,
+    shadow: Tracer<'s>,
+    /// Rays that hit the iso-surface (iso) or gathered opacity ≥ 0.01 (dvr).
+    pub hits: u64,
+    pub rays: u64,
+}
+
+impl<'s> RayCaster<'s> {
+    pub fn new(scene: &'s Scene<'s>) -> Self {
+        let mut shadow_params = scene.params;
+        if shadow_params.strategy != Strategy::Exact {
+            // Shadow rays only need the occlusion, sampled a little coarser.
+            shadow_params.step = shadow_params.step.max(1.0);
+        }
+        RayCaster {
+            scene,
+            main: Tracer::new(scene.vol, scene.params),
+            shadow: Tracer::new(scene.vol, shadow_params),
+            hits: 0,
+            rays: 0,
+        }
+    }
+
+    /// Work counters of every ray cast so far (camera and shadow rays).
+    pub fn stats(&self) -> Stats {
+        let mut s = self.main.stats;
+        s += self.shadow.stats;
+        s
+    }
+
+    /// The camera ray of sample `s` of pixel (`x`, `y`) and its first-sample offset.
+    /// One sample per pixel goes through the pixel centre; more are jittered.
+    pub fn camera_ray(&self, x: u32, y: u32, s: u32) -> (Ray, f64) {
+        let st = self.scene.state;
+        let (jx, jy) = if st.spp.max(1) == 1 {
+            (0.5, 0.5)
+        } else {
+            (jitter(x, y, s, st.seed, 1), jitter(x, y, s, st.seed, 2))
+        };
+        let ray = self.scene.rays.ray(x as f64 + jx, y as f64 + jy);
+        (ray, jitter(x, y, s, st.seed, 0))
+    }
+
+    /// Colour of sample `s` of pixel (`x`, `y`).
+    #[inline]
+    pub fn sample(&mut self, x: u32, y: u32, s: u32) -> [f64; 3] {
+        let (ray, jit) = self.camera_ray(x, y, s);
+        self.trace(&ray, jit)
+    }
+
+    /// Colour seen along one camera ray.
+    pub fn trace(&mut self, ray: &Ray, jit: f64) -> [f64; 3] {
+        let scene = self.scene;
+        let st = scene.state;
+        let vol = scene.vol;
+        self.rays += 1;
+        let o = vol.to_local(ray.origin.to_array());
+        let d = ray.dir.to_array();
+        let mesh_hit = if scene.meshes.is_empty() {
+            None
+        } else {
+            scene.meshes.intersect(ray, 0.0, f64::INFINITY)
+        };
+        let t_max = mesh_hit.map_or(f64::INFINITY, |h| h.t);
+        let bg = st.background.map(f64::from);
+        let behind = |w: &mut Self| match mesh_hit {
+            Some(h) => w.shade_mesh(ray, &h),
+            None => bg,
+        };
+        match scene.params.tf.mode {
+            Mode::Iso => match self.main.iso(o, d, 0.0, t_max, jit) {
+                Some(hit) => {
+                    self.hits += 1;
+                    let e = hit.eval.unwrap_or_default();
+                    self.shade_surface(ray, &hit.p, &e, hit.eval.is_some())
+                }
+                None => behind(self),
+            },
+            Mode::Dvr => {
+                let shadows = st.shadows;
+                let (main, shadow) = (&mut self.main, &mut self.shadow);
+                let acc = main.dvr(o, d, 0.0, t_max, jit, &mut |p, e| {
+                    shade_sample(scene, shadow, shadows, ray, p, e)
+                });
+                if acc.alpha() >= 0.01 {
+                    self.hits += 1;
+                }
+                let back = if acc.done() { [0.0; 3] } else { behind(self) };
+                acc.over(back)
+            }
+        }
+    }
+
+    /// The first surface along `ray`: the iso-surface (found with `exact` root finding,
+    /// whatever the view's mode and strategy) or a mesh, as a distance along the ray.
+    pub fn first_surface(&mut self, ray: &Ray) -> Option<f64> {
+        let scene = self.scene;
+        let mesh_t = if scene.meshes.is_empty() {
+            None
+        } else {
+            scene.meshes.intersect(ray, 0.0, f64::INFINITY).map(|h| h.t)
+        };
+        let mut params = scene.params;
+        params.strategy = Strategy::Exact;
+        params.tf.mode = Mode::Iso;
+        let mut tracer = Tracer::new(scene.vol, params);
+        let o = scene.vol.to_local(ray.origin.to_array());
+        let t_max = mesh_t.unwrap_or(f64::INFINITY);
+        let iso_t = tracer
+            .iso(o, ray.dir.to_array(), 0.0, t_max, 0.5)
+            .map(|hit| {
+                let p = DVec3::from_array(scene.vol.to_world(hit.p));
+                (p - ray.origin).dot(ray.dir)
+            });
+        iso_t.or(mesh_t)
+    }
+
+    fn shade_mesh(&mut self, ray: &Ray, h: &MeshHit) -> [f64; 3] {
+        let st = self.scene.state;
+        let p = ray.at(h.t);
+        let n = if h.normal.dot(ray.dir) > 0.0 {
+            -h.normal
+        } else {
+            h.normal
+        };
+        let vis = self.visibility(p, n);
+        phong(h.colour, n, -ray.dir, p, &st.lights, &vis, &st.material)
+            .to_array()
+            .map(f64::from)
+    }
+
+    /// Phong-shaded iso-surface point (local `p`).
+    fn shade_surface(&mut self, ray: &Ray, p: &[f64; 3], e: &Eval, has_eval: bool) -> [f64; 3] {
+        let scene = self.scene;
+        let st = scene.state;
+        let base = base_colour(scene, e, has_eval);
+        let n = normal(e, ray.dir);
+        let pw = DVec3::from_array(scene.vol.to_world(*p));
+        let vis = self.visibility(pw, n);
+        phong(base, n, -ray.dir, pw, &st.lights, &vis, &st.material)
+            .to_array()
+            .map(f64::from)
+    }
+
+    /// Shadow transmittance towards every light from world point `p` with normal `n`.
+    fn visibility(&mut self, p: DVec3, n: DVec3) -> Vec<f32> {
+        let scene = self.scene;
+        let st = scene.state;
+        if !st.shadows {
+            return Vec::new();
+        }
+        st.lights
+            .iter()
+            .map(|l| light_visibility(scene, &mut self.shadow, p, n, l))
+            .collect()
+    }
+}
+
+fn light_visibility(scene: &Scene, shadow: &mut Tracer, p: DVec3, n: DVec3, light: &Light) -> f32 {
+    let (l, dist) = light.towards(p);
+    if n.dot(l) <= 0.0 {
+        return 1.0; // phong ignores lights behind the surface anyway
+    }
+    let eps = 1e-3 * scene.vol.finest_w;
+    let origin = p + eps * n;
+    let ray = Ray { origin, dir: l };
+    if !scene.meshes.is_empty() && scene.meshes.occluded(&ray, 0.0, dist) {
+        return 0.0;
+    }
+    let o = scene.vol.to_local(origin.to_array());
+    let d = l.to_array();
+    let t_max = if dist.is_finite() {
+        dist
+    } else {
+        f64::INFINITY
+    };
+    match scene.params.tf.mode {
+        Mode::Iso => {
+            if shadow.iso_occluded(o, d, 0.0, t_max) {
+                0.0
+            } else {
+                1.0
+            }
+        }
+        Mode::Dvr => shadow.transmittance(o, d, 0.0, t_max) as f32,
+    }
+}
+
+/// Unit normal from the gradient, facing the viewer; the view direction when the
+/// gradient vanishes.
+fn normal(e: &Eval, dir: DVec3) -> DVec3 {
+    let g = DVec3::from_array(e.grad);
+    let len = g.length();
+    if !(len > 0.0 && len.is_finite()) {
+        return -dir;
+    }
+    let n = g / len;
+    if n.dot(dir) > 0.0 {
+        -n
+    } else {
+        n
+    }
+}
+
+fn base_colour(scene: &Scene, e: &Eval, has_eval: bool) -> Vec3 {
+    match (scene.params.colour_field, has_eval) {
+        (Some(_), true) => Vec3::from_array(scene.state.colormap.colour(e.colour as f32)),
+        _ => Vec3::splat(0.8),
+    }
+}
+
+/// Colour of a visible dvr sample at local `p`.
+fn shade_sample(
+    scene: &Scene,
+    shadow: &mut Tracer,
+    shadows: bool,
+    ray: &Ray,
+    p: &[f64; 3],
+    e: &Eval,
+) -> [f64; 3] {
+    let st = scene.state;
+    let base = base_colour(scene, e, true);
+    let g = DVec3::from_array(e.grad);
+    if g.length() <= 0.0 || g.is_nan() {
+        return base.to_array().map(f64::from);
+    }
+    let n = normal(e, ray.dir);
+    let pw = DVec3::from_array(scene.vol.to_world(*p));
+    let vis: Vec<f32> = if shadows {
+        st.lights
+            .iter()
+            .map(|l| light_visibility(scene, shadow, pw, n, l))
+            .collect()
+    } else {
+        Vec::new()
+    };
+    phong(base, n, -ray.dir, pw, &st.lights, &vis, &st.material)
+        .to_array()
+        .map(f64::from)
+}
