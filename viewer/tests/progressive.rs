@@ -96,14 +96,16 @@ fn refined_frame_equals_headless_render_pixel_for_pixel() {
         );
         assert_eq!(last.counts.stats, want.stats);
         assert_eq!(last.samples, spp);
-        // The preview came first, at a quarter of the resolution or coarser.
-        match updates[0].level {
-            Level::Preview { scale } => {
+        // Previews (when one was seen before a newer image replaced it) are a quarter
+        // of the resolution or coarser, and come before every full-resolution image.
+        for (i, u) in updates.iter().enumerate() {
+            if let Level::Preview { scale } = u.level {
                 assert!(scale >= 4, "preview scale {scale}");
-                assert_eq!(updates[0].width, st.width.div_ceil(scale));
+                assert_eq!(u.width, st.width.div_ceil(scale));
+                assert!(updates[..i].iter().all(|v| v.level != Level::Full));
             }
-            Level::Full => panic!("no preview before the full frame"),
         }
+        assert!(p.preview_scale() >= 4);
         // Sample waves arrive in order and every update belongs to this job.
         assert!(updates.iter().all(|u| u.generation == generation));
         let full: Vec<u32> = updates
