@@ -9,6 +9,7 @@ pub mod cells;
 pub mod derive;
 pub mod fields;
 pub mod grid;
+pub mod inputs;
 pub mod kdtree;
 pub mod levels;
 pub mod nonfinite;

@@ -10,12 +10,11 @@ use anyhow::Context;
 use clap::ValueEnum;
 use format::writer::{write_with, WriteOptions};
 use indicatif::{ProgressBar, ProgressStyle};
-use qbricks_preprocess::bake::{
-    bake_with_progress, select_grids, BakeOptions, GridKind, DEFAULT_MAX_BRICK,
-};
+use qbricks_preprocess::bake::{bake_with_progress, BakeOptions, DEFAULT_MAX_BRICK};
 use qbricks_preprocess::derive::Stencil;
 use qbricks_preprocess::fields::FieldKind;
-use qbricks_preprocess::vdb::{ValueType, VdbFile};
+use qbricks_preprocess::inputs::{read_inputs, Layout, ReadError, ReadOptions};
+use qbricks_preprocess::vdb::VdbFile;
 
 #[derive(Clone, Copy, ValueEnum)]
 pub enum StencilArg {
@@ -48,6 +47,10 @@ pub struct Args {
     /// scalar grid when there is no vec3 grid.
     #[arg(long = "grid", value_name = "NAME")]
     pub grids: Vec<String>,
+    /// Velocity to bake when the file holds several candidates (repeatable): a vec3 grid
+    /// name, or X for three scalar component grids X.x/X.y/X.z, X_x/X_y/X_z or Xx/Xy/Xz.
+    #[arg(long, value_name = "NAME")]
+    pub velocity: Vec<String>,
     /// Fields derived from velocity, comma separated: q, speed, velocity (three fields
     /// velocity_x/y/z). Default: q,speed. A scalar grid is baked as its own field.
     #[arg(long, value_delimiter = ',')]
@@ -145,36 +148,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // Read only the grids that will be baked.
     stage("reading VDB");
     let file = VdbFile::open(&args.input)?;
-    let kinds: Vec<(&str, GridKind)> = file
-        .grids()
-        .iter()
-        .map(|g| {
-            let k = match g.value_type {
-                ValueType::Vec3s | ValueType::Vec3d => GridKind::Vector,
-                ValueType::Float | ValueType::Double => GridKind::Scalar,
-                ValueType::Unsupported(_) => GridKind::Other,
-            };
-            (g.name.as_str(), k)
-        })
-        .collect();
-    let chosen = select_grids(&kinds, &opts.grids).with_context(|| input_name.clone())?;
-    opts.staggered = chosen
-        .iter()
-        .map(|&i| &file.grids()[i])
-        .filter(|g| {
-            g.value_type.is_vector()
-                && match args.layout {
-                    LayoutArg::Auto => g.is_staggered(),
-                    LayoutArg::Centred => false,
-                    LayoutArg::Staggered => true,
-                }
-        })
-        .map(|g| g.name.clone())
-        .collect();
-    let grids = chosen
-        .iter()
-        .map(|&i| file.read_grid(i))
-        .collect::<Result<Vec<_>, _>>()?;
+    let read = ReadOptions {
+        grids: args.grids.clone(),
+        velocity: args.velocity.clone(),
+        layout: match args.layout {
+            LayoutArg::Auto => Layout::Auto,
+            LayoutArg::Centred => Layout::Centred,
+            LayoutArg::Staggered => Layout::Staggered,
+        },
+        max_cells: opts.max_cells,
+    };
+    let (grids, staggered) = match read_inputs(&file, &read) {
+        Ok(v) => v,
+        // Reader errors already name the file.
+        Err(ReadError::Vdb(e)) => return Err(e.into()),
+        Err(e) => return Err(anyhow::Error::new(e).context(input_name.clone())),
+    };
+    opts.staggered = staggered;
     drop(file);
 
     let (brick_file, summary) =
