@@ -88,6 +88,9 @@ pub struct BakeSummary {
     pub regions: u64,
     pub kd_nodes: u64,
     pub nonfinite: u64,
+    /// Baked values (derived or resampled) that were not finite as f32 (overflow of Q or
+    /// speed from huge velocities, huge doubles); stored clamped, see [`clamp_nonfinite`].
+    pub nonfinite_derived: u64,
     pub fields: Vec<FieldSummary>,
     /// Non-fatal problems (non-finite values replaced, …), one line each.
     #[serde(skip)]
@@ -113,6 +116,19 @@ pub enum BakeError {
     FieldsForScalar { grid: String },
     #[error("no fields requested")]
     NoFields,
+    #[error("--fields: field \"{0}\" is requested twice")]
+    DuplicateField(String),
+    #[error("--fields: no scalar grid named \"{name}\" (scalar grids: {available})")]
+    FieldGridNotFound { name: String, available: String },
+    #[error("--grid names several scalar grids ({names}): a scalar grid is baked as its own field, one per bake (or bake the velocity with --fields q,speed,<grid>,…)")]
+    SeveralScalarGrids { names: String },
+    #[error("grid \"{grid}\": field \"{field}\": {count} values are not finite as 32-bit floats (first at voxel {first:?}); refused because of --strict")]
+    NonFiniteDerived {
+        grid: String,
+        field: String,
+        count: u64,
+        first: [i32; 3],
+    },
     #[error("grid \"{grid}\": transform is not usable: {found}")]
     BadTransform { grid: String, found: String },
     #[error("grid \"{grid}\": voxels must be cubes, found voxel size {voxel_size:?}")]
@@ -240,6 +256,19 @@ pub fn select_grids(grids: &[(&str, GridKind)], names: &[String]) -> Result<Vec<
                 scalar: format!("\"{}\"", grids[s].0),
             });
         }
+        let mut snames: Vec<&str> = chosen
+            .iter()
+            .filter(|&&i| grids[i].1 == GridKind::Scalar)
+            .map(|&i| grids[i].0)
+            .collect();
+        snames.dedup();
+        snames.sort_unstable();
+        snames.dedup();
+        if snames.len() > 1 {
+            return Err(BakeError::SeveralScalarGrids {
+                names: quoted(snames),
+            });
+        }
         return Ok(chosen);
     }
     let vectors: Vec<usize> = (0..grids.len())
@@ -346,6 +375,46 @@ fn run(
         return Err(BakeError::BadMaxBrick(opts.max_brick));
     }
     stage("selecting grids");
+    // Fields: no name twice; scalar-grid fields take their grids out of the selection.
+    let mut extra_names: Vec<String> = Vec::new();
+    if let Some(kinds) = &opts.fields {
+        let mut seen: Vec<String> = Vec::new();
+        for n in kinds.iter().flat_map(FieldKind::names) {
+            if seen.contains(&n) {
+                return Err(BakeError::DuplicateField(n));
+            }
+            seen.push(n);
+        }
+        for k in kinds {
+            if let FieldKind::Scalar(n) = k {
+                extra_names.push(n.clone());
+            }
+        }
+    }
+    let (extra_grids, grids): (Vec<AnyGrid>, Vec<AnyGrid>) = grids
+        .into_iter()
+        .partition(|g| !is_vector(g) && extra_names.iter().any(|n| n == grid_name(g)));
+    if let Some(missing) = extra_names
+        .iter()
+        .find(|n| !extra_grids.iter().any(|g| grid_name(g) == n.as_str()))
+    {
+        let mut available: Vec<&str> = grids
+            .iter()
+            .chain(&extra_grids)
+            .filter(|g| !is_vector(g))
+            .map(grid_name)
+            .collect();
+        available.sort_unstable();
+        available.dedup();
+        return Err(BakeError::FieldGridNotFound {
+            name: missing.clone(),
+            available: available
+                .iter()
+                .map(|n| format!("\"{n}\""))
+                .collect::<Vec<_>>()
+                .join(", "),
+        });
+    }
     let grids = select(grids, &opts.grids)?;
     if grids.is_empty() {
         return Err(BakeError::NoGrids);
@@ -356,9 +425,10 @@ fn run(
         .collect();
     let (levels, widths) = assign_levels(&named)?;
     let input_cells: u64 = grids.iter().map(grid_voxels).sum();
-    if input_cells > opts.max_cells {
+    let extra_cells: u64 = extra_grids.iter().map(grid_voxels).sum();
+    if input_cells.saturating_add(extra_cells) > opts.max_cells {
         return Err(BakeError::TooManyCells {
-            cells: input_cells,
+            cells: input_cells.saturating_add(extra_cells),
             limit: opts.max_cells,
         });
     }
@@ -411,6 +481,9 @@ fn run(
         Input::Scalar(sets, vals, _) => fix_nonfinite(sets, vals, opts.strict, &mut warnings)?,
     };
 
+    let extras = extra_fields(&extra_names, &extra_grids, opts.strict, &mut warnings)?;
+    drop(extra_grids);
+
     // Staggered grids: keep the (repaired) face values, bake from cell-centred ones.
     if let Input::Vector(sets, vals, faces) = &mut input {
         *faces = sets
@@ -453,10 +526,7 @@ fn run(
                 .fields
                 .clone()
                 .unwrap_or(vec![FieldKind::Q, FieldKind::Speed]);
-            let names: Vec<String> = kinds
-                .iter()
-                .flat_map(|k| k.names().iter().map(|n| n.to_string()))
-                .collect();
+            let names: Vec<String> = kinds.iter().flat_map(FieldKind::names).collect();
             let field = VelocityField {
                 sets,
                 values: vals,
@@ -475,6 +545,11 @@ fn run(
                             }
                             FieldKind::Speed => out.push(speed(&u) as f32),
                             FieldKind::Velocity => out.extend(u.map(|c| c as f32)),
+                            FieldKind::Scalar(n) => {
+                                let e = extras.iter().find(|e| &e.name == n);
+                                let p = set.centre(ijk);
+                                out.push(e.map_or(0.0, |e| e.sample(p)) as f32);
+                            }
                         }
                     }
                 }
@@ -492,6 +567,35 @@ fn run(
             (vec![name.clone()], values)
         }
     };
+
+    // Values that overflowed f32 (or were NaN): counted, refused with --strict, clamped.
+    let mut values = values;
+    let mut nonfinite_derived = 0;
+    for (name, vals) in names.iter().zip(values.iter_mut()) {
+        let Some((count, at)) = clamp_nonfinite(vals) else {
+            continue;
+        };
+        let b = first.partition_point(|&f| f <= at as u64) - 1;
+        let bx = &bricks[b];
+        let local = at as u64 - first[b];
+        let (nx, ny) = (u64::from(bx.dims[0]), u64::from(bx.dims[1]));
+        let off = [local % nx, (local / nx) % ny, local / (nx * ny)];
+        let first_cell = [0, 1, 2].map(|a| bx.lo[a] + off[a] as i32);
+        let grid = sets[bx.set].name.clone();
+        if opts.strict {
+            return Err(BakeError::NonFiniteDerived {
+                grid,
+                field: name.clone(),
+                count,
+                first: first_cell,
+            });
+        }
+        warnings.push(format!(
+            "grid \"{grid}\": field \"{name}\": {count} values are not finite as 32-bit floats (first at voxel {first_cell:?}); stored as ±{:e} (infinities) and 0 (NaN)",
+            f32::MAX
+        ));
+        nonfinite_derived += count;
+    }
 
     // Supports, regions, KD-tree.
     stage("building regions");
@@ -586,6 +690,7 @@ fn run(
         regions: file_regions.len() as u64,
         kd_nodes: kd_nodes.len() as u64,
         nonfinite,
+        nonfinite_derived,
         fields: field_summaries,
         warnings,
     };
@@ -687,4 +792,136 @@ fn snapped_supports(sets: &[CellSet], bricks: &[BrickBox], finest: f64) -> Vec<B
             max: [0, 1, 2].map(|a| snap(a, b.max[a])),
         })
         .collect()
+}
+
+/// Replaces the non-finite values of `vals` (±∞ → ±`f32::MAX`, NaN → 0), so that every
+/// stored value lies inside the field's range. Returns their count and the index of the
+/// first, or `None` when all are finite.
+pub fn clamp_nonfinite(vals: &mut [f32]) -> Option<(u64, usize)> {
+    let mut first = None;
+    let mut count = 0;
+    for (i, v) in vals.iter_mut().enumerate() {
+        if v.is_finite() {
+            continue;
+        }
+        first.get_or_insert(i);
+        count += 1;
+        *v = if v.is_nan() {
+            0.0
+        } else {
+            f32::MAX.copysign(*v)
+        };
+    }
+    first.map(|f| (count, f))
+}
+
+/// A scalar grid baked as an extra field: its cells, values and background, finest first
+/// among grids of the same name.
+struct ExtraGrid {
+    name: String,
+    grids: Vec<(CellSet, Vec<f64>, f64)>,
+}
+
+impl ExtraGrid {
+    /// Trilinear sample at world point `p` from the finest grid with an active voxel among
+    /// the 8 around `p`; inactive or missing voxels count as the background (OpenVDB's
+    /// reading of a sparse grid); the background where no grid has data. At a voxel centre
+    /// (same lattice as the velocity) this is the voxel's value.
+    fn sample(&self, p: [f64; 3]) -> f64 {
+        for (set, vals, bg) in &self.grids {
+            let t = set.transform.translation;
+            let mut base = [0i32; 3];
+            let mut frac = [0.0; 3];
+            let mut ok = true;
+            for a in 0..3 {
+                let x = (p[a] - t[a]) / set.width;
+                let mut fl = x.floor();
+                let mut fr = x - fl;
+                // Snap to the lattice so that a voxel centre reads exactly that voxel.
+                if fr > 1.0 - 1e-9 {
+                    fl += 1.0;
+                    fr = 0.0;
+                } else if fr < 1e-9 {
+                    fr = 0.0;
+                }
+                if !(fl > f64::from(i32::MIN) + 2.0 && fl < f64::from(i32::MAX) - 2.0) {
+                    ok = false;
+                    break;
+                }
+                base[a] = fl as i32;
+                frac[a] = fr;
+            }
+            if !ok {
+                continue;
+            }
+            let (mut sum, mut any) = (0.0, false);
+            for corner in 0..8 {
+                let d = [corner & 1, (corner >> 1) & 1, corner >> 2];
+                let w: f64 = (0..3)
+                    .map(|a| if d[a] == 0 { 1.0 - frac[a] } else { frac[a] })
+                    .product();
+                if w == 0.0 {
+                    continue;
+                }
+                let ijk = [0, 1, 2].map(|a| base[a] + d[a]);
+                match set.active_slot(ijk) {
+                    Some(s) => {
+                        any = true;
+                        sum += w * vals[s];
+                    }
+                    None => sum += w * bg,
+                }
+            }
+            if any {
+                return sum;
+            }
+        }
+        self.grids.first().map_or(0.0, |g| g.2)
+    }
+}
+
+/// Cell sets of the scalar grids baked as extra fields (non-finite values handled as for
+/// the velocity), one entry per field name.
+fn extra_fields(
+    names: &[String],
+    grids: &[AnyGrid],
+    strict: bool,
+    warnings: &mut Vec<String>,
+) -> Result<Vec<ExtraGrid>, BakeError> {
+    let mut out = Vec::with_capacity(names.len());
+    for name in names {
+        let mine: Vec<&AnyGrid> = grids.iter().filter(|g| grid_name(g) == name).collect();
+        let mut sets = Vec::with_capacity(mine.len());
+        let mut vals = Vec::with_capacity(mine.len());
+        let mut bgs = Vec::with_capacity(mine.len());
+        for g in mine {
+            let (set, v, bg) = match g {
+                AnyGrid::Float(g) => {
+                    let (s, v) = CellSet::from_grid(g, 0, f64::from);
+                    (s, v, f64::from(g.background))
+                }
+                AnyGrid::Double(g) => {
+                    let (s, v) = CellSet::from_grid(g, 0, |v: f64| v);
+                    (s, v, g.background)
+                }
+                _ => continue,
+            };
+            sets.push(set);
+            vals.push(v);
+            bgs.push(if bg.is_finite() { bg } else { 0.0 });
+        }
+        fix_nonfinite(&sets, &mut vals, strict, warnings)?;
+        let mut grids: Vec<(CellSet, Vec<f64>, f64)> = sets
+            .into_iter()
+            .zip(vals)
+            .zip(bgs)
+            .map(|((s, v), b)| (s, v, b))
+            .collect();
+        grids.sort_by(|a, b| a.0.width.total_cmp(&b.0.width));
+        out.push(ExtraGrid {
+            name: name.clone(),
+            grids,
+        });
+    }
+    Ok(out)
 }

@@ -10,8 +10,9 @@ use crate::regions::Bbox;
 /// Bins of every field's histogram.
 pub const HISTOGRAM_BINS: usize = 64;
 
-/// A field derived from velocity grids.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+/// A baked field: derived from the velocity, or a scalar grid of the file resampled onto
+/// the velocity's leaf cells.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum FieldKind {
     /// Q-criterion.
@@ -20,9 +21,13 @@ pub enum FieldKind {
     Speed,
     /// The three velocity components (three fields `velocity_x`, `velocity_y`, `velocity_z`).
     Velocity,
+    /// The scalar grid(s) of this name, sampled trilinearly at the leaf-cell centres.
+    Scalar(String),
 }
 
 impl FieldKind {
+    /// `q`, `speed`, `velocity`, or `None` for any other name (a scalar grid's, for callers
+    /// that take extra fields: see [`FieldKind::parse_or_grid`]).
     pub fn parse(s: &str) -> Option<FieldKind> {
         match s.trim().to_ascii_lowercase().as_str() {
             "q" => Some(FieldKind::Q),
@@ -32,12 +37,25 @@ impl FieldKind {
         }
     }
 
+    /// As [`FieldKind::parse`], any other (non-empty) name being a scalar grid's.
+    pub fn parse_or_grid(s: &str) -> Option<FieldKind> {
+        let t = s.trim();
+        match FieldKind::parse(t) {
+            Some(k) => Some(k),
+            None if !t.is_empty() => Some(FieldKind::Scalar(t.to_string())),
+            None => None,
+        }
+    }
+
     /// Names of the file fields this kind produces.
-    pub fn names(self) -> &'static [&'static str] {
+    pub fn names(&self) -> Vec<String> {
         match self {
-            FieldKind::Q => &["q"],
-            FieldKind::Speed => &["speed"],
-            FieldKind::Velocity => &["velocity_x", "velocity_y", "velocity_z"],
+            FieldKind::Q => vec!["q".into()],
+            FieldKind::Speed => vec!["speed".into()],
+            FieldKind::Velocity => ["velocity_x", "velocity_y", "velocity_z"]
+                .map(String::from)
+                .to_vec(),
+            FieldKind::Scalar(name) => vec![name.clone()],
         }
     }
 }

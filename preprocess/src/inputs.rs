@@ -34,6 +34,8 @@ pub struct ReadOptions {
     pub layout: Layout,
     /// Largest number of active voxels per component grid (0: [`DEFAULT_MAX_CELLS`]).
     pub max_cells: u64,
+    /// Scalar grids baked as extra fields (every scalar grid of each name is read too).
+    pub extra: Vec<String>,
 }
 
 /// Why reading the bake input failed.
@@ -88,10 +90,11 @@ pub fn read_inputs(
             .filter(|g| g.value_type.is_vector() && staggered(g))
             .map(|g| g.name.clone())
             .collect();
-        let grids = chosen
+        let mut grids = chosen
             .iter()
             .map(|&i| file.read_grid(i))
             .collect::<Result<Vec<_>, _>>()?;
+        read_extra(file, &kinds, &opts.extra, &chosen, &mut grids)?;
         return Ok((grids, mac));
     };
     let max_cells = if opts.max_cells == 0 {
@@ -101,6 +104,7 @@ pub fn read_inputs(
     };
     let mut grids = Vec::new();
     let mut mac = Vec::new();
+    let mut read = Vec::new();
     for v in velocity {
         match v {
             Velocity::Vector { name, grids: ids } => {
@@ -109,6 +113,7 @@ pub fn read_inputs(
                 }
                 for i in ids {
                     grids.push(file.read_grid(i)?);
+                    read.push(i);
                 }
             }
             Velocity::Split { name, parts } => {
@@ -129,7 +134,40 @@ pub fn read_inputs(
             }
         }
     }
+    read_extra(file, &kinds, &opts.extra, &read, &mut grids)?;
     Ok((grids, mac))
+}
+
+/// Appends every scalar grid named in `extra` that is not among `done` (file indices);
+/// a name without a scalar grid is an error listing the file's scalar grids.
+fn read_extra(
+    file: &VdbFile,
+    kinds: &[(&str, GridKind)],
+    extra: &[String],
+    done: &[usize],
+    grids: &mut Vec<AnyGrid>,
+) -> Result<(), ReadError> {
+    let scalar = |n: &str| kinds.iter().any(|(g, k)| *k == GridKind::Scalar && *g == n);
+    if let Some(missing) = extra.iter().find(|n| !scalar(n)) {
+        let mut names: Vec<&str> = kinds
+            .iter()
+            .filter(|(_, k)| *k == GridKind::Scalar)
+            .map(|(g, _)| *g)
+            .collect();
+        names.sort_unstable();
+        names.dedup();
+        return Err(BakeError::FieldGridNotFound {
+            name: missing.clone(),
+            available: quoted(names),
+        }
+        .into());
+    }
+    for (i, (name, kind)) in kinds.iter().enumerate() {
+        if *kind == GridKind::Scalar && !done.contains(&i) && extra.iter().any(|e| e == name) {
+            grids.push(file.read_grid(i)?);
+        }
+    }
+    Ok(())
 }
 
 /// A scalar grid as doubles (vector grids become empty: component sets hold scalars only).

@@ -51,8 +51,9 @@ pub struct Args {
     /// name, or X for three scalar component grids X.x/X.y/X.z, X_x/X_y/X_z or Xx/Xy/Xz.
     #[arg(long, value_name = "NAME")]
     pub velocity: Vec<String>,
-    /// Fields derived from velocity, comma separated: q, speed, velocity (three fields
-    /// velocity_x/y/z). Default: q,speed. A scalar grid is baked as its own field.
+    /// Fields, comma separated: q, speed, velocity (three fields velocity_x/y/z), or the
+    /// name of any scalar grid of the file (resampled onto the velocity's leaf cells).
+    /// Default: q,speed. A scalar grid baked on its own (no velocity) takes no field list.
     #[arg(long, value_delimiter = ',')]
     pub fields: Option<Vec<String>>,
     /// Velocity gradient stencil at grid edges and next to missing cells.
@@ -90,15 +91,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some(list) => Some(
             list.iter()
                 .map(|s| {
-                    FieldKind::parse(s).ok_or_else(|| {
-                        anyhow::anyhow!(
-                            "--fields: unknown field \"{s}\" (expected q, speed or velocity)"
-                        )
-                    })
+                    FieldKind::parse_or_grid(s)
+                        .ok_or_else(|| anyhow::anyhow!("--fields: empty field name"))
                 })
                 .collect::<anyhow::Result<Vec<_>>>()?,
         ),
     };
+    let extra: Vec<String> = fields
+        .iter()
+        .flatten()
+        .filter_map(|k| match k {
+            FieldKind::Scalar(n) => Some(n.clone()),
+            _ => None,
+        })
+        .collect();
     let mut opts = BakeOptions {
         grids: args.grids.clone(),
         fields,
@@ -157,6 +163,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             LayoutArg::Staggered => Layout::Staggered,
         },
         max_cells: opts.max_cells,
+        extra,
     };
     let (grids, staggered) = match read_inputs(&file, &read) {
         Ok(v) => v,
@@ -201,6 +208,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "regions": summary.regions,
             "kd_nodes": summary.kd_nodes,
             "nonfinite": summary.nonfinite,
+            "nonfinite_derived": summary.nonfinite_derived,
             "fields": fields,
             "seconds": seconds,
             "output": output.display().to_string(),
