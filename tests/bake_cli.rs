@@ -62,6 +62,7 @@ fn bake_json_summary_matches_the_file() {
             "kd_nodes",
             "leaf_cells",
             "nonfinite",
+            "nonfinite_derived",
             "output",
             "regions",
             "seconds"
