@@ -24,6 +24,9 @@ impl FormatError {
 pub enum FormatErrorKind {
     #[error("{0}")]
     Io(#[from] std::io::Error),
+    /// Reading the file whole failed (a directory, a device over the size limit...).
+    #[error("{0}")]
+    Input(crate::input::InputErrorKind),
     /// The archive passed rkyv's structural validation but breaks an invariant of the
     /// schema (the message names the element, e.g. `regions[12].bricks[3]`), or rkyv's
     /// validation (bytecheck) itself failed.

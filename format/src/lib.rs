@@ -8,6 +8,7 @@
 
 pub mod error;
 pub mod header;
+pub mod input;
 pub mod query;
 pub mod reader;
 pub mod schema;

@@ -34,6 +34,7 @@ use rkyv::util::AlignedVec;
 
 use crate::error::{one_line, FormatError, FormatErrorKind};
 use crate::header::{Header, HEADER_LEN, PAYLOAD_ALIGN};
+use crate::input::{read_whole, InputErrorKind, Limits};
 use crate::schema::{ArchivedBrickFile, BrickFile};
 
 /// Options for [`BrickFileView::open_with`].
@@ -117,7 +118,17 @@ impl BrickFileView {
     pub fn open_with(path: &Path, options: &OpenOptions) -> Result<Self, FormatError> {
         let err = |kind| FormatError::new(path, kind);
         let file = File::open(path).map_err(|e| err(e.into()))?;
-        let len = file.metadata().map_err(|e| err(e.into()))?.len();
+        let meta = file.metadata().map_err(|e| err(e.into()))?;
+        if meta.is_dir() {
+            return Err(err(FormatErrorKind::Input(InputErrorKind::IsDirectory)));
+        }
+        if !meta.is_file() {
+            // A pipe or device cannot be mapped (mmap says "No such device"): read it,
+            // within the stream limit.
+            drop(file);
+            return Self::open_in_memory(path, options);
+        }
+        let len = meta.len();
         if len < HEADER_LEN as u64 {
             return Err(err(FormatErrorKind::TooShort {
                 expected: HEADER_LEN as u64,
@@ -132,7 +143,8 @@ impl BrickFileView {
     /// Reads `path` into memory (no mapping) and validates it. Immune to the file being
     /// truncated later, at the cost of reading and holding the whole file.
     pub fn open_in_memory(path: &Path, options: &OpenOptions) -> Result<Self, FormatError> {
-        let data = std::fs::read(path).map_err(|e| FormatError::new(path, e.into()))?;
+        let data = read_whole(path, Limits::memory())
+            .map_err(|e| FormatError::new(path, FormatErrorKind::Input(e.kind)))?;
         Self::from_bytes_with(path, &data, options)
     }
 
@@ -162,7 +174,7 @@ impl BrickFileView {
         backing: Backing,
     ) -> Result<Self, FormatError> {
         let archive = ValidatedArchive::try_new(backing, |b| {
-            let file = rkyv::access::<ArchivedBrickFile, rancor::Error>(b.payload())
+            let file = rkyv::access::<ArchivedBrickFile, CheckError>(b.payload())
                 .map_err(|e| FormatErrorKind::Invalid(one_line(e)))?;
             crate::validate::check(file).map_err(FormatErrorKind::Invalid)?;
             Ok::<_, FormatErrorKind>(file)
@@ -212,7 +224,7 @@ impl BrickFileView {
 
     /// Deserialises the whole file into owned memory.
     pub fn to_brick_file(&self) -> Result<BrickFile, FormatError> {
-        rkyv::deserialize::<BrickFile, rancor::Error>(self.file())
+        rkyv::deserialize::<BrickFile, CheckError>(self.file())
             .map_err(|e| FormatError::new(&self.path, FormatErrorKind::Invalid(one_line(e))))
     }
 }
@@ -225,6 +237,50 @@ impl std::fmt::Debug for BrickFileView {
             .field("checksum_verified", &self.checksum_verified)
             .field("mapped", &self.is_mapped())
             .finish_non_exhaustive()
+    }
+}
+
+/// rkyv's validation error as a message: what failed and the chain of places it failed in
+/// (`invalid UTF-8 in field "name" of fields[2] …`). rancor's own `Error` keeps nothing of
+/// either in release builds ("failed without error information"), and its `BoxedError`
+/// keeps only the innermost cause.
+#[derive(Debug)]
+struct CheckError {
+    error: String,
+    context: Vec<String>,
+}
+
+impl std::fmt::Display for CheckError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}", self.error)?;
+        for (i, c) in self.context.iter().enumerate() {
+            write!(f, "{}{c}", if i == 0 { " (" } else { "; " })?;
+        }
+        if !self.context.is_empty() {
+            write!(f, ")")?;
+        }
+        Ok(())
+    }
+}
+
+impl std::error::Error for CheckError {}
+
+impl rancor::Trace for CheckError {
+    fn trace<R>(mut self, trace: R) -> Self
+    where
+        R: std::fmt::Debug + std::fmt::Display + Send + Sync + 'static,
+    {
+        self.context.push(one_line(trace));
+        self
+    }
+}
+
+impl rancor::Source for CheckError {
+    fn new<T: std::error::Error + Send + Sync + 'static>(source: T) -> Self {
+        Self {
+            error: one_line(source),
+            context: Vec::new(),
+        }
     }
 }
 

@@ -31,9 +31,19 @@ use crate::vdb::write::{
     write_vdb_with, Compression, MetaMap, MetaValue, WriteError, WriteOptions,
 };
 
-/// Most voxels `scene_grids` will sample (about 12 GB of leaves): beyond that a typo in
-/// `--n0` should not exhaust memory.
-pub const MAX_VOXELS: u64 = 1 << 30;
+/// Most bytes of leaves a scene may allocate (velocity grids, plus the speed grids when
+/// asked for). Leaves are counted whole, as `sample_grid` allocates them, partial leaves at
+/// box edges included: a voxel count alone underestimates memory (a leaf of 3-vectors takes
+/// about 6.2 kB however few of its 512 voxels are active), and `synth` holds every grid in
+/// memory until the file is written. 4 GiB of leaves is a peak of about 10 GB once the
+/// writer's buffers are added, well past any scene the tests or the README use (the largest,
+/// `wake --n0 160 --levels 3`, takes 140 MB) and below what the project's machines have.
+pub const MAX_LEAF_BYTES: u64 = 4 << 30;
+
+/// Bytes one leaf of `V` takes: the struct in the grid's leaf list and its boxed values.
+fn leaf_bytes<V>() -> u64 {
+    (std::mem::size_of::<Leaf<V>>() + std::mem::size_of::<[V; LEAF_VOXELS]>()) as u64
+}
 
 #[derive(Debug, Error)]
 pub enum SynthError {
@@ -48,12 +58,17 @@ pub enum SynthError {
         max: u32,
         found: u32,
     },
-    #[error("scene {name:?} with n0 {n0} and {levels} levels needs {voxels} voxels, more than the limit of {limit}")]
+    #[error(
+        "scene {name:?} with n0 {n0} in {grids} grid(s) needs {leaves} leaves ({} MiB of grid memory), more than the limit of {} MiB; use a smaller --n0 or fewer --levels",
+        bytes >> 20,
+        limit >> 20
+    )]
     TooLarge {
         name: String,
         n0: u32,
-        levels: u32,
-        voxels: u64,
+        grids: usize,
+        leaves: u64,
+        bytes: u64,
         limit: u64,
     },
 }
@@ -90,8 +105,23 @@ pub struct GridLayout {
 }
 
 impl GridLayout {
+    /// Active voxels in the box, saturating at `u64::MAX` (an allowed `--n0` with ten levels
+    /// has a finest box of 2^75 voxels, which a plain product would overflow).
     pub fn voxel_count(&self) -> u64 {
-        (0..3).map(|a| (self.hi[a] - self.lo[a]) as u64).product()
+        saturating_product((0..3).map(|a| self.hi[a].saturating_sub(self.lo[a])))
+    }
+
+    /// Leaves [`sample_grid`] allocates for this box (every 8³ block the box touches),
+    /// saturating at `u64::MAX`.
+    pub fn leaf_count(&self) -> u64 {
+        let d = i64::from(LEAF_DIM);
+        saturating_product((0..3).map(|a| {
+            if self.hi[a] <= self.lo[a] {
+                0
+            } else {
+                (self.hi[a] - 1).div_euclid(d) - self.lo[a].div_euclid(d) + 1
+            }
+        }))
     }
 
     pub fn transform(&self) -> Transform {
@@ -166,17 +196,38 @@ pub fn scene_layout(scene: &str, n0: u32, levels: u32) -> Result<Vec<GridLayout>
         });
     }
     out.reverse();
-    let voxels: u64 = out.iter().map(GridLayout::voxel_count).sum();
-    if voxels > MAX_VOXELS {
+    check_memory(scene, n0, &out, false)?;
+    Ok(out)
+}
+
+fn saturating_product(extents: impl Iterator<Item = i64>) -> u64 {
+    extents.fold(1u64, |acc, e| acc.saturating_mul(e.max(0).unsigned_abs()))
+}
+
+/// Refuses a scene whose leaves (velocity, plus speed when `speed_grids`) would take more than
+/// [`MAX_LEAF_BYTES`], before anything is sampled.
+pub fn check_memory(
+    scene: &str,
+    n0: u32,
+    layouts: &[GridLayout],
+    speed_grids: bool,
+) -> Result<(), SynthError> {
+    let per_leaf = leaf_bytes::<Vec3>() + if speed_grids { leaf_bytes::<f32>() } else { 0 };
+    let leaves = layouts
+        .iter()
+        .fold(0u64, |acc, l| acc.saturating_add(l.leaf_count()));
+    let bytes = leaves.saturating_mul(per_leaf);
+    if bytes > MAX_LEAF_BYTES {
         return Err(SynthError::TooLarge {
             name: scene.to_string(),
             n0,
-            levels,
-            voxels,
-            limit: MAX_VOXELS,
+            grids: layouts.len(),
+            leaves,
+            bytes,
+            limit: MAX_LEAF_BYTES,
         });
     }
-    Ok(out)
+    Ok(())
 }
 
 fn check_range(what: &'static str, found: u32, min: u32, max: u32) -> Result<(), SynthError> {
@@ -291,7 +342,7 @@ fn sample_leaf(
         }
     }
     Leaf {
-        // Index boxes stay far inside i32 (checked by MAX_VOXELS and the n0 range).
+        // Index boxes stay far inside i32 (checked by MAX_LEAF_BYTES and the n0 range).
         origin: origin.map(|v| v as i32),
         active,
         values,
@@ -333,6 +384,7 @@ pub fn write_scene(
     opts: &SynthOptions,
 ) -> Result<(Vec<GridSummary>, u64), SynthError> {
     let layouts = scene_layout(&opts.scene, opts.n0, opts.levels)?;
+    check_memory(&opts.scene, opts.n0, &layouts, opts.speed_grids)?;
     let velocity = scene_grids_with(&opts.scene, opts.n0, opts.levels, opts.staggered)?;
     let mut grids: Vec<AnyGrid> = Vec::new();
     let mut metadata: Vec<MetaMap> = Vec::new();
@@ -465,7 +517,12 @@ mod tests {
     fn layouts_nest_for_any_n0_and_level_count() {
         for n0 in [2, 5, 15, 30, 48, 64, 161] {
             for levels in 1..=5 {
-                let l = scene_layout("wake", n0, levels).expect("layout");
+                let l = match scene_layout("wake", n0, levels) {
+                    Ok(l) => l,
+                    // 161 with 5 levels needs 8 GB of leaves: past the memory limit.
+                    Err(SynthError::TooLarge { .. }) if (n0, levels) == (161, 5) => continue,
+                    Err(e) => panic!("n0 {n0}, {levels} levels: {e}"),
+                };
                 assert_eq!(l.len(), levels as usize);
                 let coarse = &l[l.len() - 1];
                 let nx = coarse.hi[0] - coarse.lo[0];
@@ -543,6 +600,58 @@ mod tests {
             scene_layout("wake", 4096, 10),
             Err(SynthError::TooLarge { .. })
         ));
+    }
+
+    /// The largest allowed parameters overflow a u64 voxel count (2^75 voxels in the finest
+    /// box): the layout must still be refused with the leaf count saturated, not panic.
+    #[test]
+    fn largest_parameters_are_refused_without_overflow() {
+        match scene_layout("wake", 1 << 16, 10) {
+            Err(SynthError::TooLarge { leaves, bytes, .. }) => {
+                assert!(leaves > 1 << 50, "{leaves}");
+                assert_eq!(bytes, u64::MAX);
+            }
+            other => panic!("expected TooLarge, got {other:?}"),
+        }
+        let finest = GridLayout {
+            name: "x".into(),
+            voxel_size: 1.0,
+            lo: [-(1 << 25); 3],
+            hi: [1 << 25; 3],
+        };
+        assert_eq!(finest.voxel_count(), u64::MAX);
+    }
+
+    /// `abc --n0 1024` has exactly 2^30 voxels, which the old voxel limit let through while
+    /// its leaves take 13 GB: the limit counts leaf bytes, so it is refused before sampling.
+    #[test]
+    fn limit_counts_leaf_memory_not_voxels() {
+        match scene_layout("abc", 1024, 1) {
+            Err(SynthError::TooLarge { leaves, bytes, .. }) => {
+                assert_eq!(leaves, 128 * 128 * 128);
+                assert!(bytes > 12 << 30, "{bytes}");
+            }
+            other => panic!("expected TooLarge, got {other:?}"),
+        }
+        // The speed grids count too: a scene that fits alone can be refused with them.
+        let layouts = scene_layout("abc", 656, 1).expect("fits without speed grids");
+        check_memory("abc", 656, &layouts, false).expect("fits");
+        assert!(matches!(
+            check_memory("abc", 656, &layouts, true),
+            Err(SynthError::TooLarge { .. })
+        ));
+    }
+
+    /// `leaf_count` counts exactly the leaves `sample_grid` allocates, partial ones included.
+    #[test]
+    fn leaf_count_matches_sampled_leaves() {
+        for (scene, n0, levels) in [("wake", 16, 3), ("wake", 13, 2), ("abc", 20, 1)] {
+            let layouts = scene_layout(scene, n0, levels).expect("layout");
+            let grids = scene_grids(scene, n0, levels).expect("grids");
+            for (l, g) in layouts.iter().zip(&grids) {
+                assert_eq!(l.leaf_count(), g.leaves.len() as u64, "{scene} {}", l.name);
+            }
+        }
     }
 
     #[test]

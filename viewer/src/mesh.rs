@@ -3,6 +3,7 @@
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
+use format::input::{read_whole, InputErrorKind, Limits};
 pub use glam::{DVec3, Vec3};
 use serde::{Deserialize, Serialize};
 
@@ -118,16 +119,22 @@ impl TriangleMesh {
             let prefix = format!("{}: ", path.display());
             err(m.strip_prefix(&prefix).unwrap_or(&m).to_string())
         })?;
-        // tobj's "open failed" does not say why; ask the OS first.
-        std::fs::metadata(path).map_err(|e| err(format!("cannot read OBJ file: {e}")))?;
-        let (models, _materials) = tobj::load_obj(
-            path,
+        // Read the file ourselves (tobj's "open failed"/"read error" do not say why, and it
+        // would read `/dev/zero` until memory runs out); materials are not used.
+        let text = read_whole(path, Limits::memory()).map_err(|e| match e.kind {
+            InputErrorKind::IsDirectory => err("is a directory, expected an OBJ file".to_string()),
+            InputErrorKind::Io(e) => err(format!("cannot read OBJ file: {e}")),
+            kind => err(kind.to_string()),
+        })?;
+        let (models, _materials) = tobj::load_obj_buf(
+            &mut text.as_slice(),
             &tobj::LoadOptions {
                 triangulate: true,
                 single_index: true,
                 ignore_points: true,
                 ignore_lines: true,
             },
+            |_| Err(tobj::LoadError::OpenFileFailed),
         )
         .map_err(|e| err(format!("not a valid OBJ file: {e}")))?;
 
@@ -552,6 +559,8 @@ mod tests {
         let garbage = write(dir.path(), "garbage.obj", "v 0 zero 0\nf 1 1 1\n");
         let e = Meshes::load(&[MeshInstance::at_origin(&garbage)]).expect_err("garbage");
         assert!(e.to_string().contains("garbage.obj"), "{e}");
+        let e = Meshes::load(&[MeshInstance::at_origin(dir.path())]).expect_err("directory");
+        assert!(e.message.starts_with("is a directory"), "{e}");
         let ok = write(
             dir.path(),
             "tri.obj",

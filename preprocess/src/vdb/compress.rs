@@ -136,7 +136,7 @@ const MAX_SPLITS: usize = 16;
 const MIN_BUFFERSIZE: usize = 128;
 
 fn le32(b: &[u8], at: usize) -> Result<usize, String> {
-    b.get(at..at + 4)
+    b.get(at..at.saturating_add(4))
         .and_then(|s| s.try_into().ok())
         .map(|s: [u8; 4]| u32::from_le_bytes(s) as usize)
         .ok_or_else(|| format!("blosc frame ends at byte {} of {}", at, b.len()))
@@ -167,6 +167,13 @@ pub(crate) fn blosc_decode(src: &[u8], nbytes: usize) -> Result<Vec<u8>, String>
         return Err(format!(
             "blosc frame claims {cbytes} bytes, chunk has {}",
             src.len()
+        ));
+    }
+    // The frame size counts the header: a smaller one is corrupt, and the block-count
+    // check below subtracts the header from it.
+    if cbytes < BLOSC_HEADER {
+        return Err(format!(
+            "blosc frame claims {cbytes} bytes, shorter than its 16-byte header"
         ));
     }
     let src = &src[..cbytes];
@@ -226,10 +233,11 @@ pub(crate) fn blosc_decode(src: &[u8], nbytes: usize) -> Result<Vec<u8>, String>
         let target: &mut [u8] = if shuffle { &mut tmp[..bsize] } else { dest };
         for split in target.chunks_mut(neblock).take(nsplits) {
             let n = le32(src, at)?;
-            at += 4;
+            let past_end = || format!("blosc block {b} runs past the frame end");
+            at = at.checked_add(4).ok_or_else(past_end)?;
             let stream = src
-                .get(at..at.saturating_add(n))
-                .ok_or_else(|| format!("blosc block {b} runs past the frame end"))?;
+                .get(at..at.checked_add(n).ok_or_else(past_end)?)
+                .ok_or_else(past_end)?;
             if n == neblock {
                 split.copy_from_slice(stream);
             } else {
@@ -367,6 +375,25 @@ mod tests {
             blosc_decode(&frame, 8).unwrap(),
             vec![1, 3, 5, 7, 2, 4, 6, 8]
         );
+    }
+
+    /// A frame whose own size field is below the 16-byte header (but within the chunk) is
+    /// refused, not used to compute a negative block-table length (an overflow panic in
+    /// builds with overflow checks, a huge bogus bound without).
+    #[test]
+    fn frame_size_below_header_is_refused() {
+        for cbytes in 0..16u32 {
+            let mut frame = vec![2, 1, BLOSC_DOSHUFFLE | (BLOSC_LZ4 << 5), 4];
+            frame.extend(8u32.to_le_bytes());
+            frame.extend(8u32.to_le_bytes());
+            frame.extend(cbytes.to_le_bytes());
+            frame.extend([0u8; 16]);
+            let err = blosc_decode(&frame, 8).unwrap_err();
+            assert!(
+                err.contains("shorter than its 16-byte header"),
+                "cbytes {cbytes}: {err}"
+            );
+        }
     }
 
     #[test]

@@ -7,7 +7,7 @@ use std::fmt;
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ErrorKind {
     /// The file could not be read from disk.
-    #[error("cannot read file: {0}")]
+    #[error("{0}")]
     Io(String),
     /// A read ran past the end of the data.
     #[error("expected {expected}, found {left} bytes left")]
@@ -57,6 +57,10 @@ pub struct VdbError {
 impl fmt::Display for VdbError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{}: ", self.file)?;
+        if let ErrorKind::Io(msg) = &self.kind {
+            // Nothing was parsed yet: no grid, item or offset to name.
+            return write!(f, "{msg}");
+        }
         if let Some(grid) = &self.grid {
             write!(f, "grid {grid:?}: ")?;
         }

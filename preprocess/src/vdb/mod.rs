@@ -30,6 +30,8 @@ pub mod write;
 
 use std::path::Path;
 
+use format::input::{read_whole, Limits};
+
 pub use error::{ErrorKind, VdbError};
 pub use metadata::{MetaValue, Metadata};
 
@@ -145,15 +147,19 @@ pub struct VdbFile {
 
 impl VdbFile {
     /// Reads the whole file and parses its header and grid descriptors.
+    ///
+    /// The file is read with [`Limits::memory`]: a regular file larger than the machine's
+    /// memory is refused by its size before reading, and a device or pipe is read only up
+    /// to a cap (`/dev/zero` would otherwise be read until memory runs out).
     pub fn open(path: impl AsRef<Path>) -> Result<VdbFile, VdbError> {
         let path = path.as_ref();
         let name = path.display().to_string();
-        let data = std::fs::read(path).map_err(|e| VdbError {
+        let data = read_whole(path, Limits::memory()).map_err(|e| VdbError {
             file: name.clone(),
             grid: None,
             offset: 0,
             what: "file",
-            kind: ErrorKind::Io(e.to_string()),
+            kind: ErrorKind::Io(e.kind.to_string()),
         })?;
         Self::from_bytes(name, data)
     }

@@ -4,6 +4,7 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::{bail, Context};
+use format::input::{read_whole, Limits};
 use qbricks_viewer::probe;
 use qbricks_viewer::volume::Volume;
 
@@ -25,23 +26,17 @@ pub struct Args {
     pub json: bool,
 }
 
-/// Largest points CSV read.
+/// Largest points CSV read (regular file, device or pipe): 1 GiB of text is about 30 M
+/// points, far more than a probe is for.
 const MAX_CSV_BYTES: u64 = 1 << 30;
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let points = match (&args.points, &args.line) {
         (Some(p), None) => {
-            let len = std::fs::metadata(p)
-                .with_context(|| format!("{}", p.display()))?
-                .len();
-            if len > MAX_CSV_BYTES {
-                bail!(
-                    "{}: expected at most {MAX_CSV_BYTES} bytes, found {len}",
-                    p.display()
-                );
-            }
-            let text = std::fs::read_to_string(p).with_context(|| format!("{}", p.display()))?;
-            probe::parse_points_csv(&text).map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?
+            let bytes = read_whole(p, Limits::both(MAX_CSV_BYTES))?;
+            let text = std::str::from_utf8(&bytes)
+                .map_err(|e| anyhow::anyhow!("{}: not UTF-8 text: {e}", p.display()))?;
+            probe::parse_points_csv(text).map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?
         }
         (None, Some(l)) => probe::parse_line(l).map_err(|e| anyhow::anyhow!("--line: {e}"))?,
         _ => bail!("expected exactly one of --points CSV or --line x0,y0,z0:x1,y1,z1:N"),

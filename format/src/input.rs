@@ -1,0 +1,209 @@
+//! Reading a whole input file with a bound on what gets allocated.
+//!
+//! Both programs read some inputs whole (VDB files, point lists, view states, OBJ meshes).
+//! `std::fs::read` trusts the file: a regular file's size becomes one allocation, and a
+//! device or pipe (`/dev/zero`, a FIFO) is read until it ends, which may be never. Here a
+//! regular file's size is checked against a limit before anything is read, anything else
+//! is read in bounded steps and refused once it passes a (smaller) limit, and every
+//! allocation is a fallible reservation, so an address-space limit (`ulimit -v`) becomes an
+//! error message instead of an abort.
+
+use std::fs::File;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+
+/// How much [`read_whole`] may read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Limits {
+    /// Largest regular file, checked against its size before reading.
+    pub file: u64,
+    /// Largest input that is not a regular file (device, FIFO, socket), whose size is not
+    /// known in advance: refused once this many bytes have been read.
+    pub stream: u64,
+}
+
+/// Default cap for inputs that are not regular files: large enough for a piped sample file,
+/// small enough that `/dev/zero` is refused within a second.
+pub const STREAM_LIMIT: u64 = 1 << 30;
+
+impl Limits {
+    /// Limits for a file that is decoded in memory as a whole (a VDB file): a regular file
+    /// may be as large as the machine's physical memory (no larger one could be decoded),
+    /// anything else up to [`STREAM_LIMIT`].
+    pub fn memory() -> Self {
+        Self {
+            file: physical_memory().unwrap_or(u64::MAX),
+            stream: STREAM_LIMIT,
+        }
+    }
+
+    /// The same limit for regular files and streams (small text inputs).
+    pub fn both(bytes: u64) -> Self {
+        Self {
+            file: bytes,
+            stream: bytes,
+        }
+    }
+}
+
+/// A failed [`read_whole`]: the file and what went wrong.
+#[derive(Debug, thiserror::Error)]
+#[error("{}: {kind}", path.display())]
+pub struct InputError {
+    pub path: PathBuf,
+    pub kind: InputErrorKind,
+}
+
+/// What went wrong reading an input, without the path.
+#[derive(Debug, thiserror::Error)]
+pub enum InputErrorKind {
+    #[error("cannot read: {0}")]
+    Io(#[from] std::io::Error),
+    #[error("is a directory, not a file")]
+    IsDirectory,
+    #[error("file is {size} bytes, more than the limit of {limit} bytes for reading it whole")]
+    TooLarge { size: u64, limit: u64 },
+    #[error(
+        "is not a regular file and is longer than {limit} bytes, the limit for devices and \
+         pipes; copy it to a regular file first"
+    )]
+    StreamTooLarge { limit: u64 },
+    #[error("cannot allocate {bytes} bytes to read it")]
+    OutOfMemory { bytes: u64 },
+}
+
+impl InputErrorKind {
+    /// Whether this is an I/O error of kind `kind`.
+    pub fn is_io(&self, kind: std::io::ErrorKind) -> bool {
+        matches!(self, InputErrorKind::Io(e) if e.kind() == kind)
+    }
+}
+
+/// Reads all of `path` within `limits` (see the module docs).
+pub fn read_whole(path: &Path, limits: Limits) -> Result<Vec<u8>, InputError> {
+    read_whole_kind(path, limits).map_err(|kind| InputError {
+        path: path.to_path_buf(),
+        kind,
+    })
+}
+
+fn read_whole_kind(path: &Path, limits: Limits) -> Result<Vec<u8>, InputErrorKind> {
+    let mut file = File::open(path)?;
+    let meta = file.metadata()?;
+    if meta.is_dir() {
+        return Err(InputErrorKind::IsDirectory);
+    }
+    if meta.is_file() {
+        let size = meta.len();
+        if size > limits.file {
+            return Err(InputErrorKind::TooLarge {
+                size,
+                limit: limits.file,
+            });
+        }
+        let mut data = Vec::new();
+        reserve(&mut data, size)?;
+        // The file may grow while it is read: never read more than the limit (+1 to see it).
+        (&mut file).take(limits.file + 1).read_to_end(&mut data)?;
+        if data.len() as u64 > limits.file {
+            return Err(InputErrorKind::TooLarge {
+                size: data.len() as u64,
+                limit: limits.file,
+            });
+        }
+        return Ok(data);
+    }
+    read_stream(&mut file, limits.stream)
+}
+
+/// Reads a source of unknown length in 1 MiB steps, each a fallible reservation.
+fn read_stream(src: &mut impl Read, limit: u64) -> Result<Vec<u8>, InputErrorKind> {
+    const STEP: usize = 1 << 20;
+    let mut data: Vec<u8> = Vec::new();
+    loop {
+        if data.len() as u64 > limit {
+            return Err(InputErrorKind::StreamTooLarge { limit });
+        }
+        let want = (limit + 1 - data.len() as u64).min(STEP as u64);
+        reserve(&mut data, want)?;
+        let n = src.by_ref().take(want).read_to_end(&mut data)?;
+        if n == 0 {
+            return Ok(data);
+        }
+    }
+}
+
+fn reserve(data: &mut Vec<u8>, extra: u64) -> Result<(), InputErrorKind> {
+    let total = (data.len() as u64).saturating_add(extra);
+    usize::try_from(extra)
+        .ok()
+        .and_then(|n| data.try_reserve_exact(n).ok())
+        .ok_or(InputErrorKind::OutOfMemory { bytes: total })
+}
+
+/// Total physical memory from `/proc/meminfo` (Linux); `None` where it cannot be read.
+pub fn physical_memory() -> Option<u64> {
+    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = info.lines().find(|l| l.starts_with("MemTotal:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    kib.checked_mul(1024)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn regular_file_within_the_limit_is_read_whole() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let p = dir.path().join("a");
+        std::fs::write(&p, b"0123456789").expect("write");
+        assert_eq!(
+            read_whole(&p, Limits::both(10)).expect("read"),
+            b"0123456789"
+        );
+    }
+
+    #[test]
+    fn regular_file_over_the_limit_is_refused_by_size() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let p = dir.path().join("a");
+        std::fs::write(&p, b"0123456789").expect("write");
+        let e = read_whole(&p, Limits::both(9)).expect_err("too large");
+        assert!(matches!(
+            e.kind,
+            InputErrorKind::TooLarge { size: 10, limit: 9 }
+        ));
+        assert!(e
+            .to_string()
+            .starts_with(&format!("{}: file is 10 bytes", p.display())));
+    }
+
+    #[test]
+    fn directory_is_named_as_such() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let e = read_whole(dir.path(), Limits::both(100)).expect_err("dir");
+        assert!(matches!(e.kind, InputErrorKind::IsDirectory), "{e}");
+    }
+
+    #[test]
+    fn endless_stream_stops_at_the_limit() {
+        let e = read_stream(&mut std::io::repeat(0), 3 << 20).expect_err("endless");
+        assert!(matches!(e, InputErrorKind::StreamTooLarge { limit } if limit == 3 << 20));
+        // A stream of exactly the limit is fine, one byte more is not.
+        let ok = read_stream(&mut std::io::repeat(1).take(5), 5).expect("5 bytes");
+        assert_eq!(ok, vec![1; 5]);
+        assert!(read_stream(&mut std::io::repeat(1).take(6), 5).is_err());
+    }
+
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn dev_zero_is_refused_quickly() {
+        let e = read_whole(Path::new("/dev/zero"), Limits::both(1 << 20)).expect_err("endless");
+        assert!(
+            matches!(e.kind, InputErrorKind::StreamTooLarge { .. }),
+            "{e}"
+        );
+        assert!(physical_memory().is_some_and(|m| m > 1 << 20));
+    }
+}

@@ -1,0 +1,340 @@
+//! Every hostile command-line case of issue 12 in one table: the command, the exit code, the
+//! start of what it prints on stderr, and the files that must be byte-identical (or absent)
+//! afterwards.
+//!
+//! Each case runs in a fresh directory holding copies of the inputs it names, under an
+//! address-space limit (`ulimit -v`, so a runaway allocation fails inside the case instead of
+//! swapping the machine) and a wall-clock timeout (a hang fails the case, the process is
+//! killed). Messages are compared from their start, so a case pins the program, the file
+//! named and what is said about it.
+
+mod util;
+
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// Address-space limit for every case: far above what the sample needs (≈ 300 MB), far
+/// below what the unbounded reads of the issue took (12.9 GB).
+const MEMORY_LIMIT_KIB: u64 = 3 << 20;
+/// Wall-clock limit per case (the slowest case reads 1 GiB of `/dev/zero`).
+const TIMEOUT: Duration = Duration::from_secs(60);
+
+#[derive(Clone, Copy, PartialEq)]
+enum Out {
+    /// Stdout is captured.
+    Captured,
+    /// Stdout is a pipe whose reader is already gone (`… | true`).
+    Closed,
+}
+
+struct Case {
+    program: &'static str,
+    args: &'static [&'static str],
+    code: i32,
+    /// Stderr must start with this; empty means stderr must be empty.
+    stderr: &'static str,
+    /// Stdout must contain this (ignored when empty or when stdout is closed).
+    stdout: &'static str,
+    /// Files that must be byte-identical to what the case directory held before.
+    same: &'static [&'static str],
+    /// Files that must not exist afterwards (no output, no temporary file of it).
+    absent: &'static [&'static str],
+    out: Out,
+}
+
+const BAKE: &str = "qbricks-bake";
+const VIEW: &str = "qbricks-view";
+
+const fn case(
+    program: &'static str,
+    args: &'static [&'static str],
+    code: i32,
+    stderr: &'static str,
+) -> Case {
+    Case {
+        program,
+        args,
+        code,
+        stderr,
+        stdout: "",
+        same: &[],
+        absent: &[],
+        out: Out::Captured,
+    }
+}
+
+impl Case {
+    const fn same(mut self, files: &'static [&'static str]) -> Self {
+        self.same = files;
+        self
+    }
+    const fn absent(mut self, files: &'static [&'static str]) -> Self {
+        self.absent = files;
+        self
+    }
+    const fn stdout(mut self, text: &'static str) -> Self {
+        self.stdout = text;
+        self
+    }
+}
+
+/// Malformed first lines of a points file: each must be an error at line 1, not a header.
+const BAD_FIRST_LINES: &[&str] = &[
+    "0,0",
+    "0,0,0,0",
+    "nan,0,0",
+    "1e309,0,0",
+    "0;0;0",
+    "0 0 0",
+    "0x1,0,0",
+];
+
+const CASES: &[Case] = &[
+    // 3. Bounded memory: inputs read whole are size-checked, devices read with a cap.
+    case(BAKE, &["bake", "/dev/zero", "-o", "z.qbk"], 2,
+        "qbricks-bake: /dev/zero: is not a regular file and is longer than 1073741824 bytes")
+        .absent(&["z.qbk"]),
+    case(BAKE, &["inspect", "/dev/zero"], 2,
+        "qbricks-bake: /dev/zero: is not a regular file and is longer than 1073741824 bytes"),
+    case(BAKE, &["inspect", "huge.vdb"], 2,
+        "qbricks-bake: huge.vdb: file is 1099511627776 bytes, more than the limit of"),
+    case(VIEW, &["probe", "w.qbk", "--points", "/dev/zero"], 2,
+        "qbricks-view: /dev/zero: is not a regular file and is longer than 1073741824 bytes"),
+    case(VIEW, &["render", "w.qbk", "-o", "x.png", "--mesh", "/dev/zero"], 2,
+        "qbricks-view: /dev/zero: is not a regular file and is longer than 1073741824 bytes")
+        .absent(&["x.png"]),
+    case(VIEW, &["info", "/dev/zero"], 2,
+        "qbricks-view: /dev/zero: is not a regular file and is longer than 1073741824 bytes"),
+    case(BAKE, &["synth", "abc", "--n0", "1024", "-o", "a.vdb"], 2,
+        "qbricks-bake: synth abc: scene \"abc\" with n0 1024 in 1 grid(s) needs 2097152 leaves (12464 MiB of grid memory), more than the limit of 4096 MiB")
+        .absent(&["a.vdb"]),
+    case(BAKE, &["synth", "abc", "--n0", "656", "--float", "-o", "a.vdb"], 2,
+        "qbricks-bake: synth abc: scene \"abc\" with n0 656 in 1 grid(s) needs 551368 leaves")
+        .absent(&["a.vdb"]),
+    case(BAKE, &["synth", "wake", "--n0", "65536", "--levels", "10", "-o", "a.vdb"], 2,
+        "qbricks-bake: synth wake: scene \"wake\" with n0 65536 in 10 grid(s) needs")
+        .absent(&["a.vdb"]),
+    // 4. Clear messages naming the file.
+    case(BAKE, &["bake", "dir", "-o", "d.qbk"], 2, "qbricks-bake: dir: is a directory, not a file")
+        .absent(&["d.qbk"]),
+    case(BAKE, &["inspect", "dir"], 2, "qbricks-bake: dir: is a directory, not a file"),
+    case(BAKE, &["inspect", "missing.vdb"], 2,
+        "qbricks-bake: missing.vdb: cannot read: No such file or directory"),
+    case(VIEW, &["info", "dir"], 2, "qbricks-view: dir: is a directory, not a file"),
+    case(VIEW, &["render", "dir", "-o", "x.png"], 2, "qbricks-view: dir: is a directory, not a file")
+        .absent(&["x.png"]),
+    case(VIEW, &["render", "w.qbk", "-o", "x.png", "--mesh", "dir"], 2,
+        "qbricks-view: dir: is a directory, expected an OBJ file")
+        .absent(&["x.png"]),
+    case(VIEW, &["info", "--no-checksum", "flip.qbk"], 2,
+        "qbricks-view: flip.qbk: archive is invalid: invalid UTF-8 (while checking field 'source'"),
+    // 5. No silent wrong answers from probe.
+    case(VIEW, &["probe", "w.qbk", "--points", "bad0.csv"], 2, "qbricks-view: bad0.csv: line 1: "),
+    case(VIEW, &["probe", "w.qbk", "--points", "bad1.csv"], 2, "qbricks-view: bad1.csv: line 1: "),
+    case(VIEW, &["probe", "w.qbk", "--points", "bad2.csv"], 2, "qbricks-view: bad2.csv: line 1: "),
+    case(VIEW, &["probe", "w.qbk", "--points", "bad3.csv"], 2, "qbricks-view: bad3.csv: line 1: "),
+    case(VIEW, &["probe", "w.qbk", "--points", "bad4.csv"], 2, "qbricks-view: bad4.csv: line 1: "),
+    case(VIEW, &["probe", "w.qbk", "--points", "bad5.csv"], 2, "qbricks-view: bad5.csv: line 1: "),
+    case(VIEW, &["probe", "w.qbk", "--points", "bad6.csv"], 2, "qbricks-view: bad6.csv: line 1: "),
+    case(VIEW, &["probe", "w.qbk", "--points", "header.csv"], 0, "")
+        .stdout("\n0.5,0,0,"),
+    case(VIEW, &["probe", "w.qbk", "--line", "-1e308,0,0:1e308,0,0:3"], 0, "")
+        .stdout("\n0,0,0,"),
+    case(VIEW, &["probe", "w.qbk", "--line", "nan,0,0:1,0,0:3"], 2,
+        "qbricks-view: --line: expected a finite number, found `nan`"),
+];
+
+/// Writes the inputs a case may name into `dir`: copies of the bundled sample, a directory,
+/// a sparse 1 TiB file, an archive with byte 48 flipped and the points files.
+fn populate(dir: &Path, case: &Case) {
+    let names: Vec<&str> = case.args.iter().chain(case.same).copied().collect();
+    let data = util::root().join("data");
+    let wanted = |n: &str| names.contains(&n);
+    if wanted("w.qbk") {
+        std::fs::copy(data.join("wake_small.qbk"), dir.join("w.qbk")).expect("copy qbk");
+    }
+    if wanted("w.vdb") {
+        std::fs::copy(data.join("wake_small.vdb"), dir.join("w.vdb")).expect("copy vdb");
+    }
+    if wanted("s.obj") {
+        std::fs::copy(data.join("sphere.obj"), dir.join("s.obj")).expect("copy obj");
+    }
+    if wanted("flip.qbk") {
+        let mut bytes = std::fs::read(data.join("wake_small.qbk")).expect("read qbk");
+        bytes[48] ^= 0xff;
+        std::fs::write(dir.join("flip.qbk"), bytes).expect("write flipped");
+    }
+    if wanted("huge.vdb") {
+        let f = std::fs::File::create(dir.join("huge.vdb")).expect("create sparse");
+        f.set_len(1 << 40).expect("sparse 1 TiB file");
+    }
+    std::fs::create_dir(dir.join("dir")).expect("mkdir");
+    for (i, line) in BAD_FIRST_LINES.iter().enumerate() {
+        std::fs::write(
+            dir.join(format!("bad{i}.csv")),
+            format!("{line}\n0.5,0,0\n"),
+        )
+        .expect("csv");
+    }
+    std::fs::write(dir.join("header.csv"), "x,y,z\n0.5,0,0\n").expect("csv");
+}
+
+struct Outcome {
+    code: Option<i32>,
+    stdout: String,
+    stderr: String,
+    elapsed: Duration,
+}
+
+/// Runs `program args` in `dir` under the memory limit, killing it after [`TIMEOUT`].
+fn run(program: &str, args: &[&str], dir: &Path, out: Out) -> Outcome {
+    let bin = util::bin(program);
+    let mut cmd = Command::new("sh");
+    cmd.arg("-c")
+        .arg(format!(
+            "ulimit -v {MEMORY_LIMIT_KIB} && exec \"$0\" \"$@\""
+        ))
+        .arg(&bin)
+        .args(args)
+        .current_dir(dir)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    let start = Instant::now();
+    let mut child = cmd.spawn().expect("spawn");
+    let mut stdout_pipe = child.stdout.take().expect("stdout");
+    let mut stderr_pipe = child.stderr.take().expect("stderr");
+    // Drain both pipes on threads so a chatty child cannot block on a full pipe.
+    let err_thread = std::thread::spawn(move || {
+        let mut s = String::new();
+        let _ = stderr_pipe.read_to_string(&mut s);
+        s
+    });
+    let out_thread = match out {
+        Out::Captured => Some(std::thread::spawn(move || {
+            let mut s = String::new();
+            let _ = stdout_pipe.read_to_string(&mut s);
+            s
+        })),
+        // The reader goes away at once: every write to stdout fails with EPIPE.
+        Out::Closed => {
+            drop(stdout_pipe);
+            None
+        }
+    };
+    let code = loop {
+        if let Some(status) = child.try_wait().expect("wait") {
+            break status.code();
+        }
+        if start.elapsed() > TIMEOUT {
+            let _ = child.kill();
+            let _ = child.wait();
+            break None;
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    };
+    Outcome {
+        code,
+        stdout: out_thread
+            .map(|t| t.join().expect("stdout thread"))
+            .unwrap_or_default(),
+        stderr: err_thread.join().expect("stderr thread"),
+        elapsed: start.elapsed(),
+    }
+}
+
+fn snapshot(dir: &Path, files: &[&str]) -> Vec<(PathBuf, Option<Vec<u8>>)> {
+    files
+        .iter()
+        .map(|f| {
+            let p = dir.join(f);
+            let bytes = std::fs::read(&p).ok();
+            (p, bytes)
+        })
+        .collect()
+}
+
+/// Hidden temporary files an interrupted or failed write could leave behind.
+fn temp_files(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .expect("read dir")
+        .filter_map(|e| {
+            let name = e.ok()?.file_name().to_string_lossy().into_owned();
+            (name.starts_with('.') && name.contains("tmp")).then_some(name)
+        })
+        .collect()
+}
+
+#[test]
+fn every_case_exits_with_its_code_and_message() {
+    let mut failures = Vec::new();
+    for case in CASES {
+        let dir = tempfile::tempdir().expect("tempdir");
+        populate(dir.path(), case);
+        let before = snapshot(dir.path(), case.same);
+        let o = run(case.program, case.args, dir.path(), case.out);
+        let shown = format!("{} {}", case.program, case.args.join(" "));
+        let mut why = Vec::new();
+        match o.code {
+            None => why.push(format!(
+                "killed after {:.1} s (timeout or signal)",
+                o.elapsed.as_secs_f64()
+            )),
+            Some(c) if c != case.code => why.push(format!("exit {c}, expected {}", case.code)),
+            Some(_) => {}
+        }
+        let stderr_ok = if case.stderr.is_empty() {
+            o.stderr.is_empty()
+        } else {
+            o.stderr.starts_with(case.stderr) && o.stderr.trim_end().lines().count() == 1
+        };
+        if !stderr_ok {
+            why.push(format!(
+                "stderr {:?}, expected one line starting {:?}",
+                o.stderr, case.stderr
+            ));
+        }
+        if case.out == Out::Captured && !o.stdout.contains(case.stdout) {
+            why.push(format!("stdout lacks {:?}: {:?}", case.stdout, o.stdout));
+        }
+        for ((path, old), (_, new)) in before.iter().zip(snapshot(dir.path(), case.same)) {
+            if *old != new {
+                why.push(format!("{} changed", path.display()));
+            }
+        }
+        for f in case.absent {
+            if dir.path().join(f).exists() {
+                why.push(format!("{f} exists"));
+            }
+        }
+        let temps = temp_files(dir.path());
+        if !temps.is_empty() {
+            why.push(format!("temporary files left: {temps:?}"));
+        }
+        if !why.is_empty() {
+            failures.push(format!("{shown}: {}", why.join("; ")));
+        }
+    }
+    assert!(
+        failures.is_empty(),
+        "{} of {} cases failed:\n{}",
+        failures.len(),
+        CASES.len(),
+        failures.join("\n")
+    );
+}
+
+/// The table covers each malformed points line once (a guard against the list and the
+/// files drifting apart).
+#[test]
+fn table_has_a_case_per_bad_points_line() {
+    for i in 0..BAD_FIRST_LINES.len() {
+        let name = format!("bad{i}.csv");
+        assert!(
+            CASES.iter().any(|c| c.args.contains(&name.as_str())),
+            "no case for {name}"
+        );
+    }
+}
