@@ -41,6 +41,9 @@ struct Case {
     same: &'static [&'static str],
     /// Files that must not exist afterwards (no output, no temporary file of it).
     absent: &'static [&'static str],
+    /// Outputs that must exist afterwards, each byte-identical to a reference in the case
+    /// directory when one is given (`("o.qbk", "w.qbk")`), else non-empty.
+    made: &'static [(&'static str, &'static str)],
     out: Out,
 }
 
@@ -61,6 +64,7 @@ const fn case(
         stdout: "",
         same: &[],
         absent: &[],
+        made: &[],
         out: Out::Captured,
     }
 }
@@ -72,6 +76,14 @@ impl Case {
     }
     const fn absent(mut self, files: &'static [&'static str]) -> Self {
         self.absent = files;
+        self
+    }
+    const fn made(mut self, files: &'static [(&'static str, &'static str)]) -> Self {
+        self.made = files;
+        self
+    }
+    const fn closed(mut self) -> Self {
+        self.out = Out::Closed;
         self
     }
     const fn stdout(mut self, text: &'static str) -> Self {
@@ -92,6 +104,40 @@ const BAD_FIRST_LINES: &[&str] = &[
 ];
 
 const CASES: &[Case] = &[
+    // 1. No lost files: an output that is an input is refused and the input kept.
+    case(BAKE, &["bake", "w.vdb", "-o", "w.vdb"], 2,
+        "qbricks-bake: w.vdb: refusing to overwrite the input file w.vdb")
+        .same(&["w.vdb"]),
+    // 1. Non-regular outputs are written into, not replaced (checked after the table).
+    case(BAKE, &["bake", "w.vdb", "-o", "/dev/null"], 0, ""),
+    case(BAKE, &["synth", "wake", "--n0", "8", "--levels", "1", "-o", "/dev/null"], 0, ""),
+    case(VIEW, &["render", "w.qbk", "-o", "/dev/null", "--width", "8", "--height", "6",
+        "--save-state", "/dev/null"], 0, ""),
+    // 2. A closed stdout ends quietly, with the output file complete.
+    case(BAKE, &["inspect", "--json", "w.vdb"], 0, "").closed(),
+    case(BAKE, &["inspect", "w.vdb"], 0, "").closed(),
+    // (The baked file records its source's name: bake the sample under its own name.)
+    case(BAKE, &["bake", "wake_small.vdb", "-o", "o.qbk"], 0, "")
+        .closed()
+        .made(&[("o.qbk", "w.qbk")]),
+    case(BAKE, &["bake", "wake_small.vdb", "-o", "o.qbk", "--json"], 0, "")
+        .closed()
+        .made(&[("o.qbk", "w.qbk")]),
+    case(BAKE, &["synth", "wake", "--n0", "8", "--levels", "2", "-o", "s.vdb"], 0, "")
+        .closed()
+        .made(&[("s.vdb", "")]),
+    case(VIEW, &["info", "--json", "w.qbk"], 0, "").closed(),
+    case(VIEW, &["info", "w.qbk"], 0, "").closed(),
+    case(VIEW, &["probe", "w.qbk", "--line", "0,0,0:1,0,0:1000", "--json"], 0, "").closed(),
+    case(VIEW, &["probe", "w.qbk", "--line", "0,0,0:1,0,0:1000"], 0, "").closed(),
+    case(VIEW, &["render", "w.qbk", "-o", "r.png", "--width", "8", "--height", "6", "--json"],
+        0, "")
+        .closed()
+        .made(&[("r.png", "")]),
+    case(VIEW, &["render", "w.qbk", "-o", "r.png", "--width", "8", "--height", "6",
+        "--pixel", "3,3"], 0, "")
+        .closed()
+        .made(&[("r.png", "")]),
     // 3. Bounded memory: inputs read whole are size-checked, devices read with a cap.
     case(BAKE, &["bake", "/dev/zero", "-o", "z.qbk"], 2,
         "qbricks-bake: /dev/zero: is not a regular file and is longer than 1073741824 bytes")
@@ -149,14 +195,22 @@ const CASES: &[Case] = &[
 /// Writes the inputs a case may name into `dir`: copies of the bundled sample, a directory,
 /// a sparse 1 TiB file, an archive with byte 48 flipped and the points files.
 fn populate(dir: &Path, case: &Case) {
-    let names: Vec<&str> = case.args.iter().chain(case.same).copied().collect();
+    let names: Vec<&str> = case
+        .args
+        .iter()
+        .chain(case.same)
+        .chain(case.made.iter().map(|(_, r)| r))
+        .copied()
+        .collect();
     let data = util::root().join("data");
     let wanted = |n: &str| names.contains(&n);
     if wanted("w.qbk") {
         std::fs::copy(data.join("wake_small.qbk"), dir.join("w.qbk")).expect("copy qbk");
     }
-    if wanted("w.vdb") {
-        std::fs::copy(data.join("wake_small.vdb"), dir.join("w.vdb")).expect("copy vdb");
+    for name in ["w.vdb", "wake_small.vdb"] {
+        if wanted(name) {
+            std::fs::copy(data.join("wake_small.vdb"), dir.join(name)).expect("copy vdb");
+        }
     }
     if wanted("s.obj") {
         std::fs::copy(data.join("sphere.obj"), dir.join("s.obj")).expect("copy obj");
@@ -304,6 +358,19 @@ fn every_case_exits_with_its_code_and_message() {
                 why.push(format!("{} changed", path.display()));
             }
         }
+        for (f, reference) in case.made {
+            match std::fs::read(dir.path().join(f)) {
+                Err(e) => why.push(format!("{f} not written: {e}")),
+                Ok(b) if reference.is_empty() && b.is_empty() => why.push(format!("{f} is empty")),
+                Ok(b)
+                    if !reference.is_empty()
+                        && std::fs::read(dir.path().join(reference)).ok().as_ref() != Some(&b) =>
+                {
+                    why.push(format!("{f} differs from {reference}"))
+                }
+                Ok(_) => {}
+            }
+        }
         for f in case.absent {
             if dir.path().join(f).exists() {
                 why.push(format!("{f} exists"));
@@ -316,6 +383,15 @@ fn every_case_exits_with_its_code_and_message() {
         if !why.is_empty() {
             failures.push(format!("{shown}: {}", why.join("; ")));
         }
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        let null = std::fs::metadata("/dev/null").expect("/dev/null");
+        assert!(
+            null.file_type().is_char_device(),
+            "/dev/null was replaced by a regular file"
+        );
     }
     assert!(
         failures.is_empty(),

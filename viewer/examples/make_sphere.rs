@@ -31,10 +31,11 @@ fn main() -> anyhow::Result<()> {
         sphere.positions.len(),
         sphere.triangles.len()
     ));
-    // Write to a temporary file next to the output, then rename.
-    let tmp = out.with_extension("obj.tmp");
-    std::fs::write(&tmp, text.as_bytes()).map_err(|e| anyhow::anyhow!("{}: {e}", tmp.display()))?;
-    std::fs::rename(&tmp, &out).map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
+    format::output::write_atomic(&out, |f| {
+        use std::io::Write;
+        f.write_all(text.as_bytes())
+    })
+    .map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
     println!("{}: {} bytes", out.display(), text.len());
     Ok(())
 }

@@ -1,7 +1,6 @@
 //! The film: per-pixel sums of ray colours, filled tile by tile and sample wave by
-//! sample wave, resolved to an image; and images to PNG files, written atomically
-//! (temporary file in the target directory, fsync, rename), so a reader never sees a
-//! partial PNG.
+//! sample wave, resolved to an image; and images to PNG files, written atomically with
+//! `format::output::write_atomic`, so a reader never sees a partial PNG.
 //!
 //! Sums are kept in `f64` and every pixel adds its samples in sample order, so an image
 //! accumulated over several waves is bit-identical to one rendered in a single pass.
@@ -107,22 +106,5 @@ pub fn save_png(path: &Path, width: u32, height: u32, rgb: &[[f32; 3]]) -> Resul
         message,
     };
     let bytes = encode_png(width, height, rgb).map_err(err)?;
-    let name = path
-        .file_name()
-        .ok_or_else(|| err("expected a file name".into()))?;
-    let mut tmp_name = std::ffi::OsString::from(".");
-    tmp_name.push(name);
-    tmp_name.push(format!(".tmp-{}", std::process::id()));
-    let tmp = path.with_file_name(tmp_name);
-    let result = (|| {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(&bytes)?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(err(e.to_string()));
-    }
-    Ok(())
+    format::output::write_atomic(path, |f| f.write_all(&bytes)).map_err(|e| err(e.to_string()))
 }

@@ -8,6 +8,7 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+use format::input::{read_whole, InputErrorKind, Limits};
 use serde::{Deserialize, Serialize};
 
 use crate::camera::{Camera, Projection};
@@ -290,23 +291,29 @@ impl ViewState {
         Ok(state)
     }
 
-    /// Reads a state file (at most 16 MiB).
+    /// Reads a state file (at most 16 MiB, a regular file checked by its size before
+    /// reading, a device or pipe read no further than that).
     pub fn load(path: &Path) -> Result<ViewState, ViewStateError> {
         const MAX_BYTES: u64 = 16 << 20;
-        let io = |error| ViewStateError::Io {
+        let invalid = |message: String| ViewStateError::Invalid {
             path: path.to_path_buf(),
-            error,
+            message,
         };
-        let len = std::fs::metadata(path).map_err(io)?.len();
-        if len > MAX_BYTES {
-            return Err(ViewStateError::Invalid {
+        let bytes = read_whole(path, Limits::both(MAX_BYTES)).map_err(|e| match e.kind {
+            InputErrorKind::Io(error) => ViewStateError::Io {
                 path: path.to_path_buf(),
-                message: format!(
-                    "expected a JSON view state of at most {MAX_BYTES} bytes, found {len} bytes"
-                ),
-            });
-        }
-        let text = std::fs::read_to_string(path).map_err(io)?;
+                error,
+            },
+            InputErrorKind::TooLarge { size, .. } => invalid(format!(
+                "expected a JSON view state of at most {MAX_BYTES} bytes, found {size} bytes"
+            )),
+            InputErrorKind::StreamTooLarge { .. } => invalid(format!(
+                "expected a JSON view state of at most {MAX_BYTES} bytes, found more"
+            )),
+            kind => invalid(kind.to_string()),
+        })?;
+        let text = String::from_utf8(bytes)
+            .map_err(|e| invalid(format!("not UTF-8 text: {}", e.utf8_error())))?;
         ViewState::from_json(path, &text)
     }
 
@@ -316,33 +323,17 @@ impl ViewState {
         serde_json::to_string_pretty(self).unwrap_or_default()
     }
 
-    /// Writes the state atomically: to a temporary file next to `path`, then renamed.
+    /// Writes the state with [`format::output::write_atomic`] (temporary file next to
+    /// `path`, renamed over it; a device or FIFO is written into).
     pub fn save(&self, path: &Path) -> Result<(), ViewStateError> {
-        let io = |error| ViewStateError::Io {
+        format::output::write_atomic(path, |f| {
+            f.write_all(self.to_json().as_bytes())?;
+            f.write_all(b"\n")
+        })
+        .map_err(|error| ViewStateError::Io {
             path: path.to_path_buf(),
             error,
-        };
-        let name = path.file_name().ok_or_else(|| {
-            io(std::io::Error::new(
-                std::io::ErrorKind::InvalidInput,
-                "expected a file name",
-            ))
-        })?;
-        let mut tmp_name = std::ffi::OsString::from(".");
-        tmp_name.push(name);
-        tmp_name.push(format!(".tmp-{}", std::process::id()));
-        let tmp = path.with_file_name(tmp_name);
-        let result = (|| {
-            let mut f = std::fs::File::create(&tmp)?;
-            f.write_all(self.to_json().as_bytes())?;
-            f.write_all(b"\n")?;
-            f.sync_all()?;
-            std::fs::rename(&tmp, path)
-        })();
-        if result.is_err() {
-            let _ = std::fs::remove_file(&tmp);
-        }
-        result.map_err(io)
+        })
     }
 }
 

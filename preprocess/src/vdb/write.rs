@@ -23,8 +23,9 @@
 //! see [`NodeMeta`]), then the values it says must be stored, each block optionally
 //! zlib-compressed behind an `i64` size (negative: stored raw).
 //!
-//! Output is deterministic (same grids → same bytes) and atomic: the file is written to a
-//! temporary name in the target directory, synced, then renamed over the target.
+//! Output is deterministic (same grids → same bytes) and atomic: the file is written through
+//! `format::output::write_atomic` (temporary name in the target directory, synced, renamed
+//! over the target).
 
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -297,44 +298,21 @@ fn unique_names(grids: &[AnyGrid]) -> Vec<String> {
         .collect()
 }
 
-/// Writes through `f` into a temporary file next to `path`, syncs it and renames it over
-/// `path`; on any error the temporary file is removed and `path` is untouched.
+/// Writes through `f` with [`format::output::write_atomic`] (temporary file next to
+/// `path`, synced, renamed over it; removed on error or SIGINT/SIGTERM).
 fn write_atomically(
     path: &Path,
-    f: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
+    f: impl FnOnce(&mut BufWriter<&mut File>) -> std::io::Result<()>,
 ) -> Result<(), WriteError> {
-    let io_err = |source| WriteError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    let file_name = path
-        .file_name()
-        .ok_or_else(|| {
-            io_err(std::io::Error::new(
-                std::io::ErrorKind::InvalidInput,
-                "not a file path",
-            ))
-        })?
-        .to_string_lossy()
-        .into_owned();
-    let tmp = dir.join(format!(".{file_name}.tmp-{}", std::process::id()));
-    let result = (|| {
-        let file = File::create(&tmp)?;
+    format::output::write_atomic(path, |file| {
         let mut out = BufWriter::with_capacity(1 << 20, file);
         f(&mut out)?;
-        let file = out.into_inner().map_err(|e| e.into_error())?;
-        file.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(io_err(e));
-    }
-    Ok(())
+        out.flush()
+    })
+    .map_err(|source| WriteError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
 }
 
 /// A deterministic UUID-shaped tag: two FNV-1a hashes of the grid names and shapes.

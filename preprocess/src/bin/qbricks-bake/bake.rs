@@ -1,13 +1,14 @@
 //! `qbricks-bake bake`: argument parsing, progress and output; the work is in
 //! `qbricks_preprocess::bake`.
 
-use std::io::IsTerminal;
+use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use clap::ValueEnum;
+use format::output::QuietStdout;
 use format::writer::{write_with, WriteOptions};
 use indicatif::{ProgressBar, ProgressStyle};
 use qbricks_preprocess::bake::{bake_with_progress, BakeOptions, DEFAULT_MAX_BRICK};
@@ -194,6 +195,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             eprintln!("qbricks-bake: warning: {input_name}: {w}");
         }
     }
+    let mut out = QuietStdout::new();
     if args.json {
         let fields: Vec<serde_json::Value> = summary
             .fields
@@ -213,9 +215,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "seconds": seconds,
             "output": output.display().to_string(),
         });
-        println!("{}", serde_json::to_string_pretty(&v)?);
+        writeln!(out, "{}", serde_json::to_string_pretty(&v)?)?;
     } else if !args.quiet {
-        println!(
+        writeln!(
+            out,
             "{} -> {}: {} input cells, {} leaf cells ({} dropped), {} bricks, {} regions, {} KD nodes, {:.2} s",
             input_name,
             output.display(),
@@ -226,9 +229,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             summary.regions,
             summary.kd_nodes,
             seconds
-        );
+        )?;
         for f in &summary.fields {
-            println!("  {:<12} min {:>12.6e} max {:>12.6e}", f.name, f.min, f.max);
+            writeln!(
+                out,
+                "  {:<12} min {:>12.6e} max {:>12.6e}",
+                f.name, f.min, f.max
+            )?;
         }
     }
     Ok(())

@@ -4,6 +4,7 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::Context;
+use format::output::QuietStdout;
 use qbricks_preprocess::vdb::{inspect, VdbFile};
 
 #[derive(clap::Args)]
@@ -18,7 +19,7 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let file = VdbFile::open(&args.file)?;
     let report = inspect::report(&file)?;
-    let mut out = std::io::stdout().lock();
+    let mut out = QuietStdout::new();
     if args.json {
         serde_json::to_writer_pretty(&mut out, &report).context("writing JSON")?;
         writeln!(out)?;

@@ -48,9 +48,15 @@ fn main() -> ExitCode {
     }
 }
 
+/// Whether the run failed because its stdout reader went away (output through
+/// `QuietStdout` never fails that way; this catches any other path, including a broken pipe
+/// wrapped in a JSON serialisation error). Such a run ends quietly with status 0.
 fn is_broken_pipe(err: &anyhow::Error) -> bool {
+    let broken = Some(std::io::ErrorKind::BrokenPipe);
     err.chain().any(|e| {
-        e.downcast_ref::<std::io::Error>()
-            .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+        e.downcast_ref::<std::io::Error>().map(std::io::Error::kind) == broken
+            || e.downcast_ref::<serde_json::Error>()
+                .and_then(serde_json::Error::io_error_kind)
+                == broken
     })
 }

@@ -3,8 +3,11 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
+use std::io::Write;
+
 use anyhow::Context;
 use clap::ValueEnum;
+use format::output::QuietStdout;
 use qbricks_preprocess::synth::{write_scene, SynthOptions};
 use qbricks_preprocess::vdb::write::Compression;
 
@@ -59,20 +62,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let (grids, bytes) =
         write_scene(&args.output, &opts).with_context(|| format!("synth {}", args.scene))?;
+    let mut out = QuietStdout::new();
     for g in &grids {
-        println!(
+        writeln!(
+            out,
             "{:<10} {:<6} voxel {:<10.6} active voxels {:>10} leaves {:>7}",
             g.name, g.value_type, g.voxel_size, g.active_voxels, g.leaves
-        );
+        )?;
     }
     let voxels: u64 = grids.iter().map(|g| g.active_voxels).sum();
-    println!(
+    writeln!(
+        out,
         "wrote {} ({} bytes, {} grids, {} active voxels) in {:.2} s",
         args.output.display(),
         bytes,
         grids.len(),
         voxels,
         start.elapsed().as_secs_f64()
-    );
+    )?;
     Ok(())
 }

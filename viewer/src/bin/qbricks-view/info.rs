@@ -3,6 +3,7 @@
 use std::io::Write;
 use std::path::PathBuf;
 
+use format::output::QuietStdout;
 use format::{BrickFileView, OpenOptions};
 
 #[derive(clap::Args)]
@@ -24,7 +25,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let view = BrickFileView::open_with(&args.file, &options)?;
     let info = qbricks_viewer::info::info(&view);
-    let mut out = std::io::stdout().lock();
+    let mut out = QuietStdout::new();
     if args.json {
         serde_json::to_writer_pretty(&mut out, &info)?;
         writeln!(out)?;

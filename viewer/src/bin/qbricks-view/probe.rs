@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Context};
 use format::input::{read_whole, Limits};
+use format::output::QuietStdout;
 use qbricks_viewer::probe;
 use qbricks_viewer::volume::Volume;
 
@@ -53,8 +54,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None => probe::default_field(&vol),
     };
     let res = probe::probe(&vol, &points, gf);
-    let stdout = std::io::stdout();
-    let mut out = std::io::BufWriter::new(stdout.lock());
+    let mut out = std::io::BufWriter::new(QuietStdout::new());
     if args.json {
         // JSON has no NaN: points outside the data get null values.
         let num = |v: f64| {

@@ -1,9 +1,11 @@
 //! `qbricks-view render`.
 
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{bail, Context};
+use format::output::QuietStdout;
 use qbricks_viewer::film;
 use qbricks_viewer::mesh::Meshes;
 use qbricks_viewer::render::{FrameReport, Renderer, Scene};
@@ -113,7 +115,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(px) = &args.pixel {
         let (x, y) = parse_pixel(px, state.width, state.height)?;
         let trace = renderer.trace_pixel(&scene, x, y);
-        println!("{}", serde_json::to_string_pretty(&trace)?);
+        writeln!(
+            QuietStdout::new(),
+            "{}",
+            serde_json::to_string_pretty(&trace)?
+        )?;
         if args.output.is_none() {
             return Ok(());
         }
@@ -137,7 +143,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     if args.json {
         let report = FrameReport::new(&frame, &state, ms, open_ms, renderer.threads());
-        println!("{}", serde_json::to_string(&report)?);
+        writeln!(QuietStdout::new(), "{}", serde_json::to_string(&report)?)?;
     }
     Ok(())
 }
