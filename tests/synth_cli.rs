@@ -53,7 +53,7 @@ fn bad_input_exits_2_with_one_line() {
         (vec!["synth", "wake", "-o", out, "--levels", "0"], "levels"),
         (
             vec!["synth", "wake", "-o", out, "--n0", "4096", "--levels", "10"],
-            "voxels",
+            "MiB of grid memory",
         ),
         (
             vec![
