@@ -14,5 +14,6 @@ pub mod kdtree;
 pub mod levels;
 pub mod nonfinite;
 pub mod regions;
+pub mod sequence;
 pub mod synth;
 pub mod vdb;

@@ -2,7 +2,7 @@
 //! `qbricks_preprocess::bake`.
 
 use std::io::{IsTerminal, Write};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
@@ -11,7 +11,10 @@ use clap::ValueEnum;
 use format::output::QuietStdout;
 use format::writer::{write_with, WriteOptions};
 use indicatif::{ProgressBar, ProgressStyle};
-use qbricks_preprocess::bake::{bake_with_progress, BakeOptions, DEFAULT_MAX_BRICK};
+use qbricks_preprocess::bake::{bake_with_progress, BakeOptions, BakeSummary, DEFAULT_MAX_BRICK};
+use qbricks_preprocess::sequence::FramePattern;
+
+use crate::sequence;
 use qbricks_preprocess::derive::Stencil;
 use qbricks_preprocess::fields::FieldKind;
 use qbricks_preprocess::inputs::{read_inputs, Layout, ReadError, ReadOptions};
@@ -75,6 +78,10 @@ pub struct Args {
     /// Print nothing but errors.
     #[arg(long)]
     pub quiet: bool,
+    /// For a frame sequence: frames baked at once (default: as many as the threads and the
+    /// available memory allow).
+    #[arg(long, value_name = "N")]
+    pub jobs: Option<usize>,
     /// Show progress on stderr even when it is not a terminal.
     #[arg(long)]
     pub progress: bool,
@@ -106,7 +113,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             _ => None,
         })
         .collect();
-    let mut opts = BakeOptions {
+    let read = ReadOptions {
+        grids: args.grids.clone(),
+        velocity: args.velocity.clone(),
+        layout: match args.layout {
+            LayoutArg::Auto => Layout::Auto,
+            LayoutArg::Centred => Layout::Centred,
+            LayoutArg::Staggered => Layout::Staggered,
+        },
+        max_cells: 0,
+        extra,
+    };
+    let opts = BakeOptions {
         grids: args.grids.clone(),
         fields,
         stencil: match args.stencil {
@@ -115,13 +133,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         },
         max_brick: args.max_brick,
         strict: args.strict,
-        source: args
-            .input
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default(),
         ..BakeOptions::default()
     };
+    if let Some(pattern) = FramePattern::parse(&args.input)? {
+        if !args.input.exists() {
+            return sequence::run(&args, pattern, &opts, &read, start);
+        }
+    }
 
     // Progress: on a terminal a spinner naming the stage, shown once the bake has taken a
     // second (short bakes stay silent); with --progress elsewhere, plain stage lines.
@@ -152,39 +170,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         b.set_message(name.to_string());
     };
 
-    // Read only the grids that will be baked.
-    stage("reading VDB");
-    let file = VdbFile::open(&args.input)?;
-    let read = ReadOptions {
-        grids: args.grids.clone(),
-        velocity: args.velocity.clone(),
-        layout: match args.layout {
-            LayoutArg::Auto => Layout::Auto,
-            LayoutArg::Centred => Layout::Centred,
-            LayoutArg::Staggered => Layout::Staggered,
-        },
-        max_cells: opts.max_cells,
-        extra,
-    };
-    let (grids, staggered) = match read_inputs(&file, &read) {
-        Ok(v) => v,
-        // Reader errors already name the file.
-        Err(ReadError::Vdb(e)) => return Err(e.into()),
-        Err(e) => return Err(anyhow::Error::new(e).context(input_name.clone())),
-    };
-    opts.staggered = staggered;
-    drop(file);
-
-    let (brick_file, summary) =
-        bake_with_progress(grids, &opts, &stage).with_context(|| input_name.clone())?;
-    stage("writing");
-    write_with(
-        &output,
-        &brick_file,
-        &WriteOptions {
-            forbid_overwrite_of: Some(args.input.clone()),
-        },
-    )?;
+    let summary = bake_file(&args.input, &output, &opts, &read, &stage)?;
     if let Some(b) = bar.get() {
         b.finish_and_clear();
     }
@@ -239,4 +225,48 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// Reads the grids of `input` that `read` selects, bakes them with `opts` (source and
+/// staggered grids filled in per file) and writes `output` atomically (never over `input`).
+pub fn bake_file(
+    input: &Path,
+    output: &Path,
+    opts: &BakeOptions,
+    read: &ReadOptions,
+    stage: &(dyn Fn(&str) + Sync),
+) -> anyhow::Result<BakeSummary> {
+    let input_name = input.display().to_string();
+    let mut opts = opts.clone();
+    opts.source = input
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    // Read only the grids that will be baked.
+    stage("reading VDB");
+    let file = VdbFile::open(input)?;
+    let read = ReadOptions {
+        max_cells: opts.max_cells,
+        ..read.clone()
+    };
+    let (grids, staggered) = match read_inputs(&file, &read) {
+        Ok(v) => v,
+        // Reader errors already name the file.
+        Err(ReadError::Vdb(e)) => return Err(e.into()),
+        Err(e) => return Err(anyhow::Error::new(e).context(input_name)),
+    };
+    opts.staggered = staggered;
+    drop(file);
+
+    let (brick_file, summary) =
+        bake_with_progress(grids, &opts, stage).with_context(|| input_name.clone())?;
+    stage("writing");
+    write_with(
+        output,
+        &brick_file,
+        &WriteOptions {
+            forbid_overwrite_of: Some(input.to_path_buf()),
+        },
+    )?;
+    Ok(summary)
 }

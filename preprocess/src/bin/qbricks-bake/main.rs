@@ -6,6 +6,7 @@ use clap::{Parser, Subcommand};
 
 mod bake;
 mod inspect;
+mod sequence;
 mod synth;
 
 #[derive(Parser)]
