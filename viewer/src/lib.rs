@@ -5,6 +5,8 @@
 // Numeric kernels index several per-axis arrays in lockstep; iterators would obscure them.
 #![allow(clippy::needless_range_loop)]
 
+#[cfg(feature = "gui")]
+pub mod app;
 pub mod bvh;
 pub mod camera;
 pub mod colormap;

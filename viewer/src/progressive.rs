@@ -1,12 +1,15 @@
 //! Progressive rendering off the caller's thread, for the interactive window.
 //!
-//! Each view the window asks for is a [`Job`]; submitting one cancels the frame in flight
-//! (tiles check the cancel flag before every row) and gets a new generation number. A
-//! job first renders a preview at a reduced resolution (the divisor adapts so a preview
-//! takes about [`ProgressiveOptions::preview_ms`]), then the full resolution one sample
-//! wave after another up to the view's `spp`. Intermediate images are published as
-//! [`Update`]s; only updates of the newest generation are ever handed out, so a stale
-//! frame can never replace a newer one. The finished full-resolution image is the same,
+//! Each view the window asks for is a [`Job`] with a new generation number. A job first
+//! renders a preview at a reduced resolution (the divisor adapts so a preview takes about
+//! [`ProgressiveOptions::preview_ms`]), then the full resolution one sample wave after
+//! another up to the view's `spp`. Submitting a job cancels a full-resolution frame in
+//! flight (tiles check the cancel flag before every row); a preview in flight is let
+//! finish, because while the user drags, every UI frame brings a new view, and
+//! cancelling previews would show nothing until the drag ends. Intermediate images are
+//! published as [`Update`]s; an update older than one already published is dropped, so a
+//! stale frame never replaces a newer one, and full-resolution work is only ever
+//! published for the newest job. The finished full-resolution image is the same,
 //! pixel for pixel, as the headless [`crate::render::render`] of the same view state,
 //! because both sum the same samples in the same order into a [`Film`].
 //!
@@ -105,6 +108,10 @@ struct Inner {
     cancel: CancelToken,
     pending: Option<Pending>,
     latest: Option<Update>,
+    /// Generation of the newest update published.
+    published: u64,
+    /// The job in flight is rendering its preview (not cancelled by a new job).
+    in_preview: bool,
     /// Generation of the last completed job.
     completed: u64,
     error: Option<(u64, String)>,
@@ -126,12 +133,16 @@ impl Shared {
         self.inner.lock().unwrap_or_else(|e| e.into_inner())
     }
 
-    /// Publishes `u` if its job is still the newest; returns whether it was.
+    /// Publishes `u` unless a newer image was published already (previews) or a newer
+    /// job was submitted (full resolution); returns whether it was published.
     fn publish(&self, u: Update) -> bool {
         let mut g = self.lock();
-        if g.generation != u.generation {
+        let newest_job = g.generation == u.generation;
+        let is_preview = matches!(u.level, Level::Preview { .. });
+        if u.generation < g.published || !(newest_job || is_preview) {
             return false;
         }
+        g.published = u.generation;
         if u.complete {
             g.completed = u.generation;
         }
@@ -175,6 +186,8 @@ impl Progressive {
                 cancel: CancelToken::new(),
                 pending: None,
                 latest: None,
+                published: 0,
+                in_preview: false,
                 completed: 0,
                 error: None,
                 busy: false,
@@ -204,7 +217,9 @@ impl Progressive {
     /// Starts rendering `job`, cancelling the frame in flight. Returns its generation.
     pub fn submit(&self, job: Job) -> u64 {
         let mut g = self.shared.lock();
-        g.cancel.cancel();
+        if !g.in_preview {
+            g.cancel.cancel();
+        }
         g.generation += 1;
         g.cancel = CancelToken::new();
         g.pending = Some(Pending {
@@ -224,13 +239,10 @@ impl Progressive {
         self.shared.lock().generation
     }
 
-    /// The newest image of the newest job, if one has come since the last call.
+    /// The newest image, if one has come since the last call. Generations never go
+    /// back: an image is never older than one returned before.
     pub fn latest(&self) -> Option<Update> {
-        let mut g = self.shared.lock();
-        match g.latest.take() {
-            Some(u) if u.generation == g.generation => Some(u),
-            _ => None,
-        }
+        self.shared.lock().latest.take()
     }
 
     /// Why the newest job could not render, if it failed.
@@ -349,7 +361,11 @@ fn run_job(shared: &Shared, renderer: &Renderer, p: Pending) -> Result<(), Strin
     // Preview: a fraction of the resolution, one sample per pixel.
     let mut backdrop: Option<Vec<[f32; 3]>> = None;
     if job.preview {
-        let scale = shared.lock().scale;
+        let scale = {
+            let mut g = shared.lock();
+            g.in_preview = true;
+            g.scale
+        };
         let mut ps = state.clone();
         ps.width = w.div_ceil(scale).max(1);
         ps.height = h.div_ceil(scale).max(1);
@@ -363,6 +379,11 @@ fn run_job(shared: &Shared, renderer: &Renderer, p: Pending) -> Result<(), Strin
             g.1.add(&r);
         };
         let done = renderer.render_tiles(&scene, &tiles(ps.width, ps.height), 0..1, &cancel, &sink);
+        let superseded = {
+            let mut g = shared.lock();
+            g.in_preview = false;
+            g.pending.is_some()
+        };
         if !done {
             return Ok(());
         }
@@ -392,6 +413,10 @@ fn run_job(shared: &Shared, renderer: &Renderer, p: Pending) -> Result<(), Strin
             since_submit_ms: since(submitted),
             complete: false,
         });
+        if superseded {
+            // A newer view is waiting: its preview matters more than this full frame.
+            return Ok(());
+        }
     }
 
     // Full resolution, one sample wave after another.

@@ -7,16 +7,27 @@ use clap::{Parser, Subcommand};
 mod info;
 mod probe;
 mod render;
+mod window;
 
 #[derive(Parser)]
-#[command(name = "qbricks-view", version, about = "Ray-cast .qbk brick files")]
+#[command(
+    name = "qbricks-view",
+    version,
+    about = "Ray-cast .qbk brick files: a window to explore them, or headless render, probe, info",
+    args_conflicts_with_subcommands = true
+)]
 struct Cli {
     #[command(subcommand)]
-    command: Command,
+    command: Option<Command>,
+    /// Without a subcommand: open the window.
+    #[command(flatten)]
+    window: window::Args,
 }
 
 #[derive(Subcommand)]
 enum Command {
+    /// Open the interactive window on a .qbk file (the default without a subcommand).
+    Open(window::Args),
     /// Describe a .qbk file.
     Info(info::Args),
     /// Render a view to a PNG without a window.
@@ -28,9 +39,11 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Info(args) => info::run(args),
-        Command::Render(args) => render::run(*args),
-        Command::Probe(args) => probe::run(args),
+        None => window::run(cli.window),
+        Some(Command::Open(args)) => window::run(args),
+        Some(Command::Info(args)) => info::run(args),
+        Some(Command::Render(args)) => render::run(*args),
+        Some(Command::Probe(args)) => probe::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,0 +1,244 @@
+//! The window driven without a user: `--screenshot` (let the image refine, save a
+//! screenshot of the whole window, exit) and `--orbit-frames` (turn the camera a full
+//! circle over N frames in the real window, let it refine, report frame rates).
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use eframe::egui;
+use serde::Serialize;
+
+use crate::film;
+use crate::progressive::{Level, Update};
+
+/// What to do without a user, then close the window.
+#[derive(Debug, Clone)]
+pub enum Script {
+    /// Wait until the image is refined (or `frames` UI frames passed), save a screenshot.
+    Screenshot { out: PathBuf, frames: Option<u32> },
+    /// Orbit a full turn over `frames` UI frames, let the image refine, report; then
+    /// save a screenshot if `screenshot` is given.
+    Orbit {
+        frames: u32,
+        screenshot: Option<PathBuf>,
+    },
+}
+
+/// What `--orbit-frames N --json` prints.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct OrbitReport {
+    /// Median rate of new preview images shown while orbiting, per second.
+    pub preview_fps: f64,
+    /// Median and largest time between UI frames while the renderer works, ms.
+    pub ui_frame_ms_p50: f64,
+    pub ui_frame_ms_max: f64,
+    /// From the last orbit input to the refined full-resolution image on screen, ms.
+    pub refine_ms: f64,
+    /// Full-resolution render time of the refined image, ms.
+    pub full_frame_ms: f64,
+    /// Preview divisor at the end of the orbit (4: a quarter of the resolution).
+    pub preview_scale: u32,
+    /// UI frames of the orbit and preview images shown during it.
+    pub orbit_frames: u32,
+    pub previews_shown: u32,
+    /// Render image size (the central area) in pixels.
+    pub window: [u32; 2],
+    pub threads: usize,
+}
+
+/// What the window should do before drawing a frame.
+pub enum ScriptStep {
+    Nothing,
+    /// Turn the camera by this many radians about the pivot.
+    Orbit(f64),
+}
+
+enum Phase {
+    Orbiting { frame: u32 },
+    Refining { since: Instant },
+    Screenshot { waited: u32, requested: bool },
+    Done,
+}
+
+pub struct ScriptRunner {
+    script: Script,
+    /// Where the screenshot goes, if one is taken.
+    screenshot: Option<PathBuf>,
+    phase: Phase,
+    frames_seen: u32,
+    intervals_ms: Vec<f64>,
+    preview_times: Vec<Instant>,
+    report: OrbitReport,
+    started: Instant,
+}
+
+/// Longest a script may wait for the image, so a broken render cannot hang CI.
+const TIMEOUT: Duration = Duration::from_secs(120);
+
+fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+impl ScriptRunner {
+    pub fn new(script: Script) -> ScriptRunner {
+        let phase = match &script {
+            Script::Orbit { .. } => Phase::Orbiting { frame: 0 },
+            Script::Screenshot { .. } => Phase::Screenshot {
+                waited: 0,
+                requested: false,
+            },
+        };
+        let screenshot = match &script {
+            Script::Screenshot { out, .. } => Some(out.clone()),
+            Script::Orbit { screenshot, .. } => screenshot.clone(),
+        };
+        ScriptRunner {
+            script,
+            screenshot,
+            phase,
+            frames_seen: 0,
+            intervals_ms: Vec::new(),
+            preview_times: Vec::new(),
+            report: OrbitReport::default(),
+            started: Instant::now(),
+        }
+    }
+
+    pub fn report_mut(&mut self) -> Option<&mut OrbitReport> {
+        matches!(self.script, Script::Orbit { .. }).then_some(&mut self.report)
+    }
+
+    /// Called at the start of a UI frame with the time since the previous one.
+    pub fn before_frame(&mut self, interval: Option<Duration>) -> ScriptStep {
+        self.frames_seen += 1;
+        let working = matches!(self.phase, Phase::Orbiting { .. } | Phase::Refining { .. });
+        if let (true, Some(d)) = (working, interval) {
+            // The first interval includes window creation; count from the second frame.
+            if self.frames_seen > 2 {
+                self.intervals_ms.push(d.as_secs_f64() * 1e3);
+            }
+        }
+        match (&self.phase, &self.script) {
+            (Phase::Orbiting { .. }, Script::Orbit { frames, .. }) => {
+                ScriptStep::Orbit(std::f64::consts::TAU / f64::from((*frames).max(1)))
+            }
+            _ => ScriptStep::Nothing,
+        }
+    }
+
+    /// Called after the frame's UI was built. `received`: a new image was taken this
+    /// frame; `shown`: the image on screen. Returns the report once done.
+    pub fn after_frame(
+        &mut self,
+        ctx: &egui::Context,
+        received: bool,
+        shown: Option<&Update>,
+        preview_scale: u32,
+    ) -> anyhow::Result<Option<OrbitReport>> {
+        if self.started.elapsed() > TIMEOUT {
+            anyhow::bail!(
+                "the window did not finish its image within {} s",
+                TIMEOUT.as_secs()
+            );
+        }
+        let complete = shown.is_some_and(|u| u.complete);
+        match &mut self.phase {
+            Phase::Orbiting { frame } => {
+                if received && shown.is_some_and(|u| matches!(u.level, Level::Preview { .. })) {
+                    self.preview_times.push(Instant::now());
+                }
+                *frame += 1;
+                let orbit_frames = match &self.script {
+                    Script::Orbit { frames, .. } => *frames,
+                    Script::Screenshot { .. } => 0,
+                };
+                if *frame >= orbit_frames {
+                    self.report.orbit_frames = *frame;
+                    self.report.preview_scale = preview_scale;
+                    self.phase = Phase::Refining {
+                        since: Instant::now(),
+                    };
+                }
+            }
+            Phase::Refining { since } => {
+                if received && complete {
+                    self.report.refine_ms = since.elapsed().as_secs_f64() * 1e3;
+                    self.report.full_frame_ms = shown.map_or(0.0, |u| u.ms);
+                    self.finish_report();
+                    self.phase = match self.screenshot {
+                        Some(_) => Phase::Screenshot {
+                            waited: 0,
+                            requested: false,
+                        },
+                        None => Phase::Done,
+                    };
+                }
+            }
+            Phase::Screenshot { waited, requested } => {
+                let frames_limit = match &self.script {
+                    Script::Screenshot {
+                        frames: Some(n), ..
+                    } => Some(*n),
+                    _ => None,
+                };
+                *waited += 1;
+                let ready = match frames_limit {
+                    Some(n) => *waited >= n,
+                    // One more frame after the refined image arrived, so it is on screen.
+                    None => complete && !received,
+                };
+                if ready && !*requested {
+                    ctx.send_viewport_cmd(egui::ViewportCommand::Screenshot(
+                        egui::UserData::default(),
+                    ));
+                    *requested = true;
+                }
+                let image = ctx.input(|i| {
+                    i.raw.events.iter().find_map(|e| match e {
+                        egui::Event::Screenshot { image, .. } => Some(image.clone()),
+                        _ => None,
+                    })
+                });
+                if let (Some(image), Some(out)) = (image, &self.screenshot) {
+                    save_screenshot(out, &image)?;
+                    self.phase = Phase::Done;
+                }
+            }
+            Phase::Done => {}
+        }
+        if matches!(self.phase, Phase::Done) {
+            return Ok(Some(self.report.clone()));
+        }
+        Ok(None)
+    }
+
+    fn finish_report(&mut self) {
+        let mut iv = self.intervals_ms.clone();
+        self.report.ui_frame_ms_max = iv.iter().copied().fold(0.0, f64::max);
+        self.report.ui_frame_ms_p50 = median(&mut iv);
+        let mut gaps: Vec<f64> = self
+            .preview_times
+            .windows(2)
+            .map(|w| (w[1] - w[0]).as_secs_f64() * 1e3)
+            .collect();
+        let gap = median(&mut gaps);
+        self.report.preview_fps = if gap > 0.0 { 1e3 / gap } else { 0.0 };
+        self.report.previews_shown = self.preview_times.len() as u32;
+    }
+}
+
+/// Writes a window screenshot as a PNG (atomically, like every image we write).
+fn save_screenshot(path: &std::path::Path, image: &egui::ColorImage) -> anyhow::Result<()> {
+    let [w, h] = image.size;
+    let rgb: Vec<[f32; 3]> = image
+        .pixels
+        .iter()
+        .map(|c| [c.r(), c.g(), c.b()].map(|v| f32::from(v) / 255.0))
+        .collect();
+    film::save_png(path, w as u32, h as u32, &rgb)?;
+    Ok(())
+}
