@@ -179,10 +179,20 @@ fn colours(app: &mut ViewerApp, ui: &mut egui::Ui) {
         .points
         .sort_by(|a, b| a.value.total_cmp(&b.value));
     if ui.button("Add point").clicked() {
-        let v = match (st.colormap.points.first(), st.colormap.points.last()) {
-            (Some(a), Some(b)) => 0.5 * (a.value + b.value),
-            _ => 0.0,
-        };
+        // Halve the widest gap between neighbouring points.
+        let v = st
+            .colormap
+            .points
+            .windows(2)
+            .map(|w| (w[1].value - w[0].value, w[0].value))
+            .fold(None, |best: Option<(f32, f32)>, g| match best {
+                Some(b) if b.0 >= g.0 => Some(b),
+                _ => Some(g),
+            })
+            .map_or_else(
+                || st.colormap.points.first().map_or(0.0, |p| p.value + 1.0),
+                |(gap, lo)| lo + 0.5 * gap,
+            );
         widgets::add_point(&mut st.colormap, v);
     }
     ui.add(

@@ -1,0 +1,183 @@
+//! The real window under Xvfb: `--screenshot` saves a picture of the whole window with
+//! the rendered volume in it, and `--orbit-frames --json` reports its frame rates.
+//!
+//! Needs `xvfb-run` (Debian's xvfb and xauth) and Mesa's GL; `.ci/run` installs them and
+//! sets QBRICKS_REQUIRE_XVFB=1 so a missing X server fails instead of skipping.
+#![cfg(feature = "gui")]
+
+use std::collections::HashSet;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn sample() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/wake_small.qbk")
+}
+
+fn have_xvfb() -> bool {
+    let found = Command::new("sh")
+        .args(["-c", "command -v xvfb-run"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !found {
+        assert!(
+            std::env::var_os("QBRICKS_REQUIRE_XVFB").is_none(),
+            "xvfb-run is not installed but QBRICKS_REQUIRE_XVFB is set"
+        );
+        eprintln!("skipping: xvfb-run not installed (apt-get install xvfb xauth)");
+    }
+    found
+}
+
+/// Runs qbricks-view with `args` in a fresh X server.
+fn in_xvfb(args: &[&str], dir: &Path) -> Output {
+    let runtime = tempfile::tempdir().expect("runtime dir");
+    Command::new("xvfb-run")
+        .args(["-a", "-s", "-screen 0 1400x1000x24"])
+        .arg(env!("CARGO_BIN_EXE_qbricks-view"))
+        .args(args)
+        .current_dir(dir)
+        .env("XDG_RUNTIME_DIR", runtime.path())
+        .env_remove("WAYLAND_DISPLAY")
+        .output()
+        .expect("run xvfb-run")
+}
+
+#[test]
+fn screenshot_shows_the_rendered_volume_and_the_panel() {
+    if !have_xvfb() {
+        return;
+    }
+    let dir = tempfile::tempdir().expect("tempdir");
+    let shot = dir.path().join("window.png");
+    let file = sample();
+    let out = in_xvfb(
+        &[
+            file.to_str().expect("utf8"),
+            "--size",
+            "1000x700",
+            "--threads",
+            "2",
+            "--screenshot",
+            shot.to_str().expect("utf8"),
+        ],
+        dir.path(),
+    );
+    assert!(
+        out.status.success(),
+        "exit {:?}: {}",
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let img = image::open(&shot).expect("a PNG").to_rgb8();
+    let (w, h) = img.dimensions();
+    assert!(w >= 1000 && h >= 700, "{w}x{h}");
+    // The central area (right of the panel, above the status line) holds the picture:
+    // the shaded rings give many colours.
+    let mut central = HashSet::new();
+    for y in h / 8..h * 7 / 8 {
+        for x in w * 2 / 5..w * 19 / 20 {
+            central.insert(img.get_pixel(x, y).0);
+        }
+    }
+    assert!(
+        central.len() > 200,
+        "only {} colours in the image area",
+        central.len()
+    );
+    // The side panel is there: its column differs from the image background and holds
+    // light text.
+    let mut panel = HashSet::new();
+    for y in 0..h {
+        for x in 0..w / 5 {
+            panel.insert(img.get_pixel(x, y).0);
+        }
+    }
+    assert!(
+        panel.len() > 20,
+        "only {} colours in the panel",
+        panel.len()
+    );
+    let bright_text = (0..h)
+        .flat_map(|y| (0..w / 5).map(move |x| (x, y)))
+        .filter(|&(x, y)| img.get_pixel(x, y).0.iter().all(|&c| c > 150))
+        .count();
+    assert!(bright_text > 100, "no panel text found");
+}
+
+#[test]
+fn orbit_reports_frame_rates_as_json() {
+    if !have_xvfb() {
+        return;
+    }
+    let dir = tempfile::tempdir().expect("tempdir");
+    let file = sample();
+    let out = in_xvfb(
+        &[
+            "open",
+            file.to_str().expect("utf8"),
+            "--size",
+            "640x480",
+            "--threads",
+            "2",
+            "--orbit-frames",
+            "12",
+            "--json",
+        ],
+        dir.path(),
+    );
+    assert!(
+        out.status.success(),
+        "exit {:?}: {}",
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    let line = text.lines().last().expect("a JSON line");
+    let j: serde_json::Value = serde_json::from_str(line).expect("JSON");
+    for key in [
+        "preview_fps",
+        "ui_frame_ms_p50",
+        "ui_frame_ms_max",
+        "refine_ms",
+        "full_frame_ms",
+        "preview_scale",
+        "orbit_frames",
+        "previews_shown",
+        "window",
+        "threads",
+    ] {
+        assert!(j.get(key).is_some(), "missing {key}: {j}");
+    }
+    assert_eq!(j["orbit_frames"], 12);
+    assert_eq!(j["threads"], 2);
+    assert!(j["preview_scale"].as_u64().unwrap_or(0) >= 4);
+    assert!(j["refine_ms"].as_f64().unwrap_or(-1.0) > 0.0);
+    assert!(j["previews_shown"].as_u64().unwrap_or(0) >= 1, "{j}");
+}
+
+#[test]
+fn a_missing_file_opens_the_window_with_the_error() {
+    if !have_xvfb() {
+        return;
+    }
+    let dir = tempfile::tempdir().expect("tempdir");
+    let shot = dir.path().join("window.png");
+    let out = in_xvfb(
+        &[
+            "nope.qbk",
+            "--size",
+            "800x600",
+            "--screenshot",
+            shot.to_str().expect("utf8"),
+            "--frames",
+            "5",
+        ],
+        dir.path(),
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(image::open(&shot).is_ok());
+}
