@@ -18,6 +18,8 @@ pub struct Film {
     sum: Vec<[f64; 3]>,
     /// Samples added per pixel.
     samples: Vec<u32>,
+    /// Of those, samples whose ray hit the surface (iso) or gathered opacity (dvr).
+    hits: Vec<u32>,
 }
 
 impl Film {
@@ -28,6 +30,7 @@ impl Film {
             height,
             sum: vec![[0.0; 3]; n],
             samples: vec![0; n],
+            hits: vec![0; n],
         }
     }
 
@@ -44,6 +47,11 @@ impl Film {
                     self.sum[i][a] += c[a];
                 }
                 self.samples[i] += n;
+                self.hits[i] += r
+                    .hit_samples
+                    .get((y - y0) as usize * tw + (x - x0) as usize)
+                    .copied()
+                    .unwrap_or(0);
             }
         }
     }
@@ -51,6 +59,11 @@ impl Film {
     /// Samples added to pixel (`x`, `y`).
     pub fn samples_at(&self, x: u32, y: u32) -> u32 {
         self.samples[(y * self.width + x) as usize]
+    }
+
+    /// Per pixel (row-major), how many of its samples hit.
+    pub fn hit_samples(&self) -> &[u32] {
+        &self.hits
     }
 
     /// Mean colour of pixel `i` (row-major), `None` before its first sample.

@@ -7,6 +7,7 @@
 
 #[cfg(feature = "gui")]
 pub mod app;
+pub mod bench;
 pub mod bvh;
 pub mod camera;
 pub mod colormap;

@@ -94,6 +94,10 @@ pub struct Frame {
     pub rays: u64,
     /// Rays that hit the iso-surface (iso) or gathered opacity ≥ 0.01 (dvr).
     pub hits: u64,
+    /// Per pixel (row-major), how many of its samples hit: what `bench` compares against
+    /// a reference to count missed and false surfaces, which the colours alone cannot tell
+    /// (a surface may be shaded like the background).
+    pub pixel_hits: Vec<u32>,
 }
 
 /// A rectangle of pixels `[x0, x1) × [y0, y1)`.
@@ -127,6 +131,8 @@ pub struct TileResult {
     pub tile: Tile,
     pub samples: Range<u32>,
     pub sum: Vec<[f64; 3]>,
+    /// Per pixel (row-major inside the tile), how many of `samples` hit.
+    pub hit_samples: Vec<u32>,
     pub stats: Stats,
     pub rays: u64,
     pub hits: u64,
@@ -179,12 +185,14 @@ pub fn render_tiles(
         let mut caster = RayCaster::new(scene);
         let n = ((tile.x1 - tile.x0) * (tile.y1 - tile.y0)) as usize;
         let mut sum = Vec::with_capacity(n);
+        let mut hit_samples = Vec::with_capacity(n);
         for y in tile.y0..tile.y1 {
             if !cancel.start_row() {
                 return false;
             }
             for x in tile.x0..tile.x1 {
                 let mut c = [0.0f64; 3];
+                let hits_before = caster.hits;
                 for s in samples.clone() {
                     let v = caster.sample(x, y, s);
                     for a in 0..3 {
@@ -192,12 +200,15 @@ pub fn render_tiles(
                     }
                 }
                 sum.push(c);
+                // A sample adds at most one hit (shadow rays are not counted).
+                hit_samples.push((caster.hits - hits_before) as u32);
             }
         }
         sink(TileResult {
             tile,
             samples: samples.clone(),
             sum,
+            hit_samples,
             stats: caster.stats(),
             rays: caster.rays,
             hits: caster.hits,
@@ -244,6 +255,7 @@ pub fn render(scene: &Scene) -> Frame {
         width: w,
         height: h,
         rgb: film.resolve(),
+        pixel_hits: film.hit_samples().to_vec(),
         stats: counts.stats,
         rays: counts.rays,
         hits: counts.hits,

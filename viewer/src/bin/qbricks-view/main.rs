@@ -4,6 +4,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+mod bench;
 mod info;
 mod probe;
 mod render;
@@ -34,6 +35,8 @@ enum Command {
     Render(Box<render::Args>),
     /// Print field values and gradients at points.
     Probe(probe::Args),
+    /// Time and error of every sampling strategy at several steps against a fine reference.
+    Bench(Box<bench::Args>),
 }
 
 fn main() -> ExitCode {
@@ -44,6 +47,7 @@ fn main() -> ExitCode {
         Some(Command::Info(args)) => info::run(args),
         Some(Command::Render(args)) => render::run(*args),
         Some(Command::Probe(args)) => probe::run(args),
+        Some(Command::Bench(args)) => bench::run(*args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,0 +1,188 @@
+//! `qbricks-view bench`: every strategy at several steps against a fine reference.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::{bail, Context};
+use format::output::QuietStdout;
+use qbricks_viewer::bench::{self, BenchOptions, Run};
+use qbricks_viewer::mesh::Meshes;
+use qbricks_viewer::render::Renderer;
+use qbricks_viewer::view_state::ViewState;
+use qbricks_viewer::volume::Volume;
+
+use crate::render::{open_volume, resolve_file};
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Brick file [default: data/wake_small.qbk, relative to the current directory].
+    pub file: Option<PathBuf>,
+    /// View state JSON (camera, mode, iso, spp, …); its strategy and step mark the default run.
+    #[arg(long)]
+    pub state: Option<PathBuf>,
+    /// Print the runs as a JSON list on stdout instead of a table.
+    #[arg(long)]
+    pub json: bool,
+    /// Draw RMSE against ms per frame (log axes, one line per strategy) to this PNG.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+    /// Step of the `uniform` reference, cells.
+    #[arg(
+        long = "reference-step",
+        default_value_t = 0.01,
+        allow_hyphen_values = true
+    )]
+    pub reference_step: f64,
+    /// Samples per pixel of the reference [default: the view's, so reference and runs cast
+    /// the same camera rays; more measures anti-aliasing as well as sampling].
+    #[arg(long = "reference-spp")]
+    pub reference_spp: Option<u32>,
+    /// Frames per run; `ms` is their median.
+    #[arg(long, default_value_t = 3)]
+    pub repeat: u32,
+    /// Image size WxH [default: the state's].
+    #[arg(long)]
+    pub size: Option<String>,
+    /// Worker threads [default: all cores].
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
+
+fn parse_size(s: &str) -> anyhow::Result<(u32, u32)> {
+    let bad = || anyhow::anyhow!("--size: expected WxH with sides 1..=16384, found `{s}`");
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
+    let w: u32 = w.trim().parse().map_err(|_| bad())?;
+    let h: u32 = h.trim().parse().map_err(|_| bad())?;
+    let max = qbricks_viewer::view_state::MAX_IMAGE_SIDE;
+    if w == 0 || h == 0 || w > max || h > max {
+        return Err(bad());
+    }
+    Ok((w, h))
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let path = resolve_file(args.file.clone())?;
+    if args.repeat == 0 {
+        bail!("--repeat: expected at least 1, found 0");
+    }
+    if args.threads == Some(0) {
+        bail!("--threads: expected at least 1, found 0");
+    }
+    if !(args.reference_step > 0.0 && args.reference_step.is_finite()) {
+        bail!(
+            "--reference-step: expected a positive number, found {}",
+            args.reference_step
+        );
+    }
+    if let Some(spp) = args.reference_spp {
+        if spp == 0 || spp > qbricks_viewer::view_state::MAX_SPP {
+            bail!(
+                "--reference-spp: expected 1..={}, found {spp}",
+                qbricks_viewer::view_state::MAX_SPP
+            );
+        }
+    }
+    let size = args.size.as_deref().map(parse_size).transpose()?;
+    let view = open_volume(&path)?;
+    let vol = Volume::new(view.file()).with_context(|| format!("{}", path.display()))?;
+    let mut state = match &args.state {
+        Some(s) => ViewState::load(s)?,
+        None => ViewState::default_for_volume(&vol),
+    };
+    if let Some((w, h)) = size {
+        state.width = w;
+        state.height = h;
+    }
+    state
+        .validate()
+        .map_err(|m| anyhow::anyhow!("view state: {m}"))?;
+    let meshes = if state.meshes.is_empty() {
+        Meshes::empty()
+    } else {
+        Meshes::load(&state.meshes)?
+    };
+    let renderer = Renderer::new(args.threads).context("starting worker threads")?;
+    let opts = BenchOptions {
+        reference_step: args.reference_step,
+        reference_spp: args.reference_spp,
+        repeat: args.repeat,
+        ..BenchOptions::default()
+    };
+    let total = 1 + bench::plan(&state, &opts).len() as u64;
+    let bar = indicatif::ProgressBar::with_draw_target(
+        Some(total),
+        indicatif::ProgressDrawTarget::stderr(),
+    );
+    if let Ok(style) =
+        indicatif::ProgressStyle::with_template("{bar:30} {pos}/{len} renders, {elapsed} {msg}")
+    {
+        bar.set_style(style);
+    }
+    let (reference, runs) = bench::bench(&renderer, &vol, &state, &meshes, &opts, &mut |what| {
+        bar.set_message(what.to_string());
+        bar.inc(1);
+    })
+    .with_context(|| format!("{}", path.display()))?;
+    bar.finish_and_clear();
+    if let Some(p) = &args.plot {
+        let title = format!(
+            "{} — {} {}x{}, {} threads",
+            path.file_name().map_or_else(
+                || path.display().to_string(),
+                |n| n.to_string_lossy().into_owned()
+            ),
+            state.mode,
+            state.width,
+            state.height,
+            renderer.threads()
+        );
+        bench::save_plot(p, &runs, &title)?;
+    }
+    let mut out = QuietStdout::new();
+    if args.json {
+        writeln!(out, "{}", serde_json::to_string(&runs)?)?;
+    } else {
+        writeln!(
+            out,
+            "{} {}x{}, mode {}, {} threads; reference uniform step {} × {} spp: {:.0} ms",
+            path.display(),
+            state.width,
+            state.height,
+            state.mode,
+            renderer.threads(),
+            opts.reference_step,
+            reference.spp,
+            reference.ms
+        )?;
+        write_table(&mut out, &runs)?;
+    }
+    Ok(())
+}
+
+fn write_table(out: &mut impl Write, runs: &[Run]) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "{:<8} {:>5} {:>9} {:>9} {:>8} {:>7} {:>7} {:>7}  pareto",
+        "strategy", "step", "ms", "samp/ray", "rmse", "psnr", "miss%", "false%"
+    )?;
+    for r in runs {
+        let psnr = r
+            .psnr
+            .map_or_else(|| "inf".to_string(), |p| format!("{p:.1}"));
+        writeln!(
+            out,
+            "{:<8} {:>5} {:>9.1} {:>9.1} {:>8.5} {:>7} {:>7.2} {:>7.2}  {}{}",
+            r.strategy,
+            r.step,
+            r.ms,
+            r.samples_per_ray,
+            r.rmse,
+            psnr,
+            100.0 * r.miss_rate,
+            100.0 * r.false_hit_rate,
+            if r.pareto { "*" } else { "" },
+            if r.is_default { " (default)" } else { "" }
+        )?;
+    }
+    Ok(())
+}
