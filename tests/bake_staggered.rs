@@ -17,7 +17,7 @@ use preprocess::synth::scene_grids_with;
 
 /// RMS and largest |Q − exact Q| over all leaf cells, relative to the largest |exact Q|.
 fn q_error(scene: &str, n0: u32, staggered_file: bool, staggered_bake: bool) -> (f64, f64) {
-    let grids: Vec<AnyGrid> = scene_grids_with(scene, n0, 1, staggered_file)
+    let grids: Vec<AnyGrid> = scene_grids_with(scene, n0, 1, staggered_file, 1)
         .expect("synth")
         .into_iter()
         .map(AnyGrid::Vec3s)

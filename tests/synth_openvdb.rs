@@ -373,6 +373,7 @@ fn write_scene_output_reads_back_in_pyopenvdb() {
             compression: Compression::Zip,
             speed_grids: false,
             staggered: false,
+            frame: 1,
         };
         write_scene(&path, &opts).expect("write");
         let want = scene_grids(scene, 12, 3).expect("grids");
@@ -499,6 +500,7 @@ fn vdb_print_lists_every_grid_type_we_write() {
         compression: Compression::Zip,
         speed_grids: true,
         staggered: false,
+        frame: 1,
     };
     let (summary, _) = write_scene(&path, &opts).expect("write");
     let listed = vdb_print(&path);
@@ -527,6 +529,7 @@ fn writer_is_deterministic_and_atomic() {
         compression: Compression::Zip,
         speed_grids: true,
         staggered: false,
+        frame: 1,
     };
     let a = dir.path().join("a.vdb");
     let b = dir.path().join("b.vdb");

@@ -72,6 +72,7 @@ fn write_scene_metadata_reads_back() {
         compression: Compression::Zip,
         speed_grids: true,
         staggered: false,
+        frame: 1,
     };
     let (summary, _) = write_scene(&path, &opts).expect("write");
     let file = VdbFile::open(&path).expect("open");

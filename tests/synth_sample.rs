@@ -19,6 +19,7 @@ fn options() -> SynthOptions {
         compression: Compression::Zip,
         speed_grids: false,
         staggered: false,
+        frame: 1,
     }
 }
 

@@ -142,7 +142,7 @@ pub fn scene_layout(scene: &str, n0: u32, levels: u32) -> Result<Vec<GridLayout>
     let (domain, multi) = match scene {
         "wake" => (WAKE_DOMAIN, true),
         "wake-single" => (WAKE_DOMAIN, false),
-        "lamb-oseen" | "burgers" | "abc" => (UNIT_DOMAIN, false),
+        "lamb-oseen" | "burgers" | "abc" | "ring-plume" => (UNIT_DOMAIN, false),
         _ => {
             return Err(SynthError::UnknownScene {
                 name: scene.to_string(),
@@ -185,6 +185,9 @@ pub fn scene_layout(scene: &str, n0: u32, levels: u32) -> Result<Vec<GridLayout>
         };
         let name = if multi {
             format!("vel_l{}", levels - 1 - c)
+        } else if scene == "ring-plume" {
+            // Named as Blender's Mantaflow names its cache grids.
+            "velocity".to_string()
         } else {
             "vel".to_string()
         };
@@ -245,18 +248,20 @@ fn check_range(what: &'static str, found: u32, min: u32, max: u32) -> Result<(),
 
 /// Samples scene `scene` onto its grids (see the module docs for the layout), finest first.
 pub fn scene_grids(scene: &str, n0: u32, levels: u32) -> Result<Vec<Grid<Vec3>>, SynthError> {
-    scene_grids_with(scene, n0, levels, false)
+    scene_grids_with(scene, n0, levels, false, 1)
 }
 
-/// As [`scene_grids`]; with `staggered`, as MAC grids (see [`sample_grid_with`]).
+/// As [`scene_grids`]; with `staggered`, as MAC grids (see [`sample_grid_with`]); `frame`
+/// (1-based) picks the time of a time-dependent scene (`ring-plume`).
 pub fn scene_grids_with(
     scene: &str,
     n0: u32,
     levels: u32,
     staggered: bool,
+    frame: u64,
 ) -> Result<Vec<Grid<Vec3>>, SynthError> {
     let layouts = scene_layout(scene, n0, levels)?;
-    let flow = analytic::scene(scene).ok_or_else(|| SynthError::UnknownScene {
+    let flow = analytic::scene_at(scene, frame).ok_or_else(|| SynthError::UnknownScene {
         name: scene.to_string(),
     })?;
     Ok(layouts
@@ -265,16 +270,8 @@ pub fn scene_grids_with(
         .collect())
 }
 
-/// Samples `flow` at the voxel centres of `layout`'s box.
-pub fn sample_grid(flow: &dyn Flow, layout: &GridLayout) -> Grid<Vec3> {
-    sample_grid_with(flow, layout, false)
-}
-
-/// Samples `flow` on `layout`'s box: at voxel centres, or with `staggered` as a MAC grid in
-/// OpenVDB's convention (component `c` of voxel `i` at the lower face, centre − ½h·e_c).
-/// The active voxels are the same either way, so the upper faces of the last cells along
-/// each axis are not stored (as in a solver's MAC grid of the same size as its cell grid).
-pub fn sample_grid_with(flow: &dyn Flow, layout: &GridLayout, staggered: bool) -> Grid<Vec3> {
+/// Origins of the leaves that hold `layout`'s box.
+fn leaf_origins(layout: &GridLayout) -> Vec<[i64; 3]> {
     let d = i64::from(LEAF_DIM);
     let first = layout.lo.map(|v| v.div_euclid(d) * d);
     let counts: Vec<i64> = (0..3)
@@ -288,6 +285,20 @@ pub fn sample_grid_with(flow: &dyn Flow, layout: &GridLayout, staggered: bool) -
             }
         }
     }
+    origins
+}
+
+/// Samples `flow` at the voxel centres of `layout`'s box.
+pub fn sample_grid(flow: &dyn Flow, layout: &GridLayout) -> Grid<Vec3> {
+    sample_grid_with(flow, layout, false)
+}
+
+/// Samples `flow` on `layout`'s box: at voxel centres, or with `staggered` as a MAC grid in
+/// OpenVDB's convention (component `c` of voxel `i` at the lower face, centre − ½h·e_c).
+/// The active voxels are the same either way, so the upper faces of the last cells along
+/// each axis are not stored (as in a solver's MAC grid of the same size as its cell grid).
+pub fn sample_grid_with(flow: &dyn Flow, layout: &GridLayout, staggered: bool) -> Grid<Vec3> {
+    let origins = leaf_origins(layout);
     let leaves = origins
         .par_iter()
         .map(|&origin| sample_leaf(flow, layout, origin, staggered))
@@ -362,6 +373,8 @@ pub struct SynthOptions {
     /// Write the velocity grids as MAC grids (class `staggered`, see
     /// [`sample_grid_with`]); speed grids stay cell-centred.
     pub staggered: bool,
+    /// Frame (1-based) of a time-dependent scene (`ring-plume`); ignored by the others.
+    pub frame: u64,
 }
 
 /// One written grid, for the command's summary.
@@ -385,7 +398,13 @@ pub fn write_scene(
 ) -> Result<(Vec<GridSummary>, u64), SynthError> {
     let layouts = scene_layout(&opts.scene, opts.n0, opts.levels)?;
     check_memory(&opts.scene, opts.n0, &layouts, opts.speed_grids)?;
-    let velocity = scene_grids_with(&opts.scene, opts.n0, opts.levels, opts.staggered)?;
+    let velocity = scene_grids_with(
+        &opts.scene,
+        opts.n0,
+        opts.levels,
+        opts.staggered,
+        opts.frame,
+    )?;
     let mut grids: Vec<AnyGrid> = Vec::new();
     let mut metadata: Vec<MetaMap> = Vec::new();
     let mut summary = Vec::new();
@@ -437,6 +456,24 @@ pub fn write_scene(
         metadata.push(meta_for(layout, level));
         grids.push(AnyGrid::Float(grid));
     }
+    if opts.scene == "ring-plume" {
+        // The smoke the ring carries, at voxel centres (class "fog volume", as Mantaflow).
+        let plume = analytic::RingPlume::frame(opts.frame);
+        for (level, layout) in layouts.iter().enumerate() {
+            let density = sample_scalar("density", layout, |p| plume.density(p));
+            summary.push(GridSummary {
+                name: density.name.clone(),
+                value_type: "float",
+                voxel_size: layout.voxel_size,
+                active_voxels: density.active_voxel_count(),
+                leaves: density.leaves.len(),
+            });
+            let mut m = meta_for(layout, level);
+            m.insert("class".into(), MetaValue::String("fog volume".into()));
+            metadata.push(m);
+            grids.push(AnyGrid::Float(density));
+        }
+    }
     let mut options = WriteOptions::new(opts.compression);
     options.grid_metadata = metadata;
     options
@@ -448,8 +485,53 @@ pub fn write_scene(
     options
         .file_metadata
         .insert("levels".into(), MetaValue::Int32(opts.levels as i32));
+    if opts.scene == "ring-plume" {
+        options.file_metadata.insert(
+            "frame".into(),
+            MetaValue::Int64(i64::try_from(opts.frame).unwrap_or(i64::MAX)),
+        );
+    }
     let bytes = write_vdb_with(path, &grids, &options)?;
     Ok((summary, bytes))
+}
+
+/// A float grid `name` over `layout`'s box with `f` at the voxel centres.
+pub fn sample_scalar(
+    name: &str,
+    layout: &GridLayout,
+    f: impl Fn([f64; 3]) -> f64 + Sync,
+) -> Grid<f32> {
+    let inside = |a: usize, v: i64| v >= layout.lo[a] && v < layout.hi[a];
+    let leaves = leaf_origins(layout)
+        .par_iter()
+        .map(|&o| {
+            let mut active = [0u64; 8];
+            let values = Box::new(std::array::from_fn(|n| {
+                let ijk = [
+                    o[0] + (n >> 6) as i64,
+                    o[1] + ((n >> 3) & 7) as i64,
+                    o[2] + (n & 7) as i64,
+                ];
+                if !(0..3).all(|a| inside(a, ijk[a])) {
+                    return 0.0;
+                }
+                active[n >> 6] |= 1u64 << (n & 63);
+                f(layout.centre(ijk)) as f32
+            }));
+            Leaf {
+                origin: o.map(|v| v as i32),
+                active,
+                values,
+            }
+        })
+        .collect();
+    Grid {
+        name: name.to_string(),
+        transform: layout.transform(),
+        background: 0.0,
+        leaves,
+        tiles: Vec::new(),
+    }
 }
 
 /// `|u|` of a velocity grid, same leaves and active masks, named `speed…` for `vel…`.

@@ -11,15 +11,18 @@
 //! | `lamb-oseen` | [`LambOseen`] | a straight Gaussian vortex; Q known in closed form |
 //! | `burgers` | [`Burgers`] | Lamb–Oseen plus axisymmetric strain; Q = Q_Lamb–Oseen − ¾α² |
 //! | `abc` | [`Abc`] | Arnold–Beltrami–Childress flow (vorticity = k · velocity) |
+//! | `ring-plume` | [`RingPlume`] per frame | a rising vortex ring with a smoke plume: a small frame sequence |
 
 // Tensor formulas read best with explicit indices.
 #![allow(clippy::needless_range_loop)]
 
 mod abc;
+mod plume;
 mod vortex;
 mod wake;
 
 pub use abc::Abc;
+pub use plume::{RingPlume, FRAME_SECONDS};
 pub use vortex::{Burgers, LambOseen};
 pub use wake::{Ring, Wake};
 
@@ -66,17 +69,34 @@ pub fn speed(u: [f64; 3]) -> f64 {
 }
 
 /// Names accepted by [`scene`], in documentation order.
-pub const SCENE_NAMES: [&str; 5] = ["wake", "wake-single", "lamb-oseen", "burgers", "abc"];
+pub const SCENE_NAMES: [&str; 6] = [
+    "wake",
+    "wake-single",
+    "lamb-oseen",
+    "burgers",
+    "abc",
+    "ring-plume",
+];
 
 /// The flow of a named scene (`wake`, `wake-single`, `lamb-oseen`, `burgers`, `abc`), or
 /// `None` for an unknown name. `wake` and `wake-single` are the same flow; they differ only
 /// in how [`crate::synth`] samples it.
 pub fn scene(name: &str) -> Option<Box<dyn Flow + Send + Sync>> {
+    scene_at(name, 1)
+}
+
+/// As [`scene`], at frame `frame` (1-based) for the time-dependent `ring-plume`; the other
+/// scenes are steady and ignore it.
+pub fn scene_at(name: &str, frame: u64) -> Option<Box<dyn Flow + Send + Sync>> {
+    if name == "ring-plume" {
+        return Some(Box::new(RingPlume::frame(frame)));
+    }
     match name {
         "wake" | "wake-single" => Some(Box::new(Wake::sample_scene())),
         "lamb-oseen" => Some(Box::new(LambOseen::sample_scene())),
         "burgers" => Some(Box::new(Burgers::sample_scene())),
         "abc" => Some(Box::new(Abc::sample_scene())),
+        "ring-plume" => Some(Box::new(RingPlume::frame(1))),
         _ => None,
     }
 }

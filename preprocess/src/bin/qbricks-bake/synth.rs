@@ -8,6 +8,7 @@ use std::io::Write;
 use anyhow::Context;
 use clap::ValueEnum;
 use format::output::QuietStdout;
+use qbricks_preprocess::sequence::FramePattern;
 use qbricks_preprocess::synth::{write_scene, SynthOptions};
 use qbricks_preprocess::vdb::write::Compression;
 
@@ -44,41 +45,64 @@ pub struct Args {
     /// along axis c, OpenVDB's convention).
     #[arg(long)]
     pub staggered: bool,
+    /// Write frames 1..=N of a time-dependent scene (ring-plume); the output must then hold
+    /// a frame-number placeholder (out_####.vdb or out_%04d.vdb).
+    #[arg(long, value_name = "N")]
+    pub frames: Option<u64>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let start = Instant::now();
-    let opts = SynthOptions {
-        scene: args.scene.clone(),
-        n0: args.n0,
-        levels: args.levels,
-        compression: match args.compression {
-            CompressionArg::Zip => Compression::Zip,
-            CompressionArg::Mask => Compression::ActiveMask,
-            CompressionArg::None => Compression::None,
-        },
-        speed_grids: args.float,
-        staggered: args.staggered,
+    let pattern = FramePattern::parse(&args.output)?;
+    let outputs: Vec<(u64, PathBuf)> = match (args.frames, &pattern) {
+        (None, None) => vec![(1, args.output.clone())],
+        (Some(n), Some(p)) if (1..=100_000).contains(&n) => {
+            (1..=n).map(|f| (f, p.path(f))).collect()
+        }
+        (Some(n), Some(_)) => anyhow::bail!("--frames must be in 1..=100000, found {n}"),
+        (Some(_), None) => anyhow::bail!(
+            "{}: --frames needs an output with a frame-number placeholder (e.g. out_####.vdb)",
+            args.output.display()
+        ),
+        (None, Some(_)) => anyhow::bail!(
+            "{}: an output with a frame-number placeholder needs --frames N",
+            args.output.display()
+        ),
     };
-    let (grids, bytes) =
-        write_scene(&args.output, &opts).with_context(|| format!("synth {}", args.scene))?;
     let mut out = QuietStdout::new();
-    for g in &grids {
+    for (frame, path) in outputs {
+        let start = Instant::now();
+        let opts = SynthOptions {
+            scene: args.scene.clone(),
+            n0: args.n0,
+            levels: args.levels,
+            compression: match args.compression {
+                CompressionArg::Zip => Compression::Zip,
+                CompressionArg::Mask => Compression::ActiveMask,
+                CompressionArg::None => Compression::None,
+            },
+            speed_grids: args.float,
+            staggered: args.staggered,
+            frame,
+        };
+        let (grids, bytes) =
+            write_scene(&path, &opts).with_context(|| format!("synth {}", args.scene))?;
+        for g in &grids {
+            writeln!(
+                out,
+                "{:<10} {:<6} voxel {:<10.6} active voxels {:>10} leaves {:>7}",
+                g.name, g.value_type, g.voxel_size, g.active_voxels, g.leaves
+            )?;
+        }
+        let voxels: u64 = grids.iter().map(|g| g.active_voxels).sum();
         writeln!(
             out,
-            "{:<10} {:<6} voxel {:<10.6} active voxels {:>10} leaves {:>7}",
-            g.name, g.value_type, g.voxel_size, g.active_voxels, g.leaves
+            "wrote {} ({} bytes, {} grids, {} active voxels) in {:.2} s",
+            path.display(),
+            bytes,
+            grids.len(),
+            voxels,
+            start.elapsed().as_secs_f64()
         )?;
     }
-    let voxels: u64 = grids.iter().map(|g| g.active_voxels).sum();
-    writeln!(
-        out,
-        "wrote {} ({} bytes, {} grids, {} active voxels) in {:.2} s",
-        args.output.display(),
-        bytes,
-        grids.len(),
-        voxels,
-        start.elapsed().as_secs_f64()
-    )?;
     Ok(())
 }
