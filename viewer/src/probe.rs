@@ -2,13 +2,15 @@
 
 use crate::volume::Volume;
 
-/// One probed point: every field (NaN outside the data) and the gradient of the chosen
-/// field (NaN outside).
+/// One probed point: every field (NaN outside the data), the exact gradient of the
+/// reconstruction of the chosen field, and the unit shading normal the renderer uses
+/// there (from [`Volume::shading_gradient`], smooth across cell faces; NaN outside).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Probe {
     pub p: [f64; 3],
     pub values: Vec<f64>,
     pub gradient: [f64; 3],
+    pub normal: [f64; 3],
 }
 
 /// Probes every point (world coordinates).
@@ -20,11 +22,16 @@ pub fn probe(vol: &Volume, points: &[[f64; 3]], grad_field: usize) -> Vec<Probe>
                 p,
                 values: s.values.iter().map(|&v| v as f64).collect(),
                 gradient: s.gradient,
+                normal: vol
+                    .shading_gradient(vol.to_local(p), grad_field)
+                    .and_then(|g| glam::DVec3::from_array(g).try_normalize())
+                    .map_or([f64::NAN; 3], |n| n.to_array()),
             },
             None => Probe {
                 p,
                 values: vec![f64::NAN; vol.fields.len()],
                 gradient: [f64::NAN; 3],
+                normal: [f64::NAN; 3],
             },
         })
         .collect()

@@ -13,7 +13,7 @@ use crate::camera::Ray;
 use crate::mesh::MeshHit;
 use crate::reconstruct::Eval;
 use crate::render::Scene;
-use crate::sampling::{Stats, Strategy, Tracer};
+use crate::sampling::{Event, Stats, Strategy, Tracer};
 use crate::shading::{phong, Light};
 use crate::transfer::Mode;
 
@@ -31,6 +31,28 @@ fn mix(mut z: u64) -> u64 {
 pub fn jitter(x: u32, y: u32, sample: u32, seed: u64, purpose: u64) -> f64 {
     let h = mix(seed ^ mix(((x as u64) << 32 | y as u64) ^ mix((sample as u64) << 8 | purpose)));
     (h >> 11) as f64 / (1u64 << 53) as f64
+}
+
+/// Which gradient gives the shading normal.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Shading {
+    /// Central differences of the reconstruction over one local cell width: continuous
+    /// across cell faces and level boundaries ([`crate::volume::Volume::shading_gradient`]).
+    #[default]
+    Smooth,
+    /// The analytic gradient of the reconstruction (piecewise, facets at cell faces).
+    Analytic,
+}
+
+/// An iso-surface point as seen by a camera ray.
+#[derive(Debug, Clone, Copy)]
+pub struct SurfacePoint {
+    pub world: DVec3,
+    pub local: [f64; 3],
+    /// Unit shading normal, facing the ray's origin.
+    pub normal: DVec3,
+    /// Reconstruction at the point (`None` only where the weights vanish).
+    pub eval: Option<Eval>,
 }
 
 /// Per-thread ray casting state: the tracers (with their reusable stacks) and counters.
@@ -106,11 +128,10 @@ impl<'s> RayCaster<'s> {
             None => bg,
         };
         match scene.params.tf.mode {
-            Mode::Iso => match self.main.iso(o, d, 0.0, t_max, jit) {
-                Some(hit) => {
+            Mode::Iso => match self.surface_within(ray, t_max, jit) {
+                Some(s) => {
                     self.hits += 1;
-                    let e = hit.eval.unwrap_or_default();
-                    self.shade_surface(ray, &hit.p, &e, hit.eval.is_some())
+                    self.shade_surface(ray, &s)
                 }
                 None => behind(self),
             },
@@ -127,6 +148,38 @@ impl<'s> RayCaster<'s> {
                 acc.over(back)
             }
         }
+    }
+
+    /// The iso-surface point along `ray` (iso mode, the view's strategy), with its
+    /// shading normal.
+    pub fn surface(&mut self, ray: &Ray, jit: f64) -> Option<SurfacePoint> {
+        self.surface_within(ray, f64::INFINITY, jit)
+    }
+
+    fn surface_within(&mut self, ray: &Ray, t_max: f64, jit: f64) -> Option<SurfacePoint> {
+        let vol = self.scene.vol;
+        let o = vol.to_local(ray.origin.to_array());
+        let hit = self.main.iso(o, ray.dir.to_array(), 0.0, t_max, jit)?;
+        let eval = hit.eval;
+        let e = eval.unwrap_or_default();
+        let gradient = match self.scene.shading {
+            Shading::Smooth => vol
+                .shading_gradient(hit.p, self.scene.params.field)
+                .unwrap_or(e.grad),
+            Shading::Analytic => e.grad,
+        };
+        let normal = facing(gradient, ray.dir);
+        if let Some(Event::Hit { normal: n, .. }) =
+            self.main.log.as_mut().and_then(|l| l.last_mut())
+        {
+            *n = Some(normal.to_array());
+        }
+        Some(SurfacePoint {
+            world: DVec3::from_array(vol.to_world(hit.p)),
+            local: hit.p,
+            normal,
+            eval,
+        })
     }
 
     /// The first surface along `ray`: the iso-surface (found with `exact` root finding,
@@ -167,13 +220,13 @@ impl<'s> RayCaster<'s> {
             .map(f64::from)
     }
 
-    /// Phong-shaded iso-surface point (local `p`).
-    fn shade_surface(&mut self, ray: &Ray, p: &[f64; 3], e: &Eval, has_eval: bool) -> [f64; 3] {
+    /// Phong-shaded iso-surface point.
+    fn shade_surface(&mut self, ray: &Ray, s: &SurfacePoint) -> [f64; 3] {
         let scene = self.scene;
         let st = scene.state;
-        let base = base_colour(scene, e, has_eval);
-        let n = normal(e, ray.dir);
-        let pw = DVec3::from_array(scene.vol.to_world(*p));
+        let base = base_colour(scene, &s.eval.unwrap_or_default(), s.eval.is_some());
+        let n = s.normal;
+        let pw = s.world;
         let vis = self.visibility(pw, n);
         phong(base, n, -ray.dir, pw, &st.lights, &vis, &st.material)
             .to_array()
@@ -224,10 +277,10 @@ fn light_visibility(scene: &Scene, shadow: &mut Tracer, p: DVec3, n: DVec3, ligh
     }
 }
 
-/// Unit normal from the gradient, facing the viewer; the view direction when the
+/// Unit normal from a gradient, facing the viewer; the view direction when the
 /// gradient vanishes.
-fn normal(e: &Eval, dir: DVec3) -> DVec3 {
-    let g = DVec3::from_array(e.grad);
+fn facing(grad: [f64; 3], dir: DVec3) -> DVec3 {
+    let g = DVec3::from_array(grad);
     let len = g.length();
     if !(len > 0.0 && len.is_finite()) {
         return -dir;
@@ -262,7 +315,16 @@ fn shade_sample(
     if g.length() <= 0.0 || g.is_nan() {
         return base.to_array().map(f64::from);
     }
-    let n = normal(e, ray.dir);
+    let n = match scene.shading {
+        Shading::Smooth => facing(
+            scene
+                .vol
+                .shading_gradient(*p, scene.params.field)
+                .unwrap_or(e.grad),
+            ray.dir,
+        ),
+        Shading::Analytic => facing(e.grad, ray.dir),
+    };
     let pw = DVec3::from_array(scene.vol.to_world(*p));
     let vis: Vec<f32> = if shadows {
         st.lights

@@ -190,6 +190,51 @@ impl Volume<'_> {
         (sh >= MIN_WEIGHT).then(|| shv / sh)
     }
 
+    /// Gradient of field `f` for shading at local `p`: central differences of the
+    /// reconstruction `B` over one cell width of the file's finest level.
+    ///
+    /// The analytic gradient of `B` (what [`Volume::eval`] returns, and what root finding
+    /// needs) is piecewise: its slope jumps at every cell face, so shading with it shows
+    /// every cell as a facet, and across the half-cell band at a level boundary where one
+    /// layer of coarse cells alone contributes, its normal component is exactly zero (a
+    /// dark seam). `B` itself is continuous, so a difference quotient of it over one fixed
+    /// width is continuous too (a width that changed with the local level would jump at
+    /// level boundaries), and a whole fine cell steps over the flat band, which is about
+    /// half a fine cell wide.
+    /// A side that leaves the data falls back to a one-sided difference; `None` when
+    /// neither side of any axis is inside.
+    pub fn shading_gradient(&self, p: [f64; 3], f: usize) -> Option<[f64; 3]> {
+        let r0 = self.region_at(p)? as usize;
+        let h = self.finest_w;
+        let at = |q: [f64; 3]| -> Option<f64> {
+            let reg = &self.regions[r0];
+            let r = if (0..3).all(|a| q[a] >= reg.min[a] && q[a] < reg.max[a]) {
+                r0
+            } else {
+                self.region_at(q)? as usize
+            };
+            self.eval_value(r, q, f)
+        };
+        let centre = at(p);
+        let mut g = [0.0; 3];
+        let mut any = false;
+        for a in 0..3 {
+            let mut q = p;
+            q[a] = p[a] + h;
+            let hi = at(q);
+            q[a] = p[a] - h;
+            let lo = at(q);
+            g[a] = match (lo, hi, centre) {
+                (Some(l), Some(u), _) => (u - l) / (2.0 * h),
+                (None, Some(u), Some(c)) => (u - c) / h,
+                (Some(l), None, Some(c)) => (c - l) / h,
+                _ => continue,
+            };
+            any = true;
+        }
+        any.then_some(g)
+    }
+
     /// Value at any local point (region found by KD descent).
     pub fn value_at(&self, p: [f64; 3], f: usize) -> Option<f64> {
         let r = self.region_at(p)?;

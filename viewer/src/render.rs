@@ -18,7 +18,7 @@ use serde::Serialize;
 use crate::camera::RayGen;
 use crate::film::Film;
 use crate::mesh::Meshes;
-use crate::ray::RayCaster;
+use crate::ray::{RayCaster, Shading};
 use crate::sampling::{Event, Params, Stats, Strategy};
 use crate::transfer::{Mode, Transfer};
 use crate::view_state::ViewState;
@@ -37,6 +37,8 @@ pub struct Scene<'a> {
     pub params: Params,
     /// Camera rays with the camera basis computed once per frame.
     pub rays: RayGen,
+    /// Where shading normals come from.
+    pub shading: Shading,
 }
 
 impl<'a> Scene<'a> {
@@ -71,6 +73,7 @@ impl<'a> Scene<'a> {
             meshes,
             params,
             rays: state.camera.ray_generator(state.width, state.height),
+            shading: Shading::default(),
         })
     }
 }
@@ -286,6 +289,11 @@ impl Renderer {
         self.pool.install(|| render(scene))
     }
 
+    /// Runs `f` on this pool.
+    pub fn install<R: Send>(&self, f: impl FnOnce() -> R + Send) -> R {
+        self.pool.install(f)
+    }
+
     /// [`render_tiles`] on this pool.
     pub fn render_tiles(
         &self,
@@ -343,6 +351,113 @@ impl FrameReport {
             mode: state.mode.as_str(),
             threads,
         }
+    }
+}
+
+/// A debug buffer written instead of the shaded image (`render --aov`), taken at the
+/// first iso-surface point of each pixel's centre ray.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Aov {
+    /// Shading normal as `0.5 + 0.5·n` (world axes to red, green, blue).
+    Normal,
+    /// Distance along the ray, near bright, far dark, over the image's range of hits.
+    Depth,
+    /// Finest level contributing at the hit, one false colour per level (0 red, 1 green,
+    /// 2 blue, 3 yellow, 4 magenta, 5 cyan, finer grey).
+    Level,
+    /// The colour map's colour of the colour field at the hit, unshaded.
+    Value,
+}
+
+/// Distance along the ray and colour of an AOV pixel that hit the surface.
+type AovPixel = Option<(f64, [f32; 3])>;
+
+const LEVEL_COLOURS: [[f32; 3]; 6] = [
+    [0.9, 0.2, 0.2],
+    [0.2, 0.8, 0.3],
+    [0.25, 0.4, 0.95],
+    [0.95, 0.85, 0.2],
+    [0.85, 0.3, 0.85],
+    [0.3, 0.85, 0.9],
+];
+
+/// Renders the `aov` buffer of the view (misses show the background). In dvr mode the
+/// surface is the iso value's, found with `exact`.
+pub fn render_aov(scene: &Scene, aov: Aov) -> Frame {
+    let mut iso_scene = Scene {
+        vol: scene.vol,
+        state: scene.state,
+        meshes: scene.meshes,
+        params: scene.params,
+        rays: scene.rays,
+        shading: scene.shading,
+    };
+    if iso_scene.params.tf.mode == Mode::Dvr {
+        iso_scene.params.tf.mode = Mode::Iso;
+        iso_scene.params.strategy = Strategy::Exact;
+    }
+    let (w, h) = (scene.state.width, scene.state.height);
+    let rows: Vec<Vec<AovPixel>> = (0..h)
+        .into_par_iter()
+        .map(|y| {
+            let mut caster = RayCaster::new(&iso_scene);
+            (0..w)
+                .map(|x| {
+                    let (ray, jit) = caster.camera_ray(x, y, 0);
+                    let s = caster.surface(&ray, jit)?;
+                    let t = (s.world - ray.origin).dot(ray.dir);
+                    let c = match aov {
+                        Aov::Normal => s.normal.to_array().map(|v| (0.5 + 0.5 * v) as f32),
+                        Aov::Depth => [0.0; 3],
+                        Aov::Level => {
+                            let vol = scene.vol;
+                            let level = vol.region_at(s.local).and_then(|r| {
+                                vol.region_brick_ids(r as usize)
+                                    .iter()
+                                    .map(|&b| vol.bricks[b as usize].level)
+                                    .min()
+                            });
+                            level.map_or([0.5; 3], |l| {
+                                LEVEL_COLOURS.get(l as usize).copied().unwrap_or([0.6; 3])
+                            })
+                        }
+                        Aov::Value => match (scene.params.colour_field, s.eval) {
+                            (Some(_), Some(e)) => scene.state.colormap.colour(e.colour as f32),
+                            _ => [0.8; 3],
+                        },
+                    };
+                    Some((t, c))
+                })
+                .collect()
+        })
+        .collect();
+    let ts = rows.iter().flatten().flatten().map(|(t, _)| *t);
+    let (tmin, tmax) = ts.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), t| {
+        (a.min(t), b.max(t))
+    });
+    let span = (tmax - tmin).max(1e-300);
+    let mut hits = 0;
+    let rgb = rows
+        .into_iter()
+        .flatten()
+        .map(|px| match px {
+            Some((t, c)) => {
+                hits += 1;
+                match aov {
+                    Aov::Depth => [(1.0 - 0.85 * (t - tmin) / span) as f32; 3],
+                    _ => c,
+                }
+            }
+            None => scene.state.background,
+        })
+        .collect();
+    Frame {
+        width: w,
+        height: h,
+        rgb,
+        stats: Stats::default(),
+        rays: u64::from(w) * u64::from(h),
+        hits,
     }
 }
 

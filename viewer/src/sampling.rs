@@ -130,6 +130,9 @@ pub enum Event {
     Hit {
         t: f64,
         value: Option<f64>,
+        /// Unit shading normal (world), filled in by the ray caster that shades the hit.
+        #[serde(skip_serializing_if = "Option::is_none")]
+        normal: Option<[f64; 3]>,
     },
 }
 
@@ -336,6 +339,7 @@ impl<'v> Tracer<'v> {
         self.record(Event::Hit {
             t,
             value: eval.map(|e| e.value),
+            normal: None,
         });
         Some(IsoHit { t, p, eval })
     }

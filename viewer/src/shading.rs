@@ -132,24 +132,32 @@ impl Light {
     }
 }
 
-/// Two white directional lights fixed to the camera's pose: a key light from above-left
-/// behind the viewer (intensity 0.75) and a fill light from the right (0.25). Stored in
-/// world coordinates, so they stay put when the camera later moves.
+/// Three white directional lights fixed to the camera's pose: a key light from above-left
+/// behind the viewer (intensity 0.6), a fill light from the right (0.2) and a headlight
+/// along the view direction (0.3), so every surface the camera sees gets some direct
+/// light and none renders near-black with the ambient term alone. Stored in world
+/// coordinates, so they stay put when the camera later moves.
 pub fn default_lights(camera: &Camera) -> Vec<Light> {
     let b = camera.basis();
     // Directions *towards* the lights, in the camera frame.
     let key = (-b.forward + 0.8 * b.up - 0.6 * b.right).normalize();
     let fill = (-b.forward + 0.9 * b.right - 0.2 * b.up).normalize();
+    let white = [1.0, 1.0, 1.0];
     vec![
         Light::Directional {
             direction: (-key).to_array(),
-            colour: [1.0, 1.0, 1.0],
-            intensity: 0.75,
+            colour: white,
+            intensity: 0.6,
         },
         Light::Directional {
             direction: (-fill).to_array(),
-            colour: [1.0, 1.0, 1.0],
-            intensity: 0.25,
+            colour: white,
+            intensity: 0.2,
+        },
+        Light::Directional {
+            direction: b.forward.to_array(),
+            colour: white,
+            intensity: 0.3,
         },
     ]
 }

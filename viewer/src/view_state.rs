@@ -97,7 +97,9 @@ pub enum ViewStateError {
 }
 
 impl ViewState {
-    /// [`ViewState::default_for`] the bounds and field ranges of an opened volume.
+    /// [`ViewState::default_for`] the field ranges of an opened volume, with the camera
+    /// framing the regions where the iso field can cross the iso value (the interesting
+    /// part, often much smaller than the domain), or the whole data when none can.
     pub fn default_for_volume(vol: &crate::volume::Volume) -> ViewState {
         let fields: Vec<FieldRange> = vol
             .fields
@@ -108,11 +110,28 @@ impl ViewState {
                 max: f.max,
             })
             .collect();
-        ViewState::default_for(
+        let mut s = ViewState::default_for(
             vol.to_world(vol.bounds_min),
             vol.to_world(vol.bounds_max),
             &fields,
-        )
+        );
+        if let Ok(f) = vol.field_index(&s.iso_field) {
+            let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+            for (r, reg) in vol.regions.iter().enumerate() {
+                let [mn, mx] = vol.range(r, f);
+                if f64::from(mn) <= s.iso && s.iso <= f64::from(mx) {
+                    for a in 0..3 {
+                        lo[a] = lo[a].min(reg.min[a]);
+                        hi[a] = hi[a].max(reg.max[a]);
+                    }
+                }
+            }
+            if (0..3).all(|a| lo[a] <= hi[a]) {
+                s.camera = Camera::frame(vol.to_world(lo), vol.to_world(hi));
+                s.lights_follow_camera();
+            }
+        }
+        s
     }
 
     /// A state that shows any data set reasonably on first open: the camera frames the

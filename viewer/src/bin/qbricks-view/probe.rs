@@ -75,6 +75,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     "gradient".into(),
                     serde_json::Value::Array(r.gradient.iter().map(|&g| num(g)).collect()),
                 );
+                o.insert(
+                    "normal".into(),
+                    serde_json::Value::Array(r.normal.iter().map(|&g| num(g)).collect()),
+                );
                 serde_json::Value::Object(o)
             })
             .collect();
@@ -83,19 +87,26 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     } else {
         let names: Vec<&str> = vol.fields.iter().map(|f| f.name.as_str()).collect();
         let g = &vol.fields[gf].name;
-        writeln!(out, "x,y,z,{},d{g}/dx,d{g}/dy,d{g}/dz", names.join(","))?;
+        writeln!(
+            out,
+            "x,y,z,{},d{g}/dx,d{g}/dy,d{g}/dz,normal_x,normal_y,normal_z",
+            names.join(",")
+        )?;
         for r in &res {
             let vals: Vec<String> = r.values.iter().map(|v| v.to_string()).collect();
             writeln!(
                 out,
-                "{},{},{},{},{},{},{}",
+                "{},{},{},{},{},{},{},{},{},{}",
                 r.p[0],
                 r.p[1],
                 r.p[2],
                 vals.join(","),
                 r.gradient[0],
                 r.gradient[1],
-                r.gradient[2]
+                r.gradient[2],
+                r.normal[0],
+                r.normal[1],
+                r.normal[2]
             )?;
         }
     }

@@ -39,6 +39,10 @@ pub struct Args {
     /// Render this many times; `ms` is the median.
     #[arg(long, default_value_t = 1)]
     pub repeat: u32,
+    /// Write a debug buffer instead of the shaded image: the shading normal, the depth,
+    /// the finest contributing level or the colour-field value at the iso-surface.
+    #[arg(long, value_enum)]
+    pub aov: Option<qbricks_viewer::render::Aov>,
     /// Render only pixel X,Y and print its rays' region segments, samples and hits.
     #[arg(long)]
     pub pixel: Option<String>,
@@ -129,7 +133,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut frame = None;
     for _ in 0..args.repeat {
         let t = Instant::now();
-        let f = renderer.render(&scene);
+        let f = match args.aov {
+            Some(aov) => renderer.install(|| qbricks_viewer::render::render_aov(&scene, aov)),
+            None => renderer.render(&scene),
+        };
         times.push(t.elapsed().as_secs_f64() * 1e3);
         frame = Some(f);
     }

@@ -1,0 +1,136 @@
+//! Measurement (ignored by default): shading normals on the synthetic wake against the
+//! exact gradient of Q, smooth (central differences of the reconstruction) against the
+//! analytic gradient of the reconstruction, and the render time of both, in one run.
+//!
+//! `cargo test --release --test shading_wake -- --ignored --nocapture`
+
+mod util;
+
+use std::time::Instant;
+
+use viewer::dataset::Dataset;
+use viewer::mesh::DVec3;
+use viewer::mesh::Meshes;
+use viewer::ray::{RayCaster, Shading};
+use viewer::render::{render, Scene};
+use viewer::sampling::Strategy;
+use viewer::view_state::{Overrides, ViewState};
+
+fn angle_deg(a: DVec3, b: DVec3) -> f64 {
+    a.dot(b).clamp(-1.0, 1.0).acos().to_degrees()
+}
+
+fn pct(v: &[f64], q: f64) -> f64 {
+    let mut v = v.to_vec();
+    v.sort_by(f64::total_cmp);
+    v[((v.len() - 1) as f64 * q) as usize]
+}
+
+#[test]
+#[ignore = "measurement: prints normal errors and render times on the n0 = 64 wake"]
+fn measure_shading_normals_on_the_wake() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let vdb = dir.path().join("wake64.vdb");
+    let qbk = dir.path().join("wake64.qbk");
+    let bake = util::bin("qbricks-bake");
+    let ok = std::process::Command::new(&bake)
+        .args(["synth", "wake", "--n0", "64", "-o"])
+        .arg(&vdb)
+        .status()
+        .expect("synth")
+        .success();
+    assert!(ok);
+    let ok = std::process::Command::new(&bake)
+        .arg("bake")
+        .arg(&vdb)
+        .arg("-o")
+        .arg(&qbk)
+        .arg("--quiet")
+        .status()
+        .expect("bake")
+        .success();
+    assert!(ok);
+    let ds = Dataset::open(&qbk).expect("open");
+    let vol = ds.volume();
+    let flow = preprocess::analytic::scene("wake").expect("wake flow");
+    let mut st = ViewState::default_for_volume(vol);
+    Overrides {
+        iso: Some(0.05),
+        eye: Some("0.5,2.2,3.6".into()),
+        look_at: Some("2.2,0,0".into()),
+        width: Some(512),
+        height: Some(512),
+        strategy: Some(Strategy::Exact),
+        ..Overrides::default()
+    }
+    .apply(&mut st, false)
+    .expect("flags");
+    let meshes = Meshes::empty();
+    // Exact ∇Q by central differences of the analytic Q (h far below the cell width).
+    let grad_q = |p: DVec3| -> DVec3 {
+        let h = 1e-5;
+        let d = |a: DVec3| {
+            (flow.q((p + h * a).to_array()) - flow.q((p - h * a).to_array())) / (2.0 * h)
+        };
+        DVec3::new(d(DVec3::X), d(DVec3::Y), d(DVec3::Z))
+    };
+    for shading in [Shading::Analytic, Shading::Smooth] {
+        let mut scene = Scene::new(vol, &st, &meshes).expect("scene");
+        scene.shading = shading;
+        let mut caster = RayCaster::new(&scene);
+        let (w, h) = (st.width as usize, st.height as usize);
+        let mut px: Vec<Option<(DVec3, DVec3)>> = Vec::with_capacity(w * h);
+        for y in 0..h {
+            for x in 0..w {
+                let (ray, jit) = caster.camera_ray(x as u32, y as u32, 0);
+                px.push(caster.surface(&ray, jit).and_then(|s| {
+                    let g = grad_q(s.world);
+                    let mut e = g.try_normalize()?;
+                    if e.dot(ray.dir) > 0.0 {
+                        e = -e;
+                    }
+                    Some((s.normal, e))
+                }));
+            }
+        }
+        let errs: Vec<f64> = px
+            .iter()
+            .flatten()
+            .map(|(n, e)| angle_deg(*n, *e))
+            .collect();
+        let (mut nb, mut nb_exact) = (Vec::new(), Vec::new());
+        for y in 0..h {
+            for x in 0..w {
+                let Some((n0, e0)) = px[y * w + x] else {
+                    continue;
+                };
+                for (dx, dy) in [(1, 0), (0, 1)] {
+                    if x + dx >= w || y + dy >= h {
+                        continue;
+                    }
+                    if let Some((n1, e1)) = px[(y + dy) * w + x + dx] {
+                        nb.push(angle_deg(n0, n1));
+                        nb_exact.push(angle_deg(e0, e1));
+                    }
+                }
+            }
+        }
+        // Render time of the whole frame with this shading (median of 5, one pool).
+        let mut times = Vec::new();
+        for _ in 0..5 {
+            let t = Instant::now();
+            let _ = render(&scene);
+            times.push(t.elapsed().as_secs_f64() * 1e3);
+        }
+        times.sort_by(f64::total_cmp);
+        println!(
+            "{shading:?}: {} hits, angle to exact ∇Q mean {:.2}° p90 {:.2}°; neighbour angle p99 {:.2}° (exact normals' own p99 {:.2}°); render {:.1} ms (median of 5)",
+            errs.len(),
+            errs.iter().sum::<f64>() / errs.len().max(1) as f64,
+            pct(&errs, 0.9),
+            pct(&nb, 0.99),
+            pct(&nb_exact, 0.99),
+            times[2],
+        );
+    }
+}
