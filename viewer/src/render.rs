@@ -437,18 +437,23 @@ pub fn render_aov(scene: &Scene, aov: Aov) -> Frame {
     });
     let span = (tmax - tmin).max(1e-300);
     let mut hits = 0;
+    let mut pixel_hits = Vec::with_capacity(w as usize * h as usize);
     let rgb = rows
         .into_iter()
         .flatten()
         .map(|px| match px {
             Some((t, c)) => {
                 hits += 1;
+                pixel_hits.push(1);
                 match aov {
                     Aov::Depth => [(1.0 - 0.85 * (t - tmin) / span) as f32; 3],
                     _ => c,
                 }
             }
-            None => scene.state.background,
+            None => {
+                pixel_hits.push(0);
+                scene.state.background
+            }
         })
         .collect();
     Frame {
@@ -458,6 +463,7 @@ pub fn render_aov(scene: &Scene, aov: Aov) -> Frame {
         stats: Stats::default(),
         rays: u64::from(w) * u64::from(h),
         hits,
+        pixel_hits,
     }
 }
 

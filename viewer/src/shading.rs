@@ -133,8 +133,8 @@ impl Light {
 }
 
 /// Three white directional lights fixed to the camera's pose: a key light from above-left
-/// behind the viewer (intensity 0.6), a fill light from the right (0.2) and a headlight
-/// along the view direction (0.3), so every surface the camera sees gets some direct
+/// behind the viewer (intensity 0.55), a fill light from the right (0.15) and a headlight
+/// along the view direction (0.3), together 1, so every surface the camera sees gets some direct
 /// light and none renders near-black with the ambient term alone. Stored in world
 /// coordinates, so they stay put when the camera later moves.
 pub fn default_lights(camera: &Camera) -> Vec<Light> {
@@ -147,12 +147,12 @@ pub fn default_lights(camera: &Camera) -> Vec<Light> {
         Light::Directional {
             direction: (-key).to_array(),
             colour: white,
-            intensity: 0.6,
+            intensity: 0.55,
         },
         Light::Directional {
             direction: (-fill).to_array(),
             colour: white,
-            intensity: 0.2,
+            intensity: 0.15,
         },
         Light::Directional {
             direction: b.forward.to_array(),
@@ -295,6 +295,23 @@ mod tests {
         let lights = default_lights(&cam);
         let total: f32 = lights.iter().map(|l| l.radiance().x).sum();
         assert!((total - 1.0).abs() < 1e-6);
+        // Every surface the camera sees, however it is turned, gets direct light (the
+        // headlight), so nothing visible is lit by the ambient term alone.
+        let b = cam.basis();
+        for i in 0..200 {
+            let a = f64::from(i) * 0.731;
+            let tilt = 1.4 * (f64::from(i) / 200.0); // up to 80° away from the viewer
+            let n = (-b.forward * tilt.cos() + (b.right * a.cos() + b.up * a.sin()) * tilt.sin())
+                .normalize();
+            let direct: f64 = lights
+                .iter()
+                .map(|l| {
+                    let (to_light, _) = l.towards(DVec3::ZERO);
+                    f64::from(l.radiance().x) * n.dot(to_light).max(0.0)
+                })
+                .sum();
+            assert!(direct > 0.05, "normal {n} gets only {direct} direct light");
+        }
         // A surface facing the camera is lit by both lights.
         let n = -cam.basis().forward;
         for l in &lights {
