@@ -176,6 +176,80 @@ const CASES: &[Case] = &[
         .absent(&["x.png"]),
     case(VIEW, &["info", "--no-checksum", "flip.qbk"], 2,
         "qbricks-view: flip.qbk: archive is invalid: invalid UTF-8 (while checking field 'source'"),
+    // 1. Render: no output over an input or another output (path, symlink, hard link).
+    case(VIEW, &["render", "w.qbk", "-o", "w.qbk"], 2,
+        "qbricks-view: w.qbk: -o would overwrite the brick file w.qbk")
+        .same(&["w.qbk"]),
+    case(VIEW, &["render", "w.qbk", "-o", "x.png", "--save-state", "w.qbk"], 2,
+        "qbricks-view: w.qbk: --save-state would overwrite the brick file w.qbk")
+        .same(&["w.qbk"])
+        .absent(&["x.png"]),
+    case(VIEW, &["render", "w.qbk", "-o", "link.qbk"], 2,
+        "qbricks-view: link.qbk: -o would overwrite the brick file w.qbk")
+        .same(&["w.qbk", "link.qbk"]),
+    case(VIEW, &["render", "w.qbk", "-o", "hard.qbk"], 2,
+        "qbricks-view: hard.qbk: -o would overwrite the brick file w.qbk")
+        .same(&["w.qbk", "hard.qbk"]),
+    case(VIEW, &["render", "w.qbk", "-o", "dir/../w.qbk"], 2,
+        "qbricks-view: dir/../w.qbk: -o would overwrite the brick file w.qbk")
+        .same(&["w.qbk"]),
+    case(VIEW, &["render", "w.qbk", "--state", "st.json", "-o", "st.json"], 2,
+        "qbricks-view: st.json: -o would overwrite the --state file st.json")
+        .same(&["st.json"]),
+    case(VIEW, &["render", "w.qbk", "--state", "st.json", "-o", "x.png", "--save-state",
+        "st.json"], 2,
+        "qbricks-view: st.json: --save-state would overwrite the --state file st.json")
+        .same(&["st.json"])
+        .absent(&["x.png"]),
+    case(VIEW, &["render", "w.qbk", "-o", "s.obj", "--mesh", "s.obj"], 2,
+        "qbricks-view: s.obj: -o would overwrite the mesh s.obj")
+        .same(&["s.obj"]),
+    case(VIEW, &["render", "w.qbk", "-o", "x.png", "--save-state", "x.png"], 2,
+        "qbricks-view: x.png: --save-state and -o name the same file")
+        .absent(&["x.png"]),
+    // 1. All or nothing: a failing run writes none of its outputs.
+    case(VIEW, &["render", "w.qbk", "-o", "nodir/x.png", "--save-state", "st.json",
+        "--width", "8", "--height", "6"], 2,
+        "qbricks-view: nodir/x.png: No such file or directory")
+        .same(&["st.json"]),
+    case(VIEW, &["render", "w.qbk", "-o", "x.png", "--save-state", "nodir/k.json",
+        "--width", "8", "--height", "6"], 2,
+        "qbricks-view: nodir/k.json: No such file or directory")
+        .absent(&["x.png"]),
+    case(VIEW, &["render", "w.qbk", "-o", "x.png", "--mesh", "missing.obj"], 2,
+        "qbricks-view: missing.obj: cannot read OBJ file")
+        .absent(&["x.png"]),
+    // 3. Bounded work: step floor, thread/repeat/spp/mesh/image bounds.
+    case(VIEW, &["render", "w.qbk", "-o", "x.png", "--step", "1e-30"], 2,
+        "qbricks-view: view state: step: expected a finite number ≥ 0.001 (cell widths), found 1e-30")
+        .absent(&["x.png"]),
+    case(VIEW, &["render", "w.qbk", "-o", "x.png", "--step", "1e-30", "--mode", "dvr"], 2,
+        "qbricks-view: view state: step: expected a finite number ≥ 0.001"),
+    case(VIEW, &["render", "w.qbk", "-o", "x.png", "--threads", "100000"], 2,
+        "qbricks-view: --threads: expected 1..=256, found 100000"),
+    case(VIEW, &["render", "w.qbk", "-o", "x.png", "--repeat", "4294967295"], 2,
+        "qbricks-view: --repeat: expected 1..=1000, found 4294967295"),
+    case(VIEW, &["render", "w.qbk", "-o", "x.png", "--spp", "4294967295"], 2,
+        "qbricks-view: view state: spp: expected 1..=4096, found 4294967295"),
+    case(VIEW, &["render", "w.qbk", "-o", "x.png", "--width", "16384", "--height", "16384"],
+        2, "qbricks-view: a 16384x16384 image needs about 12288 MiB, more than the limit of"),
+    case(VIEW, &["render", "w.qbk", "-o", "x.png", "--state", "st_meshes.json"], 2,
+        "qbricks-view: st_meshes.json: meshes: expected at most 64 entries, found 65"),
+    case(VIEW, &["render", "w.qbk", "-o", "x.png", "--state", "/dev/zero"], 2,
+        "qbricks-view: /dev/zero: expected a JSON view state of at most 16777216 bytes"),
+    case(VIEW, &["render", "w.qbk", "-o", "x.png", "--state", "dir"], 2,
+        "qbricks-view: dir: is a directory, not a file"),
+    // 5. No silent wrong answers from render.
+    case(VIEW, &["render", "w.qbk", "-o", "x.png", "--eye", "0,0,5", "--look-at", "0,0,0",
+        "--up", "0,0,1"], 2,
+        "qbricks-view: view state: camera.up: [0.0, 0.0, 1.0] is zero or parallel to the view direction"),
+    case(VIEW, &["render", "w.qbk", "-o", "x.png", "--state", "st_field.json"], 2,
+        "qbricks-view: w.qbk: colormap.field: field \"nope\" is not in the file (fields: q, speed)"),
+    case(VIEW, &["render", "w.qbk", "-o", "x.png", "--state", "st_points.json"], 2,
+        "qbricks-view: st_points.json: colormap.points: expected at least one control point"),
+    case(VIEW, &["render", "w.qbk", "-o", "x.png", "--state", "st.json", "--strategy", "exact",
+        "--json"], 0, "")
+        .stdout("\"inexact_segments\":0,\"truncated_segments\":0}"),
     // 5. No silent wrong answers from probe.
     case(VIEW, &["probe", "w.qbk", "--points", "bad0.csv"], 2, "qbricks-view: bad0.csv: line 1: "),
     case(VIEW, &["probe", "w.qbk", "--points", "bad1.csv"], 2, "qbricks-view: bad1.csv: line 1: "),
@@ -225,6 +299,14 @@ fn populate(dir: &Path, case: &Case) {
         f.set_len(1 << 40).expect("sparse 1 TiB file");
     }
     std::fs::create_dir(dir.join("dir")).expect("mkdir");
+    #[cfg(unix)]
+    if wanted("link.qbk") || wanted("hard.qbk") {
+        std::os::unix::fs::symlink("w.qbk", dir.join("link.qbk")).expect("symlink");
+        std::fs::hard_link(dir.join("w.qbk"), dir.join("hard.qbk")).expect("hard link");
+    }
+    if names.iter().any(|n| n.starts_with("st")) {
+        write_states(dir);
+    }
     for (i, line) in BAD_FIRST_LINES.iter().enumerate() {
         std::fs::write(
             dir.join(format!("bad{i}.csv")),
@@ -233,6 +315,31 @@ fn populate(dir: &Path, case: &Case) {
         .expect("csv");
     }
     std::fs::write(dir.join("header.csv"), "x,y,z\n0.5,0,0\n").expect("csv");
+}
+
+/// View states for the sample: a small valid one, and ones with a colour field the file
+/// lacks, no colour points, and one mesh entry too many.
+fn write_states(dir: &Path) {
+    use viewer::view_state::ViewState;
+    let view = format::BrickFileView::open(&util::root().join("data/wake_small.qbk"))
+        .expect("open sample");
+    let vol = viewer::volume::Volume::new(view.file()).expect("volume");
+    let mut st = ViewState::default_for_volume(&vol);
+    st.width = 8;
+    st.height = 6;
+    let save = |name: &str, s: &ViewState| {
+        std::fs::write(dir.join(name), s.to_json()).expect("write state");
+    };
+    save("st.json", &st);
+    let mut bad = st.clone();
+    bad.colormap.field = "nope".into();
+    save("st_field.json", &bad);
+    let mut bad = st.clone();
+    bad.colormap.points.clear();
+    save("st_points.json", &bad);
+    let mut bad = st.clone();
+    bad.meshes = vec![viewer::mesh::MeshInstance::at_origin("s.obj"); 65];
+    save("st_meshes.json", &bad);
 }
 
 struct Outcome {

@@ -90,7 +90,11 @@ impl TempFile {
         // Register under the lock before the file exists, so a signal between creating
         // and registering cannot leave it behind.
         let mut live = LIVE_TEMPS.lock().unwrap_or_else(|e| e.into_inner());
-        let (file, path) = builder.tempfile_in(dir)?.keep().map_err(|e| e.error)?;
+        let (file, path) = builder
+            .tempfile_in(dir)
+            .map_err(without_temp_name)?
+            .keep()
+            .map_err(|e| e.error)?;
         live.push(path.clone());
         drop(live);
         Ok(TempFile {
@@ -109,6 +113,16 @@ impl TempFile {
         live.retain(|p| p != &self.path);
         self.keep = true;
         Ok(())
+    }
+}
+
+/// The error of a failed temporary-file creation without tempfile's `at path
+/// "<temporary name>"` suffix (the user named the target, not the temporary file).
+fn without_temp_name(e: io::Error) -> io::Error {
+    let msg = e.to_string();
+    match msg.split_once(" at path ") {
+        Some((cause, _)) => io::Error::new(e.kind(), cause.to_string()),
+        None => e,
     }
 }
 
@@ -132,40 +146,83 @@ pub fn write_atomic<T, E: From<io::Error>>(
     path: &Path,
     body: impl FnOnce(&mut File) -> Result<T, E>,
 ) -> Result<T, E> {
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
-    let name = path
-        .file_name()
-        .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "expected a file name"))?
-        .to_string_lossy()
-        .into_owned();
-    // An existing target that is not a regular file (nor a directory, which the rename
-    // refuses with its own message) is written into, not replaced.
-    let special = std::fs::metadata(path)
-        .map(|m| !m.is_file() && !m.is_dir())
-        .unwrap_or(false);
-    let mut tmp = TempFile::create(dir, &name)?;
-    let value = body(&mut tmp.file)?;
-    if special {
-        use std::io::Seek;
-        let f = &mut tmp.file;
-        f.flush()?;
-        f.seek(io::SeekFrom::Start(0))?;
-        let mut target = std::fs::OpenOptions::new().write(true).open(path)?;
-        io::copy(f, &mut target)?;
-        target.flush()?;
-        return Ok(value);
-    }
-    tmp.file.sync_all()?;
-    tmp.rename_to(path)?;
-    // Make the rename itself durable. Some file systems refuse to fsync a directory;
-    // the data is already safe then, so this is best effort.
-    if let Ok(d) = File::open(dir) {
-        let _ = d.sync_all();
-    }
+    let mut pending = Pending::create(path)?;
+    let value = body(&mut pending.tmp.file)?;
+    pending.commit()?;
     Ok(value)
+}
+
+/// Writes several outputs all or nothing (as far as a file system allows): every output is
+/// first written completely to its temporary file, and only when all of them succeeded are
+/// they put in place, one after the other. A failure while writing any of them leaves every
+/// target untouched. Errors name the output that failed.
+pub fn write_all_atomic(outputs: &[(&Path, &[u8])]) -> Result<(), (PathBuf, io::Error)> {
+    let mut pending = Vec::with_capacity(outputs.len());
+    for (path, bytes) in outputs {
+        let named = |e| (path.to_path_buf(), e);
+        let mut p = Pending::create(path).map_err(named)?;
+        p.tmp.file.write_all(bytes).map_err(named)?;
+        pending.push(p);
+    }
+    for p in pending {
+        let path = p.target.clone();
+        p.commit().map_err(|e| (path, e))?;
+    }
+    Ok(())
+}
+
+/// An output being written: its temporary file and where it goes.
+struct Pending {
+    tmp: TempFile,
+    target: PathBuf,
+    dir: PathBuf,
+    /// The target exists and is not a regular file (nor a directory, which the rename
+    /// refuses with its own message): it is written into, not replaced.
+    special: bool,
+}
+
+impl Pending {
+    fn create(path: &Path) -> io::Result<Pending> {
+        let dir = match path.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p,
+            _ => Path::new("."),
+        };
+        let name = path
+            .file_name()
+            .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "expected a file name"))?
+            .to_string_lossy()
+            .into_owned();
+        let special = std::fs::metadata(path)
+            .map(|m| !m.is_file() && !m.is_dir())
+            .unwrap_or(false);
+        Ok(Pending {
+            tmp: TempFile::create(dir, &name)?,
+            target: path.to_path_buf(),
+            dir: dir.to_path_buf(),
+            special,
+        })
+    }
+
+    /// Puts the finished temporary file in place (renamed, or copied into a special target).
+    fn commit(mut self) -> io::Result<()> {
+        if self.special {
+            use std::io::Seek;
+            let f = &mut self.tmp.file;
+            f.flush()?;
+            f.seek(io::SeekFrom::Start(0))?;
+            let mut target = std::fs::OpenOptions::new().write(true).open(&self.target)?;
+            io::copy(f, &mut target)?;
+            return target.flush();
+        }
+        self.tmp.file.sync_all()?;
+        self.tmp.rename_to(&self.target)?;
+        // Make the rename itself durable. Some file systems refuse to fsync a directory;
+        // the data is already safe then, so this is best effort.
+        if let Ok(d) = File::open(&self.dir) {
+            let _ = d.sync_all();
+        }
+        Ok(())
+    }
 }
 
 /// Whether `a` and `b` name the same file (or would, for a target that does not exist):
@@ -310,6 +367,31 @@ mod tests {
         assert_eq!(std::fs::read(&path).expect("read"), b"new");
         assert_eq!(leftovers(dir.path()), vec!["out.qbk".to_owned()]);
         assert!(!live().iter().any(|p| p.starts_with(dir.path())));
+    }
+
+    #[test]
+    fn all_or_nothing_leaves_every_target_when_one_fails() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let a = dir.path().join("a.png");
+        std::fs::write(&a, b"old a").expect("write");
+        let bad = dir.path().join("no/such/dir/b.json");
+        let e = write_all_atomic(&[(&a, b"new a"), (&bad, b"new b")]).expect_err("no dir");
+        assert_eq!(e.0, bad);
+        assert_eq!(std::fs::read(&a).expect("read"), b"old a");
+        assert_eq!(leftovers(dir.path()), vec!["a.png".to_owned()]);
+        let b = dir.path().join("b.json");
+        write_all_atomic(&[(&a, b"new a"), (&b, b"new b")]).expect("both");
+        assert_eq!(std::fs::read(&a).expect("read"), b"new a");
+        assert_eq!(std::fs::read(&b).expect("read"), b"new b");
+    }
+
+    #[test]
+    fn missing_directory_error_does_not_show_the_temporary_name() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let e = write_atomic(&dir.path().join("no/x.png"), |f| f.write_all(b"x"))
+            .expect_err("no directory");
+        assert_eq!(e.kind(), io::ErrorKind::NotFound);
+        assert!(!e.to_string().contains(".tmp"), "{e}");
     }
 
     #[test]

@@ -138,6 +138,9 @@ impl ColorMap {
                 self.band
             ));
         }
+        if self.points.is_empty() {
+            return Err("points: expected at least one control point, found none".into());
+        }
         for (i, p) in self.points.iter().enumerate() {
             if !p.value.is_finite() {
                 return Err(format!("points[{i}].value: not finite ({})", p.value));

@@ -49,8 +49,21 @@ impl<'a> Scene<'a> {
         state: &'a ViewState,
         meshes: &'a Meshes,
     ) -> Result<Self, VolumeError> {
-        let field = vol.field_index(&state.iso_field)?;
-        let colour_field = vol.field_index(&state.colormap.field).ok();
+        let setting = |setting| {
+            move |e| VolumeError::Setting {
+                setting,
+                source: Box::new(e),
+            }
+        };
+        let field = vol
+            .field_index(&state.iso_field)
+            .map_err(setting("iso_field"))?;
+        // A colour field the file does not have is an error like a missing iso field (it
+        // used to fall back silently to a constant colour).
+        let colour_field = Some(
+            vol.field_index(&state.colormap.field)
+                .map_err(setting("colormap.field"))?,
+        );
         let params = Params {
             strategy: state.effective_strategy(),
             step: state.step,
@@ -331,6 +344,13 @@ pub struct FrameReport {
     pub strategy: &'static str,
     pub mode: &'static str,
     pub threads: usize,
+    /// `exact` segments through regions with more cell lattices than it cuts planes for
+    /// (`sampling::MAX_LATTICES`), where the search was only approximately exact; 0 for
+    /// nested grids of one refinement ratio.
+    pub inexact_segments: u64,
+    /// Segments whose samples stopped early because the step no longer advanced along the
+    /// ray or hit the per-segment cap (`sampling::MAX_POSITIONS_PER_SEGMENT`).
+    pub truncated_segments: u64,
 }
 
 impl FrameReport {
@@ -350,6 +370,8 @@ impl FrameReport {
             strategy: state.effective_strategy().as_str(),
             mode: state.mode.as_str(),
             threads,
+            inexact_segments: frame.stats.inexact_segments,
+            truncated_segments: frame.stats.truncated_segments,
         }
     }
 }

@@ -95,6 +95,14 @@ pub struct Stats {
     pub samples: u64,
     pub segments: u64,
     pub skipped: u64,
+    /// `exact` segments through a region with more than [`MAX_LATTICES`] distinct cell
+    /// lattices: the extra lattices' planes are not cut there, so the search is only
+    /// approximately exact (reported, never silent; nested grids of one refinement ratio
+    /// never produce such a region).
+    pub inexact_segments: u64,
+    /// Segments whose sample sequence stopped at [`MAX_POSITIONS_PER_SEGMENT`] or because
+    /// the step fell below the resolution of `t` (`t + dt == t`).
+    pub truncated_segments: u64,
 }
 
 impl std::ops::AddAssign for Stats {
@@ -102,8 +110,18 @@ impl std::ops::AddAssign for Stats {
         self.samples += o.samples;
         self.segments += o.segments;
         self.skipped += o.skipped;
+        self.inexact_segments += o.inexact_segments;
+        self.truncated_segments += o.truncated_segments;
     }
 }
+
+/// Most distinct cell lattices `exact` cuts planes for in one region.
+pub const MAX_LATTICES: usize = 8;
+
+/// Most sample positions in one region segment. With the smallest step
+/// (`view_state::MIN_STEP`, a thousand per cell width) that is a thousand cells along one
+/// segment; bricks are far smaller, so only a degenerate step or geometry reaches it.
+pub const MAX_POSITIONS_PER_SEGMENT: u32 = 1 << 20;
 
 /// What `--pixel` prints.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -154,13 +172,17 @@ struct Prev {
     real: bool,
 }
 
-/// Sample positions of one region segment: `(t, Δ)`.
+/// Sample positions of one region segment: `(t, Δ)`. Ends early (and says so in
+/// `truncated`) when a step no longer moves `t` or after [`MAX_POSITIONS_PER_SEGMENT`]
+/// positions, so no step size can make a ray march for ever.
 struct Positions {
     strategy: Strategy,
     a: f64,
     b: f64,
     end: f64,
     dt: f64,
+    count: u32,
+    truncated: bool,
 }
 
 impl Positions {
@@ -179,6 +201,8 @@ impl Positions {
                     b: a,
                     end: t1,
                     dt,
+                    count: 0,
+                    truncated: false,
                 }
             }
             _ => Positions {
@@ -187,6 +211,8 @@ impl Positions {
                 b: t0 + jitter * dt,
                 end: t1,
                 dt,
+                count: 0,
+                truncated: false,
             },
         }
     }
@@ -201,12 +227,22 @@ impl Iterator for Positions {
     type Item = (f64, f64);
 
     fn next(&mut self) -> Option<(f64, f64)> {
+        if self.count >= MAX_POSITIONS_PER_SEGMENT {
+            self.truncated |= self.a < self.end;
+            return None;
+        }
+        self.count += 1;
         if self.strategy == Strategy::Uniform {
             if self.a >= self.end {
                 return None;
             }
             let t = self.a;
             self.a += self.dt;
+            if self.a <= t {
+                // The step is below the resolution of t here: stop rather than loop.
+                self.truncated = true;
+                self.a = self.end;
+            }
             return Some((t, self.dt));
         }
         // Interval delimiters t0, t0 + jitter·dt, t0 + (1 + jitter)·dt, …, t1; midpoints.
@@ -217,7 +253,14 @@ impl Iterator for Positions {
             let b = self.b.min(self.end);
             let a = self.a;
             self.a = b;
-            self.b += self.dt;
+            let next_b = self.b + self.dt;
+            if next_b.partial_cmp(&self.b) != Some(std::cmp::Ordering::Greater) && b < self.end {
+                // `b + dt == b`: no further delimiter can be placed; end the segment here.
+                self.truncated = true;
+                self.b = self.end;
+            } else {
+                self.b = next_b;
+            }
             if b > a {
                 return Some((0.5 * (a + b), b - a));
             }
@@ -468,6 +511,9 @@ impl<'v> Tracer<'v> {
                 }
             }
             t_next = pos.next_t();
+            if pos.truncated {
+                self.stats.truncated_segments += 1;
+            }
             true
         });
         self.stack = stack;
@@ -572,6 +618,9 @@ impl<'v> Tracer<'v> {
                 return true;
             }
             let mut planes = Planes::new(vol, r, &o, &d, seg.t0);
+            if planes.inexact {
+                self.stats.inexact_segments += 1;
+            }
             let mut ta = seg.t0;
             while ta < seg.t1 {
                 let tb = planes.next(ta).min(seg.t1);
@@ -721,6 +770,9 @@ impl<'v> Tracer<'v> {
                 }
             }
             t_next = pos.next_t();
+            if pos.truncated {
+                self.stats.truncated_segments += 1;
+            }
             true
         });
         self.stack = stack;
@@ -789,20 +841,23 @@ fn bisect_depth(len: f64, w: f64) -> u32 {
 /// Walks the lattice planes (cell-centre planes) of every lattice present in a region.
 struct Planes {
     /// Next plane crossing per (lattice, axis) and the spacing in t.
-    next: [f64; 24],
-    step: [f64; 24],
+    next: [f64; 3 * MAX_LATTICES],
+    step: [f64; 3 * MAX_LATTICES],
     n: usize,
+    /// The region has more lattices than are cut (see [`Stats::inexact_segments`]).
+    inexact: bool,
 }
 
 impl Planes {
     fn new(vol: &Volume, r: usize, o: &[f64; 3], d: &[f64; 3], t: f64) -> Planes {
         let mut pl = Planes {
-            next: [f64::INFINITY; 24],
-            step: [f64::INFINITY; 24],
+            next: [f64::INFINITY; 3 * MAX_LATTICES],
+            step: [f64::INFINITY; 3 * MAX_LATTICES],
             n: 0,
+            inexact: false,
         };
         let ids = vol.region_brick_ids(r);
-        let mut lattices: [(usize, [f64; 3]); 8] = [(0, [0.0; 3]); 8];
+        let mut lattices = [(0usize, [0.0f64; 3]); MAX_LATTICES];
         let mut nl = 0;
         // One level and one lattice (checked at open): the first brick's planes are all.
         let single = vol.regions[r].single_lattice;
@@ -822,10 +877,12 @@ impl Planes {
             if lattices[..nl].iter().any(same) {
                 continue;
             }
-            if nl == 8 {
-                // More than 8 distinct lattices in one region (never produced by nested
-                // grids of one refinement ratio): the remaining lattices' planes are not
-                // cut, so intervals there are only approximately cubic.
+            if nl == MAX_LATTICES {
+                // More distinct lattices in one region than are cut (never produced by
+                // nested grids of one refinement ratio): the remaining lattices' planes are
+                // not cut, so intervals there are only approximately cubic. Counted in
+                // `Stats::inexact_segments` and reported by `render --json`.
+                pl.inexact = true;
                 break;
             }
             lattices[nl] = (k, br.origin);
@@ -1078,6 +1135,31 @@ mod tests {
                 .collect();
             assert_eq!(u.first().copied(), Some(2.0));
             assert!(u.windows(2).all(|w| (w[1] - w[0] - dt).abs() < 1e-12));
+        }
+    }
+
+    /// A step below the resolution of `t` (`t + dt == t` far from the origin) or a segment
+    /// of more than `MAX_POSITIONS_PER_SEGMENT` steps ends the sequence, marked truncated,
+    /// instead of marching for ever.
+    #[test]
+    fn positions_end_when_the_step_cannot_advance() {
+        for strategy in [Strategy::Uniform, Strategy::Paper, Strategy::Bisect] {
+            let mut p = Positions::new(strategy, 1e12, 1e12 + 1.0, 1e-6, 0.5, 0.0);
+            let n = p.by_ref().count();
+            assert!(n <= 3, "{strategy:?}: {n} positions");
+            assert!(p.truncated, "{strategy:?}");
+
+            let mut p = Positions::new(strategy, 0.0, 1.0, 1e-9, 0.5, 0.0);
+            let n = p.by_ref().count();
+            assert_eq!(n as u32, MAX_POSITIONS_PER_SEGMENT, "{strategy:?}");
+            assert!(p.truncated, "{strategy:?}");
+
+            let mut p = Positions::new(strategy, 0.0, 1.0, 0.25, 0.5, 0.0);
+            assert!(p.by_ref().count() <= 5);
+            assert!(
+                !p.truncated,
+                "{strategy:?}: an ordinary segment is not truncated"
+            );
         }
     }
 }

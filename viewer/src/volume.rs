@@ -26,6 +26,12 @@ pub enum VolumeError {
     },
     #[error("field {0:?} is not in the file (fields: {1})")]
     NoSuchField(String, String),
+    /// A view setting names a field the file does not have.
+    #[error("{setting}: {source}")]
+    Setting {
+        setting: &'static str,
+        source: Box<VolumeError>,
+    },
 }
 
 fn invalid(what: impl Into<String>, expected: impl ToString, found: impl ToString) -> VolumeError {

@@ -5,15 +5,27 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{bail, Context};
+use format::output::same_file;
 use format::output::QuietStdout;
 use qbricks_viewer::film;
 use qbricks_viewer::mesh::Meshes;
-use qbricks_viewer::render::{FrameReport, Renderer, Scene};
+use qbricks_viewer::render::{Frame, FrameReport, Renderer, Scene};
 use qbricks_viewer::view_state::{Overrides, ViewState};
 use qbricks_viewer::volume::Volume;
 
 /// The bundled sample, relative to the current directory.
 pub const DEFAULT_FILE: &str = "data/wake_small.qbk";
+
+/// Most worker threads: far more than any machine's cores, few enough that a typo
+/// (`--threads 100000`) cannot exhaust the process's thread and stack limits.
+pub const MAX_THREADS: usize = 256;
+/// Most `--repeat` (a benchmark's median needs a handful, not billions).
+pub const MAX_REPEAT: u32 = 1000;
+/// Bytes a headless frame holds per pixel: the film's f64 sums and sample counts (28), the
+/// resolved f32 image (12), the 8-bit copy and the PNG encoder's buffer (≈ 6), rounded up.
+pub const FRAME_BYTES_PER_PIXEL: u64 = 48;
+/// Most bytes a headless frame may take (about 13 000² pixels), whatever the machine.
+pub const MAX_FRAME_BYTES: u64 = 8 << 30;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -74,8 +86,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.output.is_none() && args.pixel.is_none() {
         bail!("expected -o OUT.png (or --pixel X,Y)");
     }
-    if args.repeat == 0 {
-        bail!("--repeat: expected at least 1, found 0");
+    if !(1..=MAX_REPEAT).contains(&args.repeat) {
+        bail!("--repeat: expected 1..={MAX_REPEAT}, found {}", args.repeat);
+    }
+    if let Some(t) = args.threads {
+        if !(1..=MAX_THREADS).contains(&t) {
+            bail!("--threads: expected 1..={MAX_THREADS}, found {t}");
+        }
     }
 
     // Open.
@@ -97,9 +114,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     state
         .validate()
         .map_err(|m| anyhow::anyhow!("view state: {m}"))?;
-    if let Some(p) = &args.save_state {
-        state.save(p)?;
-    }
+    check_files(&path, &args, &state)?;
+    check_frame_memory(state.width, state.height)?;
     for n in notes {
         eprintln!("qbricks-view: note: {n}");
     }
@@ -110,9 +126,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let scene = Scene::new(&vol, &state, &meshes).with_context(|| format!("{}", path.display()))?;
 
-    if args.threads == Some(0) {
-        bail!("--threads: expected at least 1, found 0");
-    }
     let renderer = Renderer::new(args.threads).context("starting worker threads")?;
 
     // One pixel, explained.
@@ -125,7 +138,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             serde_json::to_string_pretty(&trace)?
         )?;
         if args.output.is_none() {
-            return Ok(());
+            return write_outputs(&args, &state, None);
         }
     }
 
@@ -145,14 +158,88 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     times.sort_by(f64::total_cmp);
     let ms = times[times.len() / 2];
-    if let Some(out) = &args.output {
-        film::save_png(out, frame.width, frame.height, &frame.rgb)?;
-    }
+    write_outputs(&args, &state, Some(&frame))?;
     if args.json {
         let report = FrameReport::new(&frame, &state, ms, open_ms, renderer.threads());
         writeln!(QuietStdout::new(), "{}", serde_json::to_string(&report)?)?;
     }
     Ok(())
+}
+
+/// Refuses outputs that are the same file as an input (the brick file, the state file, a
+/// mesh) or as each other: by path, through symlinks and `..`, or hard links. Runs before
+/// anything is rendered or written, so nothing is lost.
+fn check_files(file: &Path, args: &Args, state: &ViewState) -> anyhow::Result<()> {
+    let mut inputs: Vec<(&str, &Path)> = vec![("brick file", file)];
+    if let Some(s) = &args.state {
+        inputs.push(("--state file", s));
+    }
+    for m in &state.meshes {
+        inputs.push(("mesh", &m.path));
+    }
+    let mut outputs: Vec<(&str, &Path)> = Vec::new();
+    if let Some(o) = &args.output {
+        outputs.push(("-o", o));
+    }
+    if let Some(s) = &args.save_state {
+        outputs.push(("--save-state", s));
+    }
+    for (i, (flag, out)) in outputs.iter().enumerate() {
+        for (what, input) in &inputs {
+            if same_file(out, input) {
+                bail!(
+                    "{}: {flag} would overwrite the {what} {}, an input of this render",
+                    out.display(),
+                    input.display()
+                );
+            }
+        }
+        for (other_flag, other) in &outputs[..i] {
+            // Two outputs into one device (`/dev/null`) lose nothing.
+            let device = std::fs::metadata(out).is_ok_and(|m| !m.is_file() && !m.is_dir());
+            if same_file(out, other) && !device {
+                bail!(
+                    "{}: {flag} and {other_flag} name the same file",
+                    out.display()
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Refuses an image whose frame needs more than [`MAX_FRAME_BYTES`] or half the machine's
+/// memory, before any of it is allocated (a 16384² image takes about 12 GiB).
+fn check_frame_memory(width: u32, height: u32) -> anyhow::Result<()> {
+    let limit =
+        format::input::physical_memory().map_or(MAX_FRAME_BYTES, |m| (m / 2).min(MAX_FRAME_BYTES));
+    let need = u64::from(width) * u64::from(height) * FRAME_BYTES_PER_PIXEL;
+    if need > limit {
+        bail!(
+            "a {width}x{height} image needs about {} MiB, more than the limit of {} MiB \
+             (8 GiB, or half of this machine's memory if less); render a smaller image",
+            need >> 20,
+            limit >> 20
+        );
+    }
+    Ok(())
+}
+
+/// Writes the PNG (when there is a frame and `-o`) and the `--save-state` file together,
+/// only now that the render succeeded, and all or nothing.
+fn write_outputs(args: &Args, state: &ViewState, frame: Option<&Frame>) -> anyhow::Result<()> {
+    let mut outputs: Vec<(&Path, Vec<u8>)> = Vec::new();
+    if let (Some(out), Some(frame)) = (&args.output, frame) {
+        let png = film::encode_png(frame.width, frame.height, &frame.rgb)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
+        outputs.push((out, png));
+    }
+    if let Some(p) = &args.save_state {
+        outputs.push((p, format!("{}\n", state.to_json()).into_bytes()));
+    }
+    let list: Vec<(&Path, &[u8])> = outputs.iter().map(|(p, b)| (*p, b.as_slice())).collect();
+    format::output::write_all_atomic(&list)
+        .map_err(|(path, e)| anyhow::anyhow!("{}: {e}", path.display()))
 }
 
 fn parse_pixel(s: &str, w: u32, h: u32) -> anyhow::Result<(u32, u32)> {
