@@ -70,7 +70,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         script,
     })?;
     if let (Some(r), true) = (report, args.json) {
-        println!("{}", serde_json::to_string(&r)?);
+        use std::io::Write;
+        writeln!(
+            format::output::QuietStdout::new(),
+            "{}",
+            serde_json::to_string(&r)?
+        )?;
     }
     Ok(())
 }
