@@ -540,7 +540,19 @@ fn writer_is_deterministic_and_atomic() {
     assert_eq!(bytes_a, std::fs::read(&b).expect("read b"));
     // Only the two outputs in the directory: no temporary file left behind.
     assert_eq!(std::fs::read_dir(dir.path()).expect("dir").count(), 2);
-    // A failing write leaves the existing file untouched.
+    // A write that fails in the atomic path itself — everything written and synced, then
+    // the rename refused because the target is a non-empty directory — leaves the target
+    // as it was and no temporary file behind.
+    let target = dir.path().join("c.vdb");
+    std::fs::create_dir(&target).expect("mkdir");
+    std::fs::write(target.join("keep"), b"kept").expect("write");
+    let e = write_scene(&target, &opts).expect_err("rename over a directory");
+    assert!(e.to_string().contains("c.vdb"), "{e}");
+    assert_eq!(std::fs::read(target.join("keep")).expect("kept"), b"kept");
+    assert_eq!(std::fs::read_dir(dir.path()).expect("dir").count(), 3);
+    std::fs::remove_dir_all(&target).expect("rm");
+    // A write refused before any file is created (a zero voxel size) leaves the existing
+    // file untouched too.
     let bad = Grid {
         name: "bad".into(),
         transform: transform(0.0, [0.0; 3]),

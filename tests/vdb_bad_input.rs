@@ -65,19 +65,38 @@ fn every_truncation_is_an_error() {
 
 #[test]
 fn truncation_inside_a_leaf_buffer_names_grid_and_counts() {
-    // Cut the uncompressed file in the middle of its last leaf buffer.
+    // Cut the uncompressed file 1000 bytes before the end of its last grid, inside the
+    // 2048 value bytes of the last leaf buffer, and move that grid's end offset in its
+    // descriptor to the cut: the file then opens, and the leaf reader must name the grid,
+    // the item, the values it expected and the bytes it found.
     let name = "float_none.vdb";
     let bytes = fixture(name);
     let file = VdbFile::from_bytes(name, bytes.clone()).unwrap();
-    let end = file.grids()[0].end_pos as usize;
-    // Keep the descriptor valid by cutting only the data after the grid start and
-    // patching nothing: the end offset is now past the end, which open() reports.
-    let e = read(name, bytes[..end - 10].to_vec()).unwrap_err();
-    check_message(&e, name);
+    let last = file.grids().len() - 1;
+    let g = &file.grids()[last];
+    let (grid, end) = (g.name.clone(), g.end_pos);
+    assert_eq!(end as usize, bytes.len(), "the last grid ends the file");
+    let cut = end - 1000;
+    let mut b = bytes[..cut as usize].to_vec();
+    let at = find(&bytes, &end.to_le_bytes());
     assert!(
-        matches!(e.kind, ErrorKind::Invalid(_) | ErrorKind::Truncated { .. }),
-        "{e}"
+        at < g.grid_pos as usize,
+        "end offset found in the descriptor"
     );
+    b[at..at + 8].copy_from_slice(&cut.to_le_bytes());
+
+    let file = VdbFile::from_bytes(name, b).expect("the patched descriptor opens");
+    let e = file.read_grid(last).expect_err("truncated leaf buffer");
+    check_message(&e, name);
+    assert_eq!(e.grid.as_deref(), Some(grid.as_str()), "{e}");
+    assert_eq!(e.what, "leaf buffer", "{e}");
+    match &e.kind {
+        ErrorKind::Truncated { expected, left } => {
+            assert_eq!(expected, "512 values", "{e}");
+            assert!(*left > 0 && *left < 2048, "{e}");
+        }
+        other => panic!("expected a truncation, found {other:?}: {e}"),
+    }
 }
 
 #[test]

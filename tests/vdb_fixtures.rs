@@ -258,7 +258,10 @@ fn inspect_json_matches_openvdb() {
         assert_eq!(got["file_version"], e["file_version"]);
         assert_eq!(got["library_version"], e["library_version"]);
         let grids = got["grids"].as_array().unwrap();
-        for (g, eg) in grids.iter().zip(e["grids"].as_array().unwrap()) {
+        let want_grids = e["grids"].as_array().unwrap();
+        // `zip` below stops at the shorter list: a missing or extra grid must fail here.
+        assert_eq!(grids.len(), want_grids.len(), "{name}: grid count");
+        for (g, eg) in grids.iter().zip(want_grids) {
             let ctx = format!("{name} {}", eg["name"]);
             for key in ["name", "value_type", "half_float", "active_voxels"] {
                 assert_eq!(g[key], eg[key], "{ctx}: {key}");
@@ -274,6 +277,7 @@ fn inspect_json_matches_openvdb() {
             );
             let mean = json_comps(&g["mean"]);
             let want = expected_mean(eg);
+            assert_eq!(mean.len(), want.len(), "{ctx}: mean components");
             for (m, w) in mean.iter().zip(&want) {
                 assert!(
                     (m - w).abs() <= 1e-9 * w.abs().max(1.0),

@@ -1,5 +1,5 @@
 //! Sampling strategies along one ray: `uniform`, `paper`, `bisect`, `exact`
-//! (see DESIGN.md, "Sampling strategies").
+//! (see `docs/design.md`, "Sampling strategies").
 //!
 //! All strategies walk the regions front to back ([`Volume::segments`]) and skip a region
 //! whose value bounds miss the transfer function's non-zero band. A skipped region still
@@ -21,7 +21,7 @@ use crate::volume::Volume;
 /// Smallest bisection interval of `bisect`, in cell widths.
 pub const BISECT_RESOLUTION: f64 = 0.005;
 
-/// Sampling strategy along a ray (see DESIGN.md, "Sampling strategies").
+/// Sampling strategy along a ray (see `docs/design.md`, "Sampling strategies").
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum Strategy {

@@ -387,7 +387,8 @@ mod tests {
     #[test]
     fn finite_differences_across_the_sphere_surface_give_no_positive_q_skin() {
         // Central differences at the finest voxel size of `synth wake --n0 160`, at points
-        // whose stencil straddles the surface: the normal-velocity jump reads as strain.
+        // whose stencil straddles the surface: the normal-velocity jump reads as strain, so
+        // Q ≤ 0 there (what the README states), not merely below the iso value.
         let w = Wake::sample_scene();
         let h = 0.0125;
         let mut rng = Rng::new(25);
@@ -395,7 +396,7 @@ mod tests {
             let d = normalize(rng.point([-1.0; 3], [1.0; 3]));
             let p = scale(d, 0.5 + 3.0 * h * rng.next_f64());
             let q = q_from_gradient(&super::super::testutil::fd_gradient(&w, p, h));
-            assert!(q < 0.05, "FD Q {q} at {p:?}");
+            assert!(q <= 0.0, "FD Q {q} at {p:?}");
         }
         assert!(w.is_smooth_near([2.0, 0.0, 0.0], 0.1));
         assert!(!w.is_smooth_near([0.0, 0.5 + 0.5 * h, 0.0], h));
