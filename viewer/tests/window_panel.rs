@@ -62,6 +62,20 @@ fn moving_the_iso_slider_changes_the_state_and_starts_a_new_frame() {
 }
 
 #[test]
+fn an_idle_window_does_not_start_new_frames() {
+    let app = ViewerApp::for_tests(&sample(), Some(1)).expect("app");
+    let mut h = harness(app);
+    refine(&mut h);
+    let generation = h.state().generation;
+    h.run_steps(30);
+    assert_eq!(
+        h.state().generation,
+        generation,
+        "the view changed without input"
+    );
+}
+
+#[test]
 fn a_colour_point_added_shows_in_the_map() {
     let app = ViewerApp::for_tests(&sample(), Some(1)).expect("app");
     let mut h = harness(app);

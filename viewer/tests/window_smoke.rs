@@ -145,10 +145,18 @@ fn orbit_reports_frame_rates_as_json() {
         "previews_shown",
         "window",
         "threads",
+        "jobs",
     ] {
         assert!(j.get(key).is_some(), "missing {key}: {j}");
     }
     assert_eq!(j["orbit_frames"], 12);
+    // One view per orbit frame plus the first: the window must not keep changing its own
+    // view (a status line that wrapped once made the image size oscillate forever).
+    let jobs = j["jobs"].as_u64().unwrap_or(u64::MAX);
+    assert!(
+        jobs <= 12 + 3,
+        "{jobs} views submitted for a 12-frame orbit"
+    );
     assert_eq!(j["threads"], 2);
     assert!(j["preview_scale"].as_u64().unwrap_or(0) >= 4);
     assert!(j["refine_ms"].as_f64().unwrap_or(-1.0) > 0.0);

@@ -41,6 +41,9 @@ pub struct OrbitReport {
     /// UI frames of the orbit and preview images shown during it.
     pub orbit_frames: u32,
     pub previews_shown: u32,
+    /// Views handed to the renderer in the whole run (one per orbit frame, plus the
+    /// first): more means the window changes its own view without input.
+    pub jobs: u64,
     /// Render image size (the central area) in pixels.
     pub window: [u32; 2],
     pub threads: usize,

@@ -597,56 +597,58 @@ impl ViewerApp {
     }
 
     fn status_line(&self, ui: &mut egui::Ui) {
-        ui.horizontal_wrapped(|ui| {
-            match &self.shown {
-                Some(s) => {
-                    let u = &s.update;
-                    let rays = u.counts.rays.max(1) as f64;
-                    let level = match u.level {
-                        Level::Preview { scale } => format!("preview 1/{scale}"),
-                        Level::Full if u.complete => format!("full, {} spp", u.samples),
-                        Level::Full => format!("full, {}/{} spp", u.samples, u.spp),
-                    };
-                    ui.label(format!(
-                        "{:.1} ms · {level} · {}×{} · {:.2} samples/ray · {:.2} Mrays/s",
-                        u.ms,
-                        u.width,
-                        u.height,
-                        u.counts.stats.samples as f64 / rays,
-                        u.counts.rays as f64 / (u.ms.max(1e-3) * 1e3),
-                    ));
-                }
-                None => {
-                    ui.label("no image yet");
-                }
-            }
-            if let Some(doc) = &self.doc {
-                ui.separator();
-                ui.label(format!(
-                    "{} cells · {} bricks · {} regions",
-                    doc.cells, doc.bricks, doc.regions
+        let text = self.status_text();
+        ui.add(egui::Label::new(text).truncate());
+    }
+
+    /// The status line: the image shown, the file, the picked point.
+    fn status_text(&self) -> String {
+        let mut parts = Vec::new();
+        match &self.shown {
+            Some(s) => {
+                let u = &s.update;
+                let rays = u.counts.rays.max(1) as f64;
+                let level = match u.level {
+                    Level::Preview { scale } => format!("preview 1/{scale}"),
+                    Level::Full if u.complete => format!("full, {} spp", u.samples),
+                    Level::Full => format!("full, {}/{} spp", u.samples, u.spp),
+                };
+                parts.push(format!(
+                    "{:.1} ms · {level} · {}×{} · {:.2} samples/ray · {:.2} Mrays/s",
+                    u.ms,
+                    u.width,
+                    u.height,
+                    u.counts.stats.samples as f64 / rays,
+                    u.counts.rays as f64 / (u.ms.max(1e-3) * 1e3),
                 ));
             }
-            if let Some(p) = &self.pick {
-                ui.separator();
-                let vals: Vec<String> = p
-                    .values
-                    .iter()
-                    .map(|(n, v)| format!("{n} {v:.4}"))
-                    .collect();
-                ui.label(format!(
-                    "at ({:.3}, {:.3}, {:.3}): {}",
-                    p.world[0],
-                    p.world[1],
-                    p.world[2],
-                    if vals.is_empty() {
-                        "outside the data".to_string()
-                    } else {
-                        vals.join(", ")
-                    }
-                ));
-            }
-        });
+            None => parts.push("no image yet".to_string()),
+        }
+        if let Some(doc) = &self.doc {
+            parts.push(format!(
+                "{} cells · {} bricks · {} regions",
+                doc.cells, doc.bricks, doc.regions
+            ));
+        }
+        if let Some(p) = &self.pick {
+            let vals: Vec<String> = p
+                .values
+                .iter()
+                .map(|(n, v)| format!("{n} {v:.4}"))
+                .collect();
+            parts.push(format!(
+                "at ({:.3}, {:.3}, {:.3}): {}",
+                p.world[0],
+                p.world[1],
+                p.world[2],
+                if vals.is_empty() {
+                    "outside the data".to_string()
+                } else {
+                    vals.join(", ")
+                }
+            ));
+        }
+        parts.join("  |  ")
     }
 
     /// One frame of the window (also what the UI tests drive).
@@ -677,7 +679,12 @@ impl ViewerApp {
             .show(ui, |ui| {
                 egui::ScrollArea::vertical().show(ui, |ui| super::panel::show(self, ui));
             });
-        egui::Panel::bottom("status").show(ui, |ui| self.status_line(ui));
+        // One line of fixed height: a status text that wrapped to two lines would shrink
+        // the image, which changes the render size, which starts a new frame, whose
+        // status text is shorter again, and so on.
+        egui::Panel::bottom("status")
+            .exact_size(24.0)
+            .show(ui, |ui| self.status_line(ui));
         egui::CentralPanel::default()
             .frame(egui::Frame::NONE)
             .show(ui, |ui| self.central(ui));
@@ -704,6 +711,7 @@ impl ViewerApp {
             }
             if let Some(report) = script.report_mut() {
                 report.threads = self.renderer.threads();
+                report.jobs = self.generation;
                 report.window = [self.viewport_px[0], self.viewport_px[1]];
             }
         }
