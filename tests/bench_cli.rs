@@ -115,3 +115,58 @@ fn bench_bad_arguments_exit_2_with_one_line() {
         assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
     }
 }
+
+#[test]
+fn accuracy_prints_every_key_and_plots_a_png() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let plot = dir.path().join("acc.png");
+    let out = Command::new(util::bin("qbricks-bake"))
+        .args([
+            "accuracy", "wake", "--n0", "8", "16", "--points", "200", "--json",
+        ])
+        .arg("--plot")
+        .arg(&plot)
+        .output()
+        .expect("run qbricks-bake accuracy");
+    assert!(
+        out.status.success(),
+        "accuracy failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("stdout is JSON");
+    assert_eq!(v["scene"], "wake");
+    let res = v["resolutions"].as_array().expect("resolutions");
+    assert_eq!(res.len(), 2);
+    let stats = ["points", "max", "rms", "max_rel", "rms_rel"];
+    for r in res {
+        for key in ["stored_q", "stored_speed", "reconstructed_q", "boundary_q"] {
+            for s in stats {
+                assert!(r[key][s].is_number(), "{key}.{s} missing: {r}");
+            }
+        }
+        // Three nested grids: three levels, and points near their boundaries.
+        assert_eq!(r["levels"].as_array().expect("levels").len(), 3);
+        assert!(r["boundary_q"]["points"].as_u64() > Some(0));
+    }
+    let orders = v["orders"].as_array().expect("orders");
+    assert_eq!(orders.len(), 1);
+    for key in ["stored_q_rms", "stored_q_max", "reconstructed_q_rms"] {
+        assert!(orders[0][key].is_number(), "{key}: {}", orders[0]);
+    }
+    let png = std::fs::read(&plot).expect("plot written");
+    assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n", "plot is not a PNG");
+    image::load_from_memory(&png).expect("plot decodes");
+
+    let bad = Command::new(util::bin("qbricks-bake"))
+        .args(["accuracy", "nope", "--n0", "8"])
+        .output()
+        .expect("run accuracy");
+    assert_eq!(bad.status.code(), Some(2));
+    assert_eq!(
+        String::from_utf8_lossy(&bad.stderr)
+            .trim_end()
+            .lines()
+            .count(),
+        1
+    );
+}

@@ -2,6 +2,7 @@
 //!
 //! Data flows one way: VDB → grids → cells → bricks → regions → kd-tree → file.
 
+pub mod accuracy;
 pub mod analytic;
 pub mod bake;
 pub mod bricks;

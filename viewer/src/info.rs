@@ -66,6 +66,17 @@ pub struct Info {
     /// The bake options as JSON (a string when they are not valid JSON).
     pub bake_options: serde_json::Value,
     pub tool_version: String,
+    /// What modelling only what the scene needs costs and saves: the bytes of the fields'
+    /// leaf values (4 per cell and field) against everything else — bricks, regions,
+    /// KD-tree, value ranges, histograms, header, provenance.
+    pub value_bytes: u64,
+    pub structure_bytes: u64,
+    /// `structure_bytes / bytes`.
+    pub structure_share: f64,
+    /// File bytes per leaf cell (all fields together).
+    pub bytes_per_cell: f64,
+    /// Cells one uniform grid at the finest cell width over the bounds would need.
+    pub uniform_finest_cells: f64,
 }
 
 /// Gathers the summary of an opened (hence validated) file.
@@ -94,6 +105,19 @@ pub fn info(view: &BrickFileView) -> Info {
     let (kd_depth, kd_leaves) = kd_shape(view);
     let bounds = query::bounds(file);
     let prov = &file.provenance;
+    let bytes = view.byte_len();
+    let value_bytes: u64 = file.fields.iter().map(|f| 4 * f.values.len() as u64).sum();
+    let structure_bytes = bytes.saturating_sub(value_bytes);
+    let uniform_finest_cells = match levels.first() {
+        Some(l) if l.cell_width > 0.0 => (0..3)
+            .map(|a| {
+                ((bounds.max[a] - bounds.min[a]) / l.cell_width)
+                    .ceil()
+                    .max(0.0)
+            })
+            .product(),
+        _ => 0.0,
+    };
     Info {
         format_version: view.header().format_version,
         bytes: view.byte_len(),
@@ -132,6 +156,11 @@ pub fn info(view: &BrickFileView) -> Info {
         bake_options: serde_json::from_str(prov.bake_options.as_str())
             .unwrap_or_else(|_| serde_json::Value::String(prov.bake_options.to_string())),
         tool_version: prov.tool_version.to_string(),
+        value_bytes,
+        structure_bytes,
+        structure_share: structure_bytes as f64 / bytes.max(1) as f64,
+        bytes_per_cell: bytes as f64 / cells.max(1) as f64,
+        uniform_finest_cells,
     }
 }
 
@@ -213,6 +242,16 @@ pub fn to_text(info: &Info) -> String {
         info.kd_nodes,
         info.kd_leaves,
         info.kd_depth
+    );
+    let _ = writeln!(
+        s,
+        "  {:.1} bytes per leaf cell; values {} bytes, structure {} bytes ({:.1} %); a uniform grid at the finest width would need {:.0} cells ({:.1}× the leaf cells)",
+        info.bytes_per_cell,
+        info.value_bytes,
+        info.structure_bytes,
+        100.0 * info.structure_share,
+        info.uniform_finest_cells,
+        info.uniform_finest_cells / info.cells.max(1) as f64
     );
     let _ = writeln!(s, "  levels:");
     for l in &info.levels {
@@ -331,6 +370,11 @@ mod tests {
         assert_eq!(i.levels[0].cells, 8);
         assert_eq!(i.levels[1].bricks, 1);
         assert_eq!(i.bake_options["step"], 0.5);
+        // One field of 9 leaf values; bounds 3×2×2 at finest width 0.5 → 6·4·4 cells.
+        assert_eq!(i.value_bytes, 36);
+        assert_eq!(i.structure_bytes, bytes.len() as u64 - 36);
+        assert_eq!(i.uniform_finest_cells, 96.0);
+        assert!((i.bytes_per_cell - bytes.len() as f64 / 9.0).abs() < 1e-12);
         let text = to_text(&i);
         assert!(text.contains("9 cells in 2 bricks"), "{text}");
         assert!(text.contains("q: min -2, max 3"), "{text}");

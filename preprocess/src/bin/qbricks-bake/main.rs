@@ -4,6 +4,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+mod accuracy;
 mod bake;
 mod inspect;
 mod sequence;
@@ -28,6 +29,8 @@ enum Command {
     Synth(synth::Args),
     /// Bake a VDB file into a .qbk brick file.
     Bake(bake::Args),
+    /// Bake an analytic flow at several resolutions and compare Q and speed with the exact values.
+    Accuracy(accuracy::Args),
 }
 
 fn main() -> ExitCode {
@@ -36,6 +39,7 @@ fn main() -> ExitCode {
         Command::Inspect(args) => inspect::run(args),
         Command::Synth(args) => synth::run(args),
         Command::Bake(args) => bake::run(args),
+        Command::Accuracy(args) => accuracy::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,0 +1,598 @@
+//! How accurate is the data model? Bakes an analytic `synth` flow at several resolutions and
+//! compares what the file stores, and what the basis-method reconstruction makes of it, with
+//! the exact Q and speed of the flow.
+//!
+//! The stored values are checked at every leaf-cell centre (per level, since a coarse level
+//! carries a coarse stencil's error); the reconstruction at random points in the data and at
+//! random points within two coarse cells of a level boundary, where cracks and blending
+//! errors would show. Errors are given absolute and relative to the 99th percentile of the
+//! exact |Q| (resp. speed) over the leaf-cell centres, so flows of different strength
+//! compare; the observed order of convergence between two resolutions is
+//! `log2(e_coarse / e_fine) / log2(h_coarse / h_fine)`.
+//!
+//! The iso-surface position error of the viewer's `exact` hits needs the ray caster, which
+//! this crate must not depend on; it is not measured here.
+
+use format::{BrickFile, KdNode};
+use serde::Serialize;
+
+use crate::analytic::{self, Flow};
+use crate::bake::{bake, BakeError, BakeOptions};
+use crate::derive::Stencil;
+use crate::grid::AnyGrid;
+use crate::synth::{scene_grids, scene_layout, SynthError};
+
+/// What to measure.
+#[derive(Debug, Clone)]
+pub struct AccuracyOptions {
+    pub scene: String,
+    /// Coarsest-grid resolutions to bake, in any order (reported as given).
+    pub n0: Vec<u32>,
+    /// Levels of the wake (single-grid scenes ignore it).
+    pub levels: u32,
+    pub stencil: Stencil,
+    /// Random points for each reconstruction check.
+    pub points: usize,
+    pub seed: u64,
+}
+
+impl Default for AccuracyOptions {
+    fn default() -> Self {
+        AccuracyOptions {
+            scene: "wake".into(),
+            n0: vec![32, 64],
+            levels: 3,
+            stencil: Stencil::Central,
+            points: 20_000,
+            seed: 1,
+        }
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum AccuracyError {
+    #[error("unknown scene `{0}`: expected wake, wake-single, lamb-oseen, burgers or abc")]
+    UnknownScene(String),
+    #[error(transparent)]
+    Synth(#[from] SynthError),
+    #[error("n0 {0}: {1}")]
+    Bake(u32, BakeError),
+    #[error("the file has no field `{0}`")]
+    MissingField(&'static str),
+    #[error("no resolutions given")]
+    NoResolutions,
+}
+
+/// Absolute and relative error statistics of one quantity over a set of points.
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct ErrorStats {
+    pub points: u64,
+    pub max: f64,
+    pub rms: f64,
+    /// `max` over the scale (99th percentile of the exact |value| at leaf-cell centres).
+    pub max_rel: f64,
+    pub rms_rel: f64,
+}
+
+#[derive(Default)]
+struct Acc {
+    n: u64,
+    max: f64,
+    sum2: f64,
+}
+
+impl Acc {
+    fn add(&mut self, e: f64) {
+        if e.is_finite() {
+            self.n += 1;
+            self.max = self.max.max(e.abs());
+            self.sum2 += e * e;
+        }
+    }
+    fn stats(&self, scale: f64) -> ErrorStats {
+        let rms = if self.n == 0 {
+            0.0
+        } else {
+            (self.sum2 / self.n as f64).sqrt()
+        };
+        let s = if scale > 0.0 { scale } else { 1.0 };
+        ErrorStats {
+            points: self.n,
+            max: self.max,
+            rms,
+            max_rel: self.max / s,
+            rms_rel: rms / s,
+        }
+    }
+}
+
+/// Stored-value errors of one level.
+#[derive(Debug, Clone, Serialize)]
+pub struct LevelReport {
+    /// 0 = finest.
+    pub level: u32,
+    pub cell_width: f64,
+    pub q: ErrorStats,
+    pub speed: ErrorStats,
+}
+
+/// Everything measured at one resolution.
+#[derive(Debug, Clone, Serialize)]
+pub struct ResolutionReport {
+    pub n0: u32,
+    /// Finest cell width, world units.
+    pub finest_width: f64,
+    pub leaf_cells: u64,
+    /// 99th percentile of exact |Q| and speed at the leaf-cell centres.
+    pub q_scale: f64,
+    pub speed_scale: f64,
+    /// Stored values at leaf-cell centres, all levels together.
+    pub stored_q: ErrorStats,
+    pub stored_speed: ErrorStats,
+    pub levels: Vec<LevelReport>,
+    /// Reconstructed Q at random points in the data.
+    pub reconstructed_q: ErrorStats,
+    /// Reconstructed Q at random points within two coarse cells of a level boundary
+    /// (no points for single-grid scenes).
+    pub boundary_q: ErrorStats,
+}
+
+/// Observed order of convergence between two consecutive resolutions (by finest width).
+#[derive(Debug, Clone, Serialize)]
+pub struct OrderReport {
+    pub n0_coarse: u32,
+    pub n0_fine: u32,
+    pub stored_q_rms: f64,
+    pub stored_q_max: f64,
+    pub stored_speed_rms: f64,
+    pub reconstructed_q_rms: f64,
+    pub boundary_q_rms: Option<f64>,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct AccuracyReport {
+    pub scene: String,
+    pub stencil: &'static str,
+    pub resolutions: Vec<ResolutionReport>,
+    pub orders: Vec<OrderReport>,
+}
+
+/// Small deterministic random numbers (xorshift64*), uniform in [0, 1).
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> f64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        (self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+fn field_index(file: &BrickFile, name: &'static str) -> Result<usize, AccuracyError> {
+    file.fields
+        .iter()
+        .position(|f| f.name == name)
+        .ok_or(AccuracyError::MissingField(name))
+}
+
+/// Region containing `p` by KD-tree descent.
+fn locate(file: &BrickFile, p: [f64; 3]) -> Option<u32> {
+    let mut n = 0usize;
+    loop {
+        match file.kd_nodes.get(n)? {
+            KdNode::Leaf { region } => return *region,
+            KdNode::Inner {
+                axis,
+                split,
+                left,
+                right,
+            } => {
+                n = if p[*axis as usize] < *split {
+                    *left
+                } else {
+                    *right
+                } as usize;
+            }
+        }
+    }
+}
+
+/// The basis-method reconstruction at `p` (`Σ H v / Σ H`, tents of the cell width around
+/// every leaf-cell centre of the region's bricks), the formula the viewer evaluates; written
+/// here over the in-memory file because this crate does not link the viewer.
+fn reconstruct(file: &BrickFile, f: usize, p: [f64; 3]) -> Option<f64> {
+    let r = locate(file, p)?;
+    let reg = file.regions.get(r as usize)?;
+    let ids = file
+        .region_bricks
+        .get(reg.bricks_start as usize..(reg.bricks_start + reg.bricks_len) as usize)?;
+    let (mut s, mut ws) = (0.0, 0.0);
+    for &bi in ids {
+        let b = &file.bricks[bi as usize];
+        let d = b.dims.map(i64::from);
+        let mut lo = [0i64; 3];
+        let mut hi = [0i64; 3];
+        for a in 0..3 {
+            let x = (p[a] - b.origin[a]) / b.cell_width;
+            lo[a] = ((x.floor() - 1.0).max(0.0)) as i64;
+            hi[a] = ((x.ceil() + 1.0) as i64).min(d[a] - 1);
+        }
+        for z in lo[2]..=hi[2] {
+            for y in lo[1]..=hi[1] {
+                for x in lo[0]..=hi[0] {
+                    let c = [x, y, z];
+                    let mut h = 1.0;
+                    for a in 0..3 {
+                        let ca = b.origin[a] + c[a] as f64 * b.cell_width;
+                        h *= (1.0 - (p[a] - ca).abs() / b.cell_width).max(0.0);
+                    }
+                    if h > 0.0 {
+                        let i = b.first_value as usize + (x + d[0] * (y + d[1] * z)) as usize;
+                        s += h * f64::from(file.fields[f].values[i]);
+                        ws += h;
+                    }
+                }
+            }
+        }
+    }
+    (ws > 1e-12).then(|| s / ws)
+}
+
+fn percentile_99(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    v[((v.len() - 1) as f64 * 0.99).round() as usize]
+}
+
+/// Boxes (world units) of the finer grids whose faces are level boundaries, with the cell
+/// width of the next coarser level (what "two coarse cells" means there).
+fn level_boundaries(scene: &str, n0: u32, levels: u32) -> Result<Vec<([f64; 6], f64)>, SynthError> {
+    let layout = scene_layout(scene, n0, levels)?;
+    // Finest first; every grid but the coarsest has a boundary with the next coarser one.
+    Ok(layout
+        .windows(2)
+        .map(|w| {
+            let g = &w[0];
+            let lo = g.lo.map(|i| i as f64 * g.voxel_size);
+            let hi = g.hi.map(|i| i as f64 * g.voxel_size);
+            ([lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]], w[1].voxel_size)
+        })
+        .collect())
+}
+
+fn measure(
+    flow: &dyn Flow,
+    opts: &AccuracyOptions,
+    n0: u32,
+) -> Result<ResolutionReport, AccuracyError> {
+    let grids: Vec<AnyGrid> = scene_grids(&opts.scene, n0, opts.levels)?
+        .into_iter()
+        .map(AnyGrid::Vec3s)
+        .collect();
+    let bopts = BakeOptions {
+        stencil: opts.stencil,
+        ..BakeOptions::default()
+    };
+    let (file, summary) = bake(grids, &bopts).map_err(|e| AccuracyError::Bake(n0, e))?;
+    let fq = field_index(&file, "q")?;
+    let fs = field_index(&file, "speed")?;
+
+    // Exact values at every leaf-cell centre, per brick.
+    struct CellVal {
+        level: u32,
+        width: f64,
+        q: f64,
+        q_exact: f64,
+        s: f64,
+        s_exact: f64,
+    }
+    let mut cells = Vec::new();
+    for b in &file.bricks {
+        let [nx, ny, nz] = b.dims.map(|d| d as usize);
+        for z in 0..nz {
+            for y in 0..ny {
+                for x in 0..nx {
+                    let c = [x, y, z];
+                    let p = [0, 1, 2].map(|a| b.origin[a] + c[a] as f64 * b.cell_width);
+                    let i = b.first_value as usize + x + nx * (y + ny * z);
+                    cells.push(CellVal {
+                        level: b.level,
+                        width: b.cell_width,
+                        q: f64::from(file.fields[fq].values[i]),
+                        q_exact: flow.q(p),
+                        s: f64::from(file.fields[fs].values[i]),
+                        s_exact: analytic::speed(flow.velocity(p)),
+                    });
+                }
+            }
+        }
+    }
+    let q_scale = percentile_99(cells.iter().map(|c| c.q_exact.abs()).collect());
+    let speed_scale = percentile_99(cells.iter().map(|c| c.s_exact).collect());
+    let (mut all_q, mut all_s) = (Acc::default(), Acc::default());
+    let nlevels = file.levels.len();
+    let mut per_q: Vec<Acc> = (0..nlevels).map(|_| Acc::default()).collect();
+    let mut per_s: Vec<Acc> = (0..nlevels).map(|_| Acc::default()).collect();
+    let mut widths = vec![0.0; nlevels];
+    for c in &cells {
+        all_q.add(c.q - c.q_exact);
+        all_s.add(c.s - c.s_exact);
+        if let Some(l) = per_q.get_mut(c.level as usize) {
+            l.add(c.q - c.q_exact);
+            per_s[c.level as usize].add(c.s - c.s_exact);
+            widths[c.level as usize] = c.width;
+        }
+    }
+    let levels = (0..nlevels)
+        .filter(|&l| per_q[l].n > 0)
+        .map(|l| LevelReport {
+            level: l as u32,
+            cell_width: widths[l],
+            q: per_q[l].stats(q_scale),
+            speed: per_s[l].stats(speed_scale),
+        })
+        .collect();
+
+    // Reconstruction at random points of the data's bounds (points outside the data
+    // are skipped and redrawn, up to a bounded number of tries).
+    let mut rng = Rng(opts.seed.max(1).wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
+    let (lo, hi) = (file.bounds.min, file.bounds.max);
+    let mut rec = Acc::default();
+    let mut tries = 0usize;
+    while (rec.n as usize) < opts.points && tries < 20 * opts.points.max(1) {
+        tries += 1;
+        let p = [0, 1, 2].map(|a| lo[a] + rng.next() * (hi[a] - lo[a]));
+        if let Some(v) = reconstruct(&file, fq, p) {
+            rec.add(v - flow.q(p));
+        }
+    }
+    // Near level boundaries: a random point on a random face of a finer box, moved off
+    // the face by up to two coarse cells either way.
+    let bounds = level_boundaries(&opts.scene, n0, opts.levels)?;
+    let mut near = Acc::default();
+    if !bounds.is_empty() {
+        let mut tries = 0usize;
+        while (near.n as usize) < opts.points && tries < 20 * opts.points.max(1) {
+            tries += 1;
+            let k = ((rng.next() * bounds.len() as f64) as usize).min(bounds.len() - 1);
+            let (b, w) = bounds[k];
+            let axis = ((rng.next() * 3.0) as usize).min(2);
+            let upper = rng.next() < 0.5;
+            let mut p = [0, 1, 2].map(|a| b[a] + rng.next() * (b[a + 3] - b[a]));
+            let face = if upper { b[axis + 3] } else { b[axis] };
+            p[axis] = face + (2.0 * rng.next() - 1.0) * 2.0 * w;
+            if let Some(v) = reconstruct(&file, fq, p) {
+                near.add(v - flow.q(p));
+            }
+        }
+    }
+    Ok(ResolutionReport {
+        n0,
+        finest_width: file.levels.first().map_or(0.0, |l| l.cell_width),
+        leaf_cells: summary.leaf_cells,
+        q_scale,
+        speed_scale,
+        stored_q: all_q.stats(q_scale),
+        stored_speed: all_s.stats(speed_scale),
+        levels,
+        reconstructed_q: rec.stats(q_scale),
+        boundary_q: near.stats(q_scale),
+    })
+}
+
+/// `log(e_a / e_b) / log(h_a / h_b)`.
+fn order(ea: f64, eb: f64, ha: f64, hb: f64) -> f64 {
+    (ea / eb).ln() / (ha / hb).ln()
+}
+
+/// Measures every resolution of `opts.n0` (each baked in memory), calling `progress` with
+/// each n0 as it starts.
+pub fn accuracy(
+    opts: &AccuracyOptions,
+    progress: &mut dyn FnMut(u32),
+) -> Result<AccuracyReport, AccuracyError> {
+    let flow = analytic::scene(&opts.scene)
+        .ok_or_else(|| AccuracyError::UnknownScene(opts.scene.clone()))?;
+    if opts.n0.is_empty() {
+        return Err(AccuracyError::NoResolutions);
+    }
+    let mut resolutions = Vec::new();
+    for &n0 in &opts.n0 {
+        progress(n0);
+        resolutions.push(measure(flow.as_ref(), opts, n0)?);
+    }
+    let mut sorted: Vec<&ResolutionReport> = resolutions.iter().collect();
+    sorted.sort_by(|a, b| b.finest_width.total_cmp(&a.finest_width));
+    let orders = sorted
+        .windows(2)
+        .filter(|w| w[0].finest_width > w[1].finest_width)
+        .map(|w| {
+            let (a, b) = (w[0], w[1]);
+            let o = |ea: f64, eb: f64| order(ea, eb, a.finest_width, b.finest_width);
+            OrderReport {
+                n0_coarse: a.n0,
+                n0_fine: b.n0,
+                stored_q_rms: o(a.stored_q.rms, b.stored_q.rms),
+                stored_q_max: o(a.stored_q.max, b.stored_q.max),
+                stored_speed_rms: o(a.stored_speed.rms, b.stored_speed.rms),
+                reconstructed_q_rms: o(a.reconstructed_q.rms, b.reconstructed_q.rms),
+                boundary_q_rms: (a.boundary_q.points > 0 && b.boundary_q.points > 0)
+                    .then(|| o(a.boundary_q.rms, b.boundary_q.rms)),
+            }
+        })
+        .collect();
+    Ok(AccuracyReport {
+        scene: opts.scene.clone(),
+        stencil: match opts.stencil {
+            Stencil::Central => "central",
+            Stencil::CrossLevel => "cross-level",
+        },
+        resolutions,
+        orders,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lamb_oseen_stored_q_converges_at_second_order() {
+        let opts = AccuracyOptions {
+            scene: "lamb-oseen".into(),
+            n0: vec![16, 32],
+            points: 500,
+            ..AccuracyOptions::default()
+        };
+        let r = accuracy(&opts, &mut |_| {}).expect("accuracy");
+        assert_eq!(r.resolutions.len(), 2);
+        assert_eq!(r.orders.len(), 1);
+        let o = &r.orders[0];
+        // Central differences: Q's error falls ≈ 4× per halving of the cell width.
+        assert!(o.stored_q_rms > 1.5, "order {}", o.stored_q_rms);
+        for res in &r.resolutions {
+            assert_eq!(res.boundary_q.points, 0, "one grid has no level boundary");
+            assert!(res.reconstructed_q.points > 0);
+            assert!(res.stored_q.rms_rel > 0.0 && res.stored_q.rms_rel < 0.5);
+        }
+    }
+
+    #[test]
+    fn unknown_scene_is_refused() {
+        let opts = AccuracyOptions {
+            scene: "nope".into(),
+            ..AccuracyOptions::default()
+        };
+        assert!(matches!(
+            accuracy(&opts, &mut |_| {}),
+            Err(AccuracyError::UnknownScene(_))
+        ));
+    }
+}
+
+/// Name under which the embedded plot font is registered with plotters.
+const PLOT_FONT: &str = "qbricks-accuracy";
+
+/// PNG bytes of the relative RMS errors (stored Q, stored speed, reconstructed Q, Q near
+/// level boundaries) against the finest cell width, both axes logarithmic.
+pub fn plot_png(report: &AccuracyReport, size: (u32, u32)) -> Result<Vec<u8>, String> {
+    use plotters::prelude::*;
+    // A font from a crate's bytes: no system fonts needed to draw text.
+    plotters::style::register_font(
+        PLOT_FONT,
+        FontStyle::Normal,
+        epaint_default_fonts::UBUNTU_LIGHT,
+    )
+    .map_err(|_| "embedded plot font is not a valid TTF".to_string())?;
+    type Pick = fn(&ResolutionReport) -> &ErrorStats;
+    let series: [(&str, Pick, RGBColor); 4] = [
+        ("stored Q", |r| &r.stored_q, RGBColor(31, 119, 180)),
+        ("stored speed", |r| &r.stored_speed, RGBColor(255, 127, 14)),
+        (
+            "reconstructed Q",
+            |r| &r.reconstructed_q,
+            RGBColor(44, 160, 44),
+        ),
+        (
+            "Q near level boundaries",
+            |r| &r.boundary_q,
+            RGBColor(214, 39, 40),
+        ),
+    ];
+    let mut res: Vec<&ResolutionReport> = report.resolutions.iter().collect();
+    res.sort_by(|a, b| a.finest_width.total_cmp(&b.finest_width));
+    let ok = |v: f64| v > 0.0 && v.is_finite();
+    let (mut h0, mut h1, mut e0, mut e1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+    for r in &res {
+        for (_, pick, _) in &series {
+            let s = pick(r);
+            if s.points > 0 && ok(s.rms_rel) && ok(r.finest_width) {
+                h0 = h0.min(r.finest_width);
+                h1 = h1.max(r.finest_width);
+                e0 = e0.min(s.rms_rel);
+                e1 = e1.max(s.rms_rel);
+            }
+        }
+    }
+    if h0 > h1 {
+        (h0, h1, e0, e1) = (0.01, 0.1, 1e-3, 1e-1);
+    }
+    let (h0, h1, e0, e1) = (h0 / 1.5, h1 * 1.5, e0 / 1.5, e1 * 1.5);
+    let (w, h) = size;
+    let mut buf = vec![255u8; w as usize * h as usize * 3];
+    {
+        let err = |e: &dyn std::fmt::Display| e.to_string();
+        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| err(&e))?;
+        let title = format!("{} ({} stencil)", report.scene, report.stencil);
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, (PLOT_FONT, 18))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(60)
+            .build_cartesian_2d((h0..h1).log_scale(), (e0..e1).log_scale())
+            .map_err(|e| err(&e))?;
+        chart
+            .configure_mesh()
+            .x_desc("finest cell width")
+            .y_desc("RMS error / p99 |exact|")
+            .label_style((PLOT_FONT, 13))
+            .draw()
+            .map_err(|e| err(&e))?;
+        for (name, pick, colour) in series {
+            let pts: Vec<(f64, f64)> = res
+                .iter()
+                .filter(|r| pick(r).points > 0 && ok(pick(r).rms_rel))
+                .map(|r| (r.finest_width, pick(r).rms_rel))
+                .collect();
+            if pts.is_empty() {
+                continue;
+            }
+            chart
+                .draw_series(LineSeries::new(pts.clone(), colour.stroke_width(2)))
+                .map_err(|e| err(&e))?
+                .label(name)
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2))
+                });
+            chart
+                .draw_series(pts.iter().map(|&p| Circle::new(p, 3, colour.filled())))
+                .map_err(|e| err(&e))?;
+        }
+        chart
+            .configure_series_labels()
+            .label_font((PLOT_FONT, 13))
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|e| err(&e))?;
+        root.present().map_err(|e| err(&e))?;
+    }
+    let img = image::RgbImage::from_raw(w, h, buf)
+        .ok_or_else(|| "plot buffer does not match its size".to_string())?;
+    let mut out = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut out, image::ImageFormat::Png)
+        .map_err(|e| e.to_string())?;
+    Ok(out.into_inner())
+}
+
+/// Why the plot could not be written.
+#[derive(Debug, thiserror::Error)]
+#[error("{path}: {message}")]
+pub struct PlotError {
+    pub path: String,
+    pub message: String,
+}
+
+/// Writes [`plot_png`] to `path` atomically.
+pub fn save_plot(path: &std::path::Path, report: &AccuracyReport) -> Result<(), PlotError> {
+    use std::io::Write;
+    let err = |message: String| PlotError {
+        path: path.display().to_string(),
+        message,
+    };
+    let bytes = plot_png(report, (800, 560)).map_err(err)?;
+    format::output::write_atomic(path, |f| f.write_all(&bytes)).map_err(|e| err(e.to_string()))
+}

@@ -1,0 +1,147 @@
+//! `qbricks-bake accuracy`: the analytic flows baked at several resolutions against their
+//! exact Q and speed.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::bail;
+use format::output::QuietStdout;
+use indicatif::{ProgressBar, ProgressStyle};
+use qbricks_preprocess::accuracy::{accuracy, AccuracyOptions, AccuracyReport, ErrorStats};
+use qbricks_preprocess::derive::Stencil;
+
+use crate::bake::StencilArg;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Scene: wake, wake-single, lamb-oseen, burgers or abc.
+    pub scene: String,
+    /// Coarsest-grid resolutions to bake (in memory), e.g. `--n0 32 64`.
+    #[arg(long, num_args = 1.., default_values_t = [32u32, 64])]
+    pub n0: Vec<u32>,
+    /// Nested levels of the wake (single-grid scenes ignore it).
+    #[arg(long, default_value_t = 3)]
+    pub levels: u32,
+    /// Stencil of the velocity gradient.
+    #[arg(long, value_enum, default_value_t = StencilArg::Central)]
+    pub stencil: StencilArg,
+    /// Random points for each reconstruction check.
+    #[arg(long, default_value_t = 20_000)]
+    pub points: usize,
+    /// Print the report as JSON.
+    #[arg(long)]
+    pub json: bool,
+    /// Draw the relative RMS errors against the finest cell width (log axes) to this PNG.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    if args.n0.iter().any(|&n| !(4..=1024).contains(&n)) {
+        bail!("--n0: expected values in 4..=1024, found {:?}", args.n0);
+    }
+    if args.points == 0 || args.points > 10_000_000 {
+        bail!("--points: expected 1..=10000000, found {}", args.points);
+    }
+    let opts = AccuracyOptions {
+        scene: args.scene.clone(),
+        n0: args.n0.clone(),
+        levels: args.levels,
+        stencil: match args.stencil {
+            StencilArg::Central => Stencil::Central,
+            StencilArg::CrossLevel => Stencil::CrossLevel,
+        },
+        points: args.points,
+        ..AccuracyOptions::default()
+    };
+    let bar = ProgressBar::with_draw_target(
+        Some(args.n0.len() as u64),
+        indicatif::ProgressDrawTarget::stderr(),
+    );
+    if let Ok(style) = ProgressStyle::with_template("{bar:30} {pos}/{len} bakes, {elapsed} {msg}") {
+        bar.set_style(style);
+    }
+    let mut started = 0;
+    let report = accuracy(&opts, &mut |n0| {
+        if started > 0 {
+            bar.inc(1);
+        }
+        started += 1;
+        bar.set_message(format!("n0 {n0}"));
+    });
+    bar.finish_and_clear();
+    let report = report?;
+    if let Some(p) = &args.plot {
+        qbricks_preprocess::accuracy::save_plot(p, &report)?;
+    }
+    let mut out = QuietStdout::new();
+    if args.json {
+        writeln!(out, "{}", serde_json::to_string(&report)?)?;
+    } else {
+        write_text(&mut out, &report)?;
+    }
+    Ok(())
+}
+
+fn write_text(out: &mut impl Write, r: &AccuracyReport) -> std::io::Result<()> {
+    let e = |s: &ErrorStats| format!("{:.2e} / {:.2e}", s.rms_rel, s.max_rel);
+    writeln!(
+        out,
+        "scene {}, stencil {}; errors are RMS / max relative to p99 of the exact |value|",
+        r.scene, r.stencil
+    )?;
+    for res in &r.resolutions {
+        writeln!(
+            out,
+            "n0 {:>4}: h {:.5}, {} leaf cells, p99 |Q| {:.3e}, p99 speed {:.3e}",
+            res.n0, res.finest_width, res.leaf_cells, res.q_scale, res.speed_scale
+        )?;
+        writeln!(
+            out,
+            "  stored Q {}   stored speed {}",
+            e(&res.stored_q),
+            e(&res.stored_speed)
+        )?;
+        for l in &res.levels {
+            writeln!(
+                out,
+                "    level {} (h {:.5}, {} cells): Q {}   speed {}",
+                l.level,
+                l.cell_width,
+                l.q.points,
+                e(&l.q),
+                e(&l.speed)
+            )?;
+        }
+        writeln!(
+            out,
+            "  reconstructed Q at {} random points {}",
+            res.reconstructed_q.points,
+            e(&res.reconstructed_q)
+        )?;
+        if res.boundary_q.points > 0 {
+            writeln!(
+                out,
+                "  reconstructed Q at {} points near level boundaries {}",
+                res.boundary_q.points,
+                e(&res.boundary_q)
+            )?;
+        }
+    }
+    for o in &r.orders {
+        writeln!(
+            out,
+            "order n0 {} → {}: stored Q rms {:.2} (max {:.2}), speed rms {:.2}, reconstructed Q rms {:.2}{}",
+            o.n0_coarse,
+            o.n0_fine,
+            o.stored_q_rms,
+            o.stored_q_max,
+            o.stored_speed_rms,
+            o.reconstructed_q_rms,
+            o.boundary_q_rms
+                .map(|b| format!(", near boundaries {b:.2}"))
+                .unwrap_or_default()
+        )?;
+    }
+    Ok(())
+}
