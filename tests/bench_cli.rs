@@ -46,9 +46,10 @@ fn bench(extra: &[&str], plot: &std::path::Path) -> Vec<serde_json::Value> {
 #[test]
 fn bench_prints_every_key_and_plots_a_png() {
     let dir = tempfile::tempdir().expect("tempdir");
-    for (mode, strategies) in [
-        ("iso", vec!["uniform", "paper", "bisect", "exact"]),
-        ("dvr", vec!["uniform", "paper", "bisect"]),
+    // Dvr runs every strategy and step with and without pre-integrated opacity.
+    for (mode, strategies, ways) in [
+        ("iso", vec!["uniform", "paper", "bisect", "exact"], 1),
+        ("dvr", vec!["uniform", "paper", "bisect"], 2),
     ] {
         let state = dir.path().join(format!("{mode}.json"));
         // A state in the wanted mode, saved by `render` (the bench reads states, not flags).
@@ -73,7 +74,7 @@ fn bench_prints_every_key_and_plots_a_png() {
         );
         let plot = dir.path().join(format!("{mode}.png"));
         let runs = bench(&["--state", state.to_str().expect("utf-8 path")], &plot);
-        assert_eq!(runs.len(), strategies.len() * 5, "{mode}: runs");
+        assert_eq!(runs.len(), strategies.len() * 5 * ways, "{mode}: runs");
         for run in &runs {
             for key in KEYS {
                 assert!(run.get(key).is_some(), "{mode}: run without `{key}`: {run}");
@@ -88,9 +89,15 @@ fn bench_prints_every_key_and_plots_a_png() {
         }
         let got: Vec<&str> = runs.iter().filter_map(|r| r["strategy"].as_str()).collect();
         for s in &strategies {
-            assert_eq!(got.iter().filter(|g| *g == s).count(), 5, "{mode}: {s}");
+            assert_eq!(
+                got.iter().filter(|g| *g == s).count(),
+                5 * ways,
+                "{mode}: {s}"
+            );
         }
         assert!(runs.iter().any(|r| r["pareto"] == true));
+        let pre = runs.iter().filter(|r| r["preintegrated"] == true).count();
+        assert_eq!(pre, if ways == 2 { runs.len() / 2 } else { 0 }, "{mode}");
         let png = std::fs::read(&plot).expect("plot written");
         assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n", "{mode}: plot is not a PNG");
         image::load_from_memory(&png).expect("plot decodes");

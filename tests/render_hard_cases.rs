@@ -44,6 +44,7 @@ fn params(vol: &Volume, strategy: Strategy, step: f64, mode: Mode, iso: f64) -> 
         colour_field: None,
         delta0: 0.5 * vol.finest_w,
         clip: None,
+        preintegrated: None,
     }
 }
 

@@ -163,6 +163,7 @@ fn params(strategy: Strategy, step: f64, iso: f64) -> Params {
         colour_field: Some(1),
         delta0: 1.0,
         clip: None,
+        preintegrated: None,
     }
 }
 

@@ -86,6 +86,8 @@ pub struct Run {
     /// a surface.
     pub false_hit_rate: f64,
     pub mode: &'static str,
+    /// Dvr opacity pre-integrated between samples (dvr runs come both ways).
+    pub preintegrated: bool,
     /// Whether this is the view state's own strategy and step.
     pub is_default: bool,
     /// Whether no other run is both faster and more accurate.
@@ -114,11 +116,19 @@ pub fn strategies(mode: Mode) -> Vec<Strategy> {
         .collect()
 }
 
-/// Every (strategy, step) pair of a benchmark of `state`.
-pub fn plan(state: &ViewState, opts: &BenchOptions) -> Vec<(Strategy, f64)> {
+/// Every (strategy, step, pre-integrated) run of a benchmark of `state`: in dvr mode each
+/// strategy and step both with and without pre-integration, to show what it buys.
+pub fn plan(state: &ViewState, opts: &BenchOptions) -> Vec<(Strategy, f64, bool)> {
+    let pre: &[bool] = match state.mode {
+        Mode::Iso => &[false],
+        Mode::Dvr => &[false, true],
+    };
     strategies(state.mode)
         .into_iter()
-        .flat_map(|s| opts.steps.iter().map(move |&st| (s, st)))
+        .flat_map(|s| {
+            pre.iter()
+                .flat_map(move |&p| opts.steps.iter().map(move |&st| (s, st, p)))
+        })
         .collect()
 }
 
@@ -161,6 +171,9 @@ pub fn reference(
     let mut st = state.clone();
     st.strategy = Strategy::Uniform;
     st.step = opts.reference_step;
+    // Point-sampled: at the reference step both ways agree, and the reference must not
+    // depend on the method it judges.
+    st.preintegrated = false;
     st.spp = opts.reference_spp.unwrap_or(state.spp).max(1);
     let (frame, ms) = render_median(renderer, vol, &st, meshes, 1)?;
     Ok(Reference {
@@ -210,11 +223,13 @@ pub fn run(
     reference: &Reference,
     strategy: Strategy,
     step: f64,
+    preintegrated: bool,
     repeat: u32,
 ) -> Result<Run, BenchError> {
     let mut st = state.clone();
     st.strategy = strategy;
     st.step = step;
+    st.preintegrated = preintegrated;
     let (frame, ms) = render_median(renderer, vol, &st, meshes, repeat)?;
     let (rmse, psnr, miss_rate, false_hit_rate) = compare(reference, &frame, st.spp);
     Ok(Run {
@@ -227,7 +242,9 @@ pub fn run(
         miss_rate,
         false_hit_rate,
         mode: st.mode.as_str(),
+        preintegrated,
         is_default: state.effective_strategy() == st.effective_strategy()
+            && state.preintegrated == preintegrated
             && (state.step - step).abs() <= 1e-12 * step.abs().max(1.0),
         pareto: false,
     })
@@ -263,7 +280,7 @@ pub fn bench(
     let reference = reference(renderer, vol, state, meshes, opts)?;
     progress("reference");
     let mut runs = Vec::new();
-    for (strategy, step) in plan(state, opts) {
+    for (strategy, step, pre) in plan(state, opts) {
         runs.push(run(
             renderer,
             vol,
@@ -272,9 +289,13 @@ pub fn bench(
             &reference,
             strategy,
             step,
+            pre,
             opts.repeat,
         )?);
-        progress(&format!("{strategy} {step}"));
+        progress(&format!(
+            "{strategy} {step}{}",
+            if pre { " pre-integrated" } else { "" }
+        ));
     }
     mark_pareto(&mut runs);
     Ok((reference, runs))
@@ -283,14 +304,27 @@ pub fn bench(
 /// Name under which the embedded plot font is registered with plotters.
 const PLOT_FONT: &str = "qbricks-plot";
 
-/// Colours of the strategies' lines (uniform, paper, bisect, exact).
+/// Colours of the strategies' lines (uniform, paper, bisect, exact; lighter when
+/// pre-integrated).
 fn strategy_colour(name: &str) -> plotters::style::RGBColor {
     use plotters::style::RGBColor;
     match name {
         "uniform" => RGBColor(31, 119, 180),
         "paper" => RGBColor(255, 127, 14),
         "bisect" => RGBColor(44, 160, 44),
+        "uniform+pre" => RGBColor(120, 180, 230),
+        "paper+pre" => RGBColor(250, 190, 120),
+        "bisect+pre" => RGBColor(130, 210, 130),
         _ => RGBColor(214, 39, 40),
+    }
+}
+
+/// Name of a run's line in the plot.
+fn line_name(r: &Run) -> String {
+    if r.preintegrated {
+        format!("{}+pre", r.strategy)
+    } else {
+        r.strategy.to_string()
     }
 }
 
@@ -343,17 +377,18 @@ pub fn plot_png(runs: &[Run], title: &str, size: (u32, u32)) -> Result<Vec<u8>, 
             .label_style((PLOT_FONT, 13))
             .draw()
             .map_err(|e| err(&e))?;
-        let mut names: Vec<&str> = Vec::new();
+        let mut names: Vec<String> = Vec::new();
         for r in &pts {
-            if !names.contains(&r.strategy) {
-                names.push(r.strategy);
+            let n = line_name(r);
+            if !names.contains(&n) {
+                names.push(n);
             }
         }
         for name in names {
-            let colour = strategy_colour(name);
+            let colour = strategy_colour(&name);
             let mut line: Vec<(f64, f64)> = pts
                 .iter()
-                .filter(|r| r.strategy == name)
+                .filter(|r| line_name(r) == name)
                 .map(|r| (r.ms, r.rmse))
                 .collect();
             line.sort_by(|a, b| a.0.total_cmp(&b.0));
@@ -456,6 +491,7 @@ mod tests {
             miss_rate: 0.0,
             false_hit_rate: 0.0,
             mode: "iso",
+            preintegrated: false,
             is_default: false,
             pareto: false,
         };
@@ -477,6 +513,7 @@ mod tests {
             miss_rate: 0.0,
             false_hit_rate: 0.0,
             mode: "iso",
+            preintegrated: false,
             is_default: s == "exact",
             pareto: false,
         };

@@ -20,7 +20,7 @@ use crate::film::Film;
 use crate::mesh::Meshes;
 use crate::ray::{RayCaster, Shading};
 use crate::sampling::{Event, Params, Stats, Strategy};
-use crate::transfer::{Mode, Transfer};
+use crate::transfer::{Mode, PreIntegrated, Transfer};
 use crate::view_state::ViewState;
 use crate::volume::{Volume, VolumeError};
 
@@ -77,8 +77,12 @@ impl<'a> Scene<'a> {
             // The seed report's opacities are per sample at step 0.5·dx of the finest grid.
             delta0: 0.5 * vol.finest_w,
             clip: None,
+            preintegrated: None,
         };
         let mut params = params;
+        if state.preintegrated {
+            params.preintegrated = PreIntegrated::new(&params.tf, params.delta0);
+        }
         params.clip_to_active(vol);
         Ok(Scene {
             vol,

@@ -14,6 +14,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::integrate::{correct_opacity, Accum};
 use crate::reconstruct::{Cubic, Eval};
+use crate::transfer::PreIntegrated;
 use crate::transfer::{Class, Mode, Transfer};
 use crate::traverse::{Skip, SKIPPED};
 use crate::volume::Volume;
@@ -86,6 +87,8 @@ pub struct Params {
     /// Local box holding every region that can contribute (rays are clipped to it);
     /// `None`: no clipping. See [`Params::clip_to_active`].
     pub clip: Option<([f64; 3], [f64; 3])>,
+    /// Pre-integrated dvr opacity (`None`: point-sampled opacity with the usual correction).
+    pub preintegrated: Option<PreIntegrated>,
 }
 
 /// Work counters of one or more rays (summed in integers: deterministic).
@@ -668,6 +671,9 @@ impl<'v> Tracer<'v> {
         let params = self.params;
         let tf = params.tf;
         let mut prev: Option<(f64, Class, bool)> = None;
+        // Value of the previous sample when it lies just behind the current one on a
+        // contiguous stretch (the front of a pre-integrated segment).
+        let mut front: Option<f64> = None;
         let mut last_t1 = f64::NEG_INFINITY;
         let mut t_next = f64::NEG_INFINITY;
         let mut stack = std::mem::take(&mut self.stack);
@@ -682,12 +688,14 @@ impl<'v> Tracer<'v> {
             let w = vol.step_width(seg.region);
             if seg.t0 > last_t1 + 1e-9 * w {
                 prev = None;
+                front = None;
             }
             last_t1 = seg.t1;
             let (mn, mx) = (seg.min, seg.max);
             let skipped = seg.region == SKIPPED || !tf.may_contribute(mn, mx);
             self.enter_segment(&seg, skipped);
             if skipped {
+                front = None;
                 if params.strategy == Strategy::Bisect {
                     let class = tf.classify(mn as f64);
                     if let Some((pt, pc, _)) = prev {
@@ -735,6 +743,7 @@ impl<'v> Tracer<'v> {
                 self.stats.samples += 1;
                 let Some(v) = v else {
                     prev = None;
+                    front = None;
                     continue;
                 };
                 let class = tf.classify(v);
@@ -746,6 +755,10 @@ impl<'v> Tracer<'v> {
                             if acc.done() {
                                 return false;
                             }
+                            if tm.is_some() {
+                                // The band sample took the front of this segment.
+                                front = None;
+                            }
                             delta = t - tm.unwrap_or(pt);
                         } else {
                             delta = t - pt;
@@ -753,8 +766,11 @@ impl<'v> Tracer<'v> {
                     }
                     prev = Some((t, class, true));
                 }
-                let alpha = tf.opacity(v);
-                let a = correct_opacity(alpha, delta, params.delta0);
+                let a = match &params.preintegrated {
+                    Some(pre) => pre.segment_alpha(front.unwrap_or(v), v, delta),
+                    None => correct_opacity(tf.opacity(v), delta, params.delta0),
+                };
+                front = Some(v);
                 self.record(Event::Sample {
                     t,
                     value: Some(v),

@@ -65,6 +65,11 @@ pub struct ViewState {
     /// Shadow rays towards every light, through meshes and the volume's opacity.
     #[serde(default)]
     pub shadows: bool,
+    /// Dvr: pre-integrated opacity between consecutive samples (see
+    /// [`crate::transfer::PreIntegrated`]). Off by default so states saved before it
+    /// existed render as they did.
+    #[serde(default)]
+    pub preintegrated: bool,
     /// Colour where rays leave the scene.
     #[serde(default = "default_background")]
     pub background: [f32; 3],
@@ -199,6 +204,7 @@ impl ViewState {
             material: Material::default(),
             meshes: Vec::new(),
             shadows: false,
+            preintegrated: false,
             background: DEFAULT_BACKGROUND,
             width: 800,
             height: 600,
@@ -414,6 +420,9 @@ pub struct Overrides {
     /// Shadow rays towards every light (through meshes and the volume).
     #[arg(long)]
     pub shadows: bool,
+    /// Dvr: pre-integrated opacity, so a band thinner than the step still counts fully.
+    #[arg(long)]
+    pub preintegrated: bool,
     /// OBJ mesh, optionally placed: PATH[@x,y,z,scale]. Repeatable; replaces the state's meshes.
     #[arg(long = "mesh")]
     pub meshes: Vec<String>,
@@ -468,6 +477,9 @@ impl Overrides {
         }
         if self.shadows {
             state.shadows = true;
+        }
+        if self.preintegrated {
+            state.preintegrated = true;
         }
         if !self.meshes.is_empty() {
             state.meshes = self

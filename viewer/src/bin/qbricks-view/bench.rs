@@ -162,7 +162,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 fn write_table(out: &mut impl Write, runs: &[Run]) -> std::io::Result<()> {
     writeln!(
         out,
-        "{:<8} {:>5} {:>9} {:>9} {:>8} {:>7} {:>7} {:>7}  pareto",
+        "{:<12} {:>5} {:>9} {:>9} {:>8} {:>7} {:>7} {:>7}  pareto",
         "strategy", "step", "ms", "samp/ray", "rmse", "psnr", "miss%", "false%"
     )?;
     for r in runs {
@@ -171,8 +171,12 @@ fn write_table(out: &mut impl Write, runs: &[Run]) -> std::io::Result<()> {
             .map_or_else(|| "inf".to_string(), |p| format!("{p:.1}"));
         writeln!(
             out,
-            "{:<8} {:>5} {:>9.1} {:>9.1} {:>8.5} {:>7} {:>7.2} {:>7.2}  {}{}",
-            r.strategy,
+            "{:<12} {:>5} {:>9.1} {:>9.1} {:>8.5} {:>7} {:>7.2} {:>7.2}  {}{}",
+            if r.preintegrated {
+                format!("{}+pre", r.strategy)
+            } else {
+                r.strategy.to_string()
+            },
             r.step,
             r.ms,
             r.samples_per_ray,
