@@ -169,7 +169,8 @@ impl PreIntegrated {
     /// mode or for a degenerate band.
     pub fn new(tf: &Transfer, delta0: f64) -> Option<PreIntegrated> {
         let (lo, hi) = tf.band();
-        if tf.mode != Mode::Dvr || !(hi > lo) || !(delta0 > 0.0) || !(hi - lo).is_finite() {
+        let usable = hi > lo && delta0 > 0.0 && (hi - lo).is_finite();
+        if tf.mode != Mode::Dvr || !usable {
             return None;
         }
         let mut pre = PreIntegrated {
@@ -204,7 +205,7 @@ impl PreIntegrated {
     /// `C(v)`, linear between the table's edges, constant outside the band.
     #[inline]
     fn cumulative(&self, v: f64) -> f64 {
-        if !(v > self.lo) {
+        if v.is_nan() || v <= self.lo {
             return 0.0;
         }
         if v >= self.hi {
@@ -220,7 +221,7 @@ impl PreIntegrated {
     /// `front` to `back`.
     #[inline]
     pub fn segment_alpha(&self, front: f64, back: f64, length: f64) -> f64 {
-        if !(length > 0.0) {
+        if length.is_nan() || length <= 0.0 {
             return 0.0;
         }
         let dv = back - front;
