@@ -538,6 +538,8 @@ pub fn plot_png(report: &AccuracyReport, size: (u32, u32)) -> Result<Vec<u8>, St
             .configure_mesh()
             .x_desc("finest cell width")
             .y_desc("RMS error / p99 |exact|")
+            .x_label_formatter(&|v| format!("{v:.3}"))
+            .y_label_formatter(&|v| format!("{v:.0e}"))
             .label_style((PLOT_FONT, 13))
             .draw()
             .map_err(|e| err(&e))?;

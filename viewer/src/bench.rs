@@ -374,6 +374,8 @@ pub fn plot_png(runs: &[Run], title: &str, size: (u32, u32)) -> Result<Vec<u8>, 
             .configure_mesh()
             .x_desc("ms per frame")
             .y_desc("RMSE vs reference")
+            .x_label_formatter(&|v| format!("{v:.0}"))
+            .y_label_formatter(&|v| format!("{v:.0e}"))
             .label_style((PLOT_FONT, 13))
             .draw()
             .map_err(|e| err(&e))?;
@@ -386,12 +388,10 @@ pub fn plot_png(runs: &[Run], title: &str, size: (u32, u32)) -> Result<Vec<u8>, 
         }
         for name in names {
             let colour = strategy_colour(&name);
-            let mut line: Vec<(f64, f64)> = pts
-                .iter()
-                .filter(|r| line_name(r) == name)
-                .map(|r| (r.ms, r.rmse))
-                .collect();
-            line.sort_by(|a, b| a.0.total_cmp(&b.0));
+            // In step order (coarse to fine), so each line follows one strategy's steps.
+            let mut steps: Vec<&&Run> = pts.iter().filter(|r| line_name(r) == name).collect();
+            steps.sort_by(|a, b| b.step.total_cmp(&a.step));
+            let line: Vec<(f64, f64)> = steps.iter().map(|r| (r.ms, r.rmse)).collect();
             chart
                 .draw_series(LineSeries::new(line.clone(), colour.stroke_width(2)))
                 .map_err(|e| err(&e))?
