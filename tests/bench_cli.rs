@@ -151,8 +151,10 @@ fn accuracy_prints_every_key_and_plots_a_png() {
                 assert!(r[key][s].is_number(), "{key}.{s} missing: {r}");
             }
         }
-        // Three nested grids: three levels, and points near their boundaries.
-        assert_eq!(r["levels"].as_array().expect("levels").len(), 3);
+        // Three nested grids; at n0 8 a level can be covered entirely by the finer one,
+        // so two or three levels keep cells. Points near the level boundaries exist.
+        let levels = r["levels"].as_array().expect("levels").len();
+        assert!((2..=3).contains(&levels), "{levels} levels");
         assert!(r["boundary_q"]["points"].as_u64() > Some(0));
     }
     let orders = v["orders"].as_array().expect("orders");
