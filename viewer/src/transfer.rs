@@ -251,7 +251,11 @@ mod pre_tests {
         let pre = PreIntegrated::new(&tf, 0.5).expect("dvr table");
         for v in [0.043, 0.047, 0.05, 0.055] {
             for len in [0.1, 0.5, 2.0] {
-                let want = crate::integrate::correct_opacity(tf.opacity(v), len, 0.5);
+                // Where the band saturates (opacity 1) the table holds the capped opacity,
+                // so a segment shorter than the reference length is a little less than
+                // opaque: 1 − (1 − cap)^(len/δ₀).
+                let alpha = tf.opacity(v).min(PRE_MAX_ALPHA);
+                let want = crate::integrate::correct_opacity(alpha, len, 0.5);
                 let got = pre.segment_alpha(v, v, len);
                 assert!(
                     (got - want).abs() < 1e-5,
