@@ -13,7 +13,7 @@
 //! The iso-surface position error of the viewer's `exact` hits needs the ray caster, which
 //! this crate must not depend on; it is not measured here.
 
-use format::{BrickFile, KdNode};
+use format::BrickFile;
 use serde::Serialize;
 
 use crate::analytic::{self, Flow};
@@ -177,24 +177,7 @@ fn field_index(file: &BrickFile, name: &'static str) -> Result<usize, AccuracyEr
 
 /// Region containing `p` by KD-tree descent.
 fn locate(file: &BrickFile, p: [f64; 3]) -> Option<u32> {
-    let mut n = 0usize;
-    loop {
-        match file.kd_nodes.get(n)? {
-            KdNode::Leaf { region } => return *region,
-            KdNode::Inner {
-                axis,
-                split,
-                left,
-                right,
-            } => {
-                n = if p[*axis as usize] < *split {
-                    *left
-                } else {
-                    *right
-                } as usize;
-            }
-        }
-    }
+    crate::kdtree::locate(&file.kd_nodes, p)
 }
 
 /// The basis-method reconstruction at `p` (`Σ H v / Σ H`, tents of the cell width around
