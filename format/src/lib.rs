@@ -5,6 +5,8 @@
 //! memory-maps it and validates everything ([`header`] checks, rkyv bytecheck,
 //! [`validate`]) before handing out `&ArchivedBrickFile`; [`query`] answers the
 //! read-only questions both programs ask (point → region, ray → regions, bricks, cells).
+//! [`sequence`] holds what both programs know about frame sequences (file-name patterns,
+//! the manifest).
 
 pub mod error;
 pub mod header;
@@ -13,6 +15,7 @@ pub mod output;
 pub mod query;
 pub mod reader;
 pub mod schema;
+pub mod sequence;
 pub mod validate;
 pub mod writer;
 

@@ -22,6 +22,7 @@ pub mod ray;
 pub mod reconstruct;
 pub mod render;
 pub mod sampling;
+pub mod sequence;
 pub mod shading;
 pub mod testvol;
 pub mod transfer;

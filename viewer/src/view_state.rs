@@ -18,13 +18,9 @@ pub use crate::sampling::Strategy;
 use crate::shading::{default_lights, Light, Material};
 pub use crate::transfer::{Band, Mode};
 
-/// Range of one field of the file (from its regions' value bounds).
-#[derive(Debug, Clone, PartialEq)]
-pub struct FieldRange {
-    pub name: String,
-    pub min: f32,
-    pub max: f32,
-}
+/// Range of one field: of a file (from its field table), or of a whole sequence (from its
+/// manifest), which is the same record.
+pub use format::sequence::FieldRange;
 
 /// Upper limit of `width`/`height`, so a state file cannot ask for an absurd allocation.
 pub const MAX_IMAGE_SIDE: u32 = 16384;
@@ -107,6 +103,31 @@ pub enum ViewStateError {
     Invalid { path: PathBuf, message: String },
 }
 
+/// The iso value and dvr band width a field starts with: 10 % of its positive maximum
+/// (where the vortex cores of Q stand out), else the middle of its range; σ at 8 % of the
+/// iso value as in the seed report, never zero.
+pub fn default_iso(f: &FieldRange) -> (f64, f64) {
+    let (iso, span) = if f.min.is_finite() && f.max.is_finite() {
+        let (lo, hi) = (f64::from(f.min.min(f.max)), f64::from(f.min.max(f.max)));
+        let iso = if hi > 0.0 && lo < 0.1 * hi {
+            0.1 * hi
+        } else {
+            0.5 * (lo + hi)
+        };
+        (iso, hi - lo)
+    } else {
+        (0.0, 1.0)
+    };
+    let mut sigma = 0.08 * iso.abs();
+    if sigma <= 0.0 || sigma.is_nan() {
+        sigma = 0.02 * span;
+    }
+    if !(sigma > 0.0 && sigma.is_finite()) {
+        sigma = 1e-3;
+    }
+    (iso, sigma)
+}
+
 impl ViewState {
     /// [`ViewState::default_for`] the field ranges of an opened volume, with the camera
     /// framing the regions where the iso field can cross the iso value (the interesting
@@ -155,27 +176,8 @@ impl ViewState {
             .iter()
             .find(|f| f.name == "q")
             .or_else(|| fields.first());
-        let (iso_field, iso, span) = match iso_range {
-            Some(f) if f.min.is_finite() && f.max.is_finite() => {
-                let (lo, hi) = (f64::from(f.min.min(f.max)), f64::from(f.min.max(f.max)));
-                let iso = if hi > 0.0 && lo < 0.1 * hi {
-                    0.1 * hi
-                } else {
-                    0.5 * (lo + hi)
-                };
-                (f.name.clone(), iso, hi - lo)
-            }
-            Some(f) => (f.name.clone(), 0.0, 1.0),
-            None => ("q".to_string(), 0.0, 1.0),
-        };
-        // σ as in the seed report (8 % of the iso value), but never zero.
-        let mut sigma = 0.08 * iso.abs();
-        if sigma <= 0.0 || sigma.is_nan() {
-            sigma = 0.02 * span;
-        }
-        if !(sigma > 0.0 && sigma.is_finite()) {
-            sigma = 1e-3;
-        }
+        let iso_field = iso_range.map_or_else(|| "q".to_string(), |f| f.name.clone());
+        let (iso, sigma) = iso_range.map_or((0.0, 1e-3), default_iso);
         let colour_field = fields
             .iter()
             .find(|f| f.name == "speed")
@@ -441,6 +443,23 @@ pub struct Overrides {
     /// Perspective projection with this vertical field of view (degrees).
     #[arg(long)]
     pub fov: Option<f64>,
+    /// Field that drives the colour (e.g. `speed`, `density`). Without --state the colour
+    /// map's points are spread over that field's range (a sequence's range for a sequence).
+    #[arg(long = "colour-field", alias = "color-field")]
+    pub colour_field: Option<String>,
+    /// Field the iso value applies to (e.g. `q`, `density`). Without --iso the iso value
+    /// starts at 10 % of that field's maximum (else the middle of its range).
+    #[arg(long = "iso-field")]
+    pub iso_field: Option<String>,
+}
+
+/// A field override that names no field of the data.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{flag}: no field named {name:?} (fields: {})", known.join(", "))]
+pub struct UnknownField {
+    pub flag: &'static str,
+    pub name: String,
+    pub known: Vec<String>,
 }
 
 impl Overrides {
@@ -508,6 +527,15 @@ impl Overrides {
         if !from_file {
             state.lights_follow_camera();
         }
+        if let Some(f) = &self.iso_field {
+            if from_file && self.iso.is_none() && *f != state.iso_field {
+                // The state file's iso value belongs to another field.
+                notes.push(format!(
+                    "--iso-field {f}: the iso value starts over from that field's range \
+                     (give --iso to choose it)"
+                ));
+            }
+        }
         if state.mode == Mode::Dvr && state.strategy == Strategy::Exact {
             if self.strategy.is_none() {
                 // The default strategy (exact) is for iso mode; a dvr request without an
@@ -518,6 +546,49 @@ impl Overrides {
             }
         }
         Ok(notes)
+    }
+}
+
+impl Overrides {
+    /// Applies `--iso-field` and `--colour-field` against the fields the data has
+    /// (`fields`: their ranges, a sequence's ranges for a sequence), after
+    /// [`Overrides::apply`]. A field that changes gets a fresh start from its range: the
+    /// iso value (unless `--iso` was given) and band as [`default_iso`], the colour map's
+    /// points as [`ColorMap::default_for_range`], since values meant for another field
+    /// would show nothing useful. An unknown name is an error listing the fields.
+    pub fn apply_fields(
+        &self,
+        state: &mut ViewState,
+        fields: &[FieldRange],
+    ) -> Result<(), UnknownField> {
+        let find = |flag: &'static str, name: &str| {
+            fields
+                .iter()
+                .find(|f| f.name == name)
+                .ok_or_else(|| UnknownField {
+                    flag,
+                    name: name.to_string(),
+                    known: fields.iter().map(|f| f.name.clone()).collect(),
+                })
+        };
+        if let Some(name) = &self.iso_field {
+            let f = find("--iso-field", name)?;
+            if *name != state.iso_field {
+                state.iso_field = name.clone();
+                let (iso, sigma) = default_iso(f);
+                if self.iso.is_none() {
+                    state.iso = iso;
+                    state.transfer.sigma = sigma;
+                }
+            }
+        }
+        if let Some(name) = &self.colour_field {
+            let f = find("--colour-field", name)?;
+            if *name != state.colormap.field {
+                state.colormap = ColorMap::default_for_range(name, f.min, f.max);
+            }
+        }
+        Ok(())
     }
 }
 
@@ -570,6 +641,68 @@ mod tests {
         ViewState::default_for([0.0; 3], [1.0; 3], &nan)
             .validate()
             .expect("nan range");
+    }
+
+    #[test]
+    fn field_overrides_start_the_new_field_from_its_range() {
+        let mut fields = fields();
+        fields.push(FieldRange {
+            name: "density".into(),
+            min: 0.0,
+            max: 2.0,
+        });
+        let base = ViewState::default_for([0.0; 3], [1.0; 3], &fields);
+        let over = |colour: Option<&str>, iso_field: Option<&str>, iso: Option<f64>| Overrides {
+            colour_field: colour.map(str::to_string),
+            iso_field: iso_field.map(str::to_string),
+            iso,
+            ..Overrides::default()
+        };
+
+        let mut s = base.clone();
+        over(Some("density"), None, None)
+            .apply_fields(&mut s, &fields)
+            .expect("known");
+        assert_eq!(s.colormap, ColorMap::default_for_range("density", 0.0, 2.0));
+        assert_eq!((s.iso_field.as_str(), s.iso), ("q", base.iso));
+
+        let mut s = base.clone();
+        over(None, Some("density"), None)
+            .apply_fields(&mut s, &fields)
+            .expect("known");
+        assert_eq!((s.iso_field.as_str(), s.iso), ("density", 0.2));
+        assert!((s.transfer.sigma - 0.016).abs() < 1e-12);
+        assert_eq!(s.colormap, base.colormap);
+
+        // An explicit --iso is kept (apply sets it first).
+        let mut s = base.clone();
+        let o = over(None, Some("density"), Some(1.5));
+        o.apply(&mut s, false).expect("apply");
+        o.apply_fields(&mut s, &fields).expect("known");
+        assert_eq!((s.iso_field.as_str(), s.iso), ("density", 1.5));
+
+        // Naming the current fields changes nothing, even a hand-made colour map.
+        let mut s = base.clone();
+        s.colormap = ColorMap::seed_report();
+        let kept = s.clone();
+        over(Some("speed"), Some("q"), None)
+            .apply_fields(&mut s, &fields)
+            .expect("known");
+        assert_eq!(s, kept);
+
+        let e = over(Some("vorticity"), None, None)
+            .apply_fields(&mut base.clone(), &fields)
+            .expect_err("unknown");
+        assert_eq!(e.flag, "--colour-field");
+        assert_eq!(e.known, ["q", "speed", "density"]);
+        assert_eq!(
+            e.to_string(),
+            "--colour-field: no field named \"vorticity\" (fields: q, speed, density)"
+        );
+        let e = over(None, Some("w"), None)
+            .apply_fields(&mut base.clone(), &fields)
+            .expect_err("unknown");
+        assert_eq!(e.flag, "--iso-field");
     }
 
     #[test]

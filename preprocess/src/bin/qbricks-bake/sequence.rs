@@ -13,7 +13,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use qbricks_preprocess::bake::BakeOptions;
 use qbricks_preprocess::inputs::ReadOptions;
 use qbricks_preprocess::sequence::{
-    gaps, global_ranges, FramePattern, Manifest, ManifestFailure, ManifestFrame,
+    gaps, global_ranges, FieldRange, FramePattern, Manifest, ManifestFailure, ManifestFrame,
 };
 
 use crate::bake::{bake_file, Args};
@@ -157,7 +157,15 @@ pub fn run(
                             input: name.clone(),
                             output: out.display().to_string(),
                             leaf_cells: summary.leaf_cells,
-                            fields: summary.fields,
+                            fields: summary
+                                .fields
+                                .into_iter()
+                                .map(|f| FieldRange {
+                                    name: f.name,
+                                    min: f.min,
+                                    max: f.max,
+                                })
+                                .collect(),
                         })
                     }
                     Err(e) => {
@@ -217,7 +225,7 @@ pub fn run(
         failed,
         missing,
     };
-    let manifest_path = output.sibling("sequence", "json");
+    let manifest_path = output.manifest_path();
     write_manifest(&manifest_path, &manifest)?;
     let seconds = start.elapsed().as_secs_f64();
     let cells: u64 = manifest.frames.iter().map(|f| f.leaf_cells).sum();

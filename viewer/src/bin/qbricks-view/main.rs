@@ -8,6 +8,7 @@ mod bench;
 mod info;
 mod probe;
 mod render;
+mod render_sequence;
 mod window;
 
 #[derive(Parser)]

@@ -7,10 +7,11 @@ use std::time::Instant;
 use anyhow::{bail, Context};
 use format::output::same_file;
 use format::output::QuietStdout;
+use format::sequence::FramePattern;
 use qbricks_viewer::film;
 use qbricks_viewer::mesh::Meshes;
 use qbricks_viewer::render::{Frame, FrameReport, Renderer, Scene};
-use qbricks_viewer::view_state::{Overrides, ViewState};
+use qbricks_viewer::view_state::{FieldRange, Overrides, ViewState};
 use qbricks_viewer::volume::Volume;
 
 /// The bundled sample, relative to the current directory.
@@ -29,11 +30,18 @@ pub const MAX_FRAME_BYTES: u64 = 8 << 30;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// Brick file to render [default: data/wake_small.qbk, relative to the current directory].
+    /// Brick file to render [default: data/wake_small.qbk, relative to the current
+    /// directory], or a frame sequence: 'out/frame_####.qbk' (or %04d) renders every frame
+    /// with one view and the sequence's field ranges.
     pub file: Option<PathBuf>,
-    /// Output PNG (written atomically). Required unless --pixel is given.
+    /// Output PNG (written atomically). Required unless --pixel is given. For a sequence a
+    /// pattern too: 'png/frame_####.png'.
     #[arg(short = 'o', long = "output")]
     pub output: Option<PathBuf>,
+    /// Sequence: render only frames A..B (both included; also A.., ..B, A). Every number in
+    /// the range is expected: a missing file counts as a failed frame.
+    #[arg(long)]
+    pub frames: Option<qbricks_viewer::sequence::FrameRange>,
     /// View state JSON to start from (flags override it).
     #[arg(long)]
     pub state: Option<PathBuf>,
@@ -83,9 +91,6 @@ pub fn open_volume(path: &Path) -> anyhow::Result<format::BrickFileView> {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let path = resolve_file(args.file.clone())?;
-    if args.output.is_none() && args.pixel.is_none() {
-        bail!("expected -o OUT.png (or --pixel X,Y)");
-    }
     if !(1..=MAX_REPEAT).contains(&args.repeat) {
         bail!("--repeat: expected 1..={MAX_REPEAT}, found {}", args.repeat);
     }
@@ -93,6 +98,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         if !(1..=MAX_THREADS).contains(&t) {
             bail!("--threads: expected 1..={MAX_THREADS}, found {t}");
         }
+    }
+    // A path that exists is one file, even with `#` in its name (as in `qbricks-bake`).
+    if !path.exists() {
+        if let Some(pattern) = FramePattern::parse(&path)? {
+            return crate::render_sequence::run(&args, &path, pattern);
+        }
+    }
+    if args.frames.is_some() {
+        bail!(
+            "{}: --frames needs a frame sequence ('frame_####.qbk' or 'frame_%04d.qbk')",
+            path.display()
+        );
+    }
+    if args.output.is_none() && args.pixel.is_none() {
+        bail!("expected -o OUT.png (or --pixel X,Y)");
     }
 
     // Open.
@@ -111,10 +131,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .view
         .apply(&mut state, args.state.is_some())
         .map_err(|m| anyhow::anyhow!(m))?;
+    let fields: Vec<FieldRange> = vol
+        .fields
+        .iter()
+        .map(|f| FieldRange {
+            name: f.name.clone(),
+            min: f.min,
+            max: f.max,
+        })
+        .collect();
+    args.view
+        .apply_fields(&mut state, &fields)
+        .with_context(|| path.display().to_string())?;
     state
         .validate()
         .map_err(|m| anyhow::anyhow!("view state: {m}"))?;
-    check_files(&path, &args, &state)?;
+    check_files(&path, args.output.as_deref(), &args, &state)?;
     check_frame_memory(state.width, state.height)?;
     for n in notes {
         eprintln!("qbricks-view: note: {n}");
@@ -142,22 +174,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
 
-    let mut times = Vec::new();
-    let mut frame = None;
-    for _ in 0..args.repeat {
-        let t = Instant::now();
-        let f = match args.aov {
-            Some(aov) => renderer.install(|| qbricks_viewer::render::render_aov(&scene, aov)),
-            None => renderer.render(&scene),
-        };
-        times.push(t.elapsed().as_secs_f64() * 1e3);
-        frame = Some(f);
-    }
-    let Some(frame) = frame else {
-        bail!("nothing rendered");
-    };
-    times.sort_by(f64::total_cmp);
-    let ms = times[times.len() / 2];
+    let (frame, ms) = render_frame(&renderer, &scene, &args);
     write_outputs(&args, &state, Some(&frame))?;
     if args.json {
         let report = FrameReport::new(&frame, &state, ms, open_ms, renderer.threads());
@@ -166,10 +183,40 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Refuses outputs that are the same file as an input (the brick file, the state file, a
-/// mesh) or as each other: by path, through symlinks and `..`, or hard links. Runs before
-/// anything is rendered or written, so nothing is lost.
-fn check_files(file: &Path, args: &Args, state: &ViewState) -> anyhow::Result<()> {
+/// Renders the scene `--repeat` times (the shaded image or the `--aov` buffer); returns
+/// the last frame and the median wall time in ms.
+pub fn render_frame(renderer: &Renderer, scene: &Scene, args: &Args) -> (Frame, f64) {
+    let mut times = Vec::new();
+    let mut frames = Vec::new();
+    for _ in 0..args.repeat.max(1) {
+        let t = Instant::now();
+        let f = match args.aov {
+            Some(aov) => renderer.install(|| qbricks_viewer::render::render_aov(scene, aov)),
+            None => renderer.render(scene),
+        };
+        times.push(t.elapsed().as_secs_f64() * 1e3);
+        // Keep only the last frame.
+        frames.clear();
+        frames.push(f);
+    }
+    times.sort_by(f64::total_cmp);
+    let ms = times.get(times.len() / 2).copied().unwrap_or(0.0);
+    match frames.pop() {
+        Some(f) => (f, ms),
+        // `repeat ≥ 1`, so there is a frame; render once more rather than panic.
+        None => (renderer.render(scene), ms),
+    }
+}
+
+/// Refuses outputs (`output`, `--save-state`) that are the same file as an input (the
+/// brick file, the state file, a mesh) or as each other: by path, through symlinks and
+/// `..`, or hard links. Runs before anything is rendered or written, so nothing is lost.
+pub fn check_files(
+    file: &Path,
+    output: Option<&Path>,
+    args: &Args,
+    state: &ViewState,
+) -> anyhow::Result<()> {
     let mut inputs: Vec<(&str, &Path)> = vec![("brick file", file)];
     if let Some(s) = &args.state {
         inputs.push(("--state file", s));
@@ -178,7 +225,7 @@ fn check_files(file: &Path, args: &Args, state: &ViewState) -> anyhow::Result<()
         inputs.push(("mesh", &m.path));
     }
     let mut outputs: Vec<(&str, &Path)> = Vec::new();
-    if let Some(o) = &args.output {
+    if let Some(o) = output {
         outputs.push(("-o", o));
     }
     if let Some(s) = &args.save_state {
@@ -210,7 +257,7 @@ fn check_files(file: &Path, args: &Args, state: &ViewState) -> anyhow::Result<()
 
 /// Refuses an image whose frame needs more than [`MAX_FRAME_BYTES`] or half the machine's
 /// memory, before any of it is allocated (a 16384² image takes about 12 GiB).
-fn check_frame_memory(width: u32, height: u32) -> anyhow::Result<()> {
+pub fn check_frame_memory(width: u32, height: u32) -> anyhow::Result<()> {
     let limit =
         format::input::physical_memory().map_or(MAX_FRAME_BYTES, |m| (m / 2).min(MAX_FRAME_BYTES));
     let need = u64::from(width) * u64::from(height) * FRAME_BYTES_PER_PIXEL;

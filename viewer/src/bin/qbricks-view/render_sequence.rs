@@ -1,0 +1,190 @@
+//! `qbricks-view render 'out/frame_####.qbk' -o 'png/frame_####.png' [--frames A..B]`: every
+//! frame with one view state and the sequence's fixed field ranges, one progress bar; a
+//! frame that fails is named and the others go on.
+
+use std::io::Write;
+use std::path::Path;
+
+use anyhow::{bail, Context};
+use format::output::QuietStdout;
+use format::sequence::{gaps, FramePattern};
+use qbricks_viewer::dataset::Dataset;
+use qbricks_viewer::film;
+use qbricks_viewer::mesh::Meshes;
+use qbricks_viewer::render::{FrameReport, Renderer, Scene};
+use qbricks_viewer::sequence::{output_pattern, select_frames, survey, RangeSource};
+use qbricks_viewer::view_state::ViewState;
+use serde::Serialize;
+
+use crate::render::{check_files, check_frame_memory, render_frame, Args};
+
+/// One line of `--json` per frame: the single-frame report, or the error.
+#[derive(Serialize)]
+struct FrameLine {
+    frame: u64,
+    file: String,
+    output: String,
+    #[serde(flatten, skip_serializing_if = "Option::is_none")]
+    report: Option<FrameReport>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    error: Option<String>,
+}
+
+pub fn run(args: &Args, path: &Path, pattern: FramePattern) -> anyhow::Result<()> {
+    let shown = path.display().to_string();
+    if args.pixel.is_some() {
+        bail!("{shown}: --pixel explains one file's pixel; give one frame's file instead of the pattern");
+    }
+    let Some(output) = &args.output else {
+        bail!("{shown}: expected -o with a frame pattern for the images (e.g. -o 'png/frame_####.png')");
+    };
+    let out_pattern = output_pattern(output).map_err(anyhow::Error::msg)?;
+    let frames = select_frames(&pattern, &shown, args.frames)?;
+    let info = survey(&pattern, &frames)?;
+    match &info.source {
+        RangeSource::Manifest(m) => eprintln!(
+            "qbricks-view: {shown}: field ranges of the whole sequence from {}",
+            m.display()
+        ),
+        RangeSource::Frames(n) => eprintln!(
+            "qbricks-view: {shown}: no manifest ({}), field ranges are the union of the {n} \
+             frame(s)' own ranges",
+            pattern.manifest_path().display()
+        ),
+    }
+    if args.frames.is_none() {
+        let numbers: Vec<u64> = frames.iter().map(|f| f.0).collect();
+        let missing = gaps(&numbers);
+        if !missing.is_empty() {
+            let list: Vec<String> = missing.iter().take(20).map(u64::to_string).collect();
+            eprintln!(
+                "qbricks-view: warning: {shown}: {} frame(s) missing: {}{}",
+                missing.len(),
+                list.join(", "),
+                if missing.len() > 20 { ", …" } else { "" }
+            );
+        }
+    }
+
+    // One view state for every frame: from --state, or from what the frames share (the
+    // camera frames the union of their boxes, since the flow moves), then the flags.
+    let from_file = args.state.is_some();
+    let mut state = match &args.state {
+        Some(s) => ViewState::load(s)?,
+        None => {
+            // No frame opened: every frame will fail with its own error below.
+            let (lo, hi) = info.bounds.unwrap_or(([0.0; 3], [1.0; 3]));
+            ViewState::default_for(lo, hi, &info.fields)
+        }
+    };
+    let notes = args
+        .view
+        .apply(&mut state, from_file)
+        .map_err(anyhow::Error::msg)?;
+    args.view
+        .apply_fields(&mut state, &info.fields)
+        .with_context(|| shown.clone())?;
+    state
+        .validate()
+        .map_err(|m| anyhow::anyhow!("view state: {m}"))?;
+    check_frame_memory(state.width, state.height)?;
+    for n in notes {
+        eprintln!("qbricks-view: note: {n}");
+    }
+    let meshes = if state.meshes.is_empty() {
+        Meshes::empty()
+    } else {
+        Meshes::load(&state.meshes)?
+    };
+    let renderer = Renderer::new(args.threads).context("starting worker threads")?;
+    if !out_pattern.dir().as_os_str().is_empty() {
+        std::fs::create_dir_all(out_pattern.dir()).with_context(|| {
+            format!(
+                "{}: cannot create the directory",
+                out_pattern.dir().display()
+            )
+        })?;
+    }
+
+    let bar = indicatif::ProgressBar::with_draw_target(
+        Some(frames.len() as u64),
+        indicatif::ProgressDrawTarget::stderr(),
+    );
+    if let Ok(style) = indicatif::ProgressStyle::with_template(
+        "{elapsed:>4} [{bar:30}] {pos}/{len} frames ({per_sec}, eta {eta}) {msg}",
+    ) {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    let mut failed = Vec::new();
+    let mut stdout = QuietStdout::new();
+    for (frame, input) in &frames {
+        bar.set_message(format!("frame {frame}"));
+        let out = out_pattern.path(*frame);
+        let result = render_one(args, input, &out, &state, &meshes, &renderer);
+        let line = FrameLine {
+            frame: *frame,
+            file: input.display().to_string(),
+            output: out.display().to_string(),
+            report: result.as_ref().ok().cloned(),
+            error: result.as_ref().err().map(|e| format!("{e:#}")),
+        };
+        if let Err(e) = &result {
+            // Errors name the file they are about (the frame, or its image).
+            let msg = format!("qbricks-view: {e:#}");
+            // A bar that does not draw (stderr not a terminal) drops its lines.
+            if bar.is_hidden() {
+                eprintln!("{msg}");
+            } else {
+                bar.println(msg);
+            }
+            failed.push(input.display().to_string());
+        }
+        if args.json {
+            writeln!(stdout, "{}", serde_json::to_string(&line)?)?;
+        }
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    if let Some(p) = &args.save_state {
+        state.save(p).with_context(|| "--save-state".to_string())?;
+    }
+    if !failed.is_empty() {
+        bail!(
+            "{shown}: {} of {} frames failed: {}",
+            failed.len(),
+            frames.len(),
+            failed.join(", ")
+        );
+    }
+    Ok(())
+}
+
+/// Opens, renders and writes one frame (the image atomically, as a single render does).
+fn render_one(
+    args: &Args,
+    input: &Path,
+    out: &Path,
+    state: &ViewState,
+    meshes: &Meshes,
+    renderer: &Renderer,
+) -> anyhow::Result<FrameReport> {
+    if !input.exists() {
+        bail!("{}: no such file", input.display());
+    }
+    check_files(input, Some(out), args, state)?;
+    let data = Dataset::open(input)?;
+    let scene =
+        Scene::new(data.volume(), state, meshes).with_context(|| input.display().to_string())?;
+    let (frame, ms) = render_frame(renderer, &scene, args);
+    let png = film::encode_png(frame.width, frame.height, &frame.rgb)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
+    format::output::write_atomic(out, |f| f.write_all(&png))
+        .with_context(|| out.display().to_string())?;
+    Ok(FrameReport::new(
+        &frame,
+        state,
+        ms,
+        data.open_ms,
+        renderer.threads(),
+    ))
+}

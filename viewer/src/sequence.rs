@@ -1,0 +1,293 @@
+//! Rendering a frame sequence (`render 'out/frame_####.qbk' -o 'png/frame_####.png'`) with
+//! one view: which frames, and what the frames share — the box the camera frames and the
+//! field ranges the default iso value and colour map come from.
+//!
+//! The ranges are fixed for the whole sequence so that a colour means the same value in
+//! every frame; per-frame ranges would make colours flicker as a field's maximum changes.
+//! They come from the manifest `qbricks-bake` writes next to the frames, which holds each
+//! field's range over every baked frame; without one, from the union of the rendered
+//! frames' own ranges.
+
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+
+use format::sequence::{FieldRange, FramePattern, Manifest, ManifestError};
+use format::OpenOptions;
+
+/// Most frames `--frames` may name (a typo like `1..1000000000` would otherwise report a
+/// billion missing files).
+pub const MAX_RANGE_FRAMES: u64 = 100_000;
+
+/// `--frames`: `A..B` (both included), `A..`, `..B` or `A`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FrameRange {
+    pub first: Option<u64>,
+    pub last: Option<u64>,
+}
+
+impl FromStr for FrameRange {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        let bad = || format!("expected A..B (both included), A.., ..B or A, found `{s}`");
+        let num = |t: &str| -> Result<Option<u64>, String> {
+            let t = t.trim();
+            if t.is_empty() {
+                Ok(None)
+            } else {
+                t.parse().map(Some).map_err(|_| bad())
+            }
+        };
+        let (first, last) = match s.split_once("..") {
+            Some((a, b)) => (num(a)?, num(b.strip_prefix('=').unwrap_or(b))?),
+            None => {
+                let n = num(s)?.ok_or_else(bad)?;
+                (Some(n), Some(n))
+            }
+        };
+        if let (Some(a), Some(b)) = (first, last) {
+            if a > b {
+                return Err(format!("first frame {a} is after the last {b} in `{s}`"));
+            }
+        }
+        Ok(FrameRange { first, last })
+    }
+}
+
+/// Why the frames of a sequence could not be chosen.
+#[derive(Debug, thiserror::Error)]
+pub enum SequenceError {
+    #[error("{pattern}: cannot list {}: {error}", dir.display())]
+    List {
+        pattern: String,
+        dir: PathBuf,
+        error: std::io::Error,
+    },
+    #[error("{pattern}: no file matches the frame pattern{}", range_note(*range))]
+    NoFrames {
+        pattern: String,
+        range: Option<FrameRange>,
+    },
+    #[error("--frames {first}..{last}: expected at most {MAX_RANGE_FRAMES} frames")]
+    TooMany { first: u64, last: u64 },
+}
+
+fn range_note(r: Option<FrameRange>) -> String {
+    match r {
+        Some(r) => format!(
+            " in --frames {}..{}",
+            r.first.map_or(String::new(), |f| f.to_string()),
+            r.last.map_or(String::new(), |f| f.to_string())
+        ),
+        None => String::new(),
+    }
+}
+
+/// The frames to render, in order: without a range, the files that exist; with one, every
+/// number in it (a missing file then fails as that frame, since it was asked for), an open
+/// end standing for the first or last existing frame.
+pub fn select_frames(
+    pattern: &FramePattern,
+    shown: &str,
+    range: Option<FrameRange>,
+) -> Result<Vec<(u64, PathBuf)>, SequenceError> {
+    let existing = pattern.scan().map_err(|error| SequenceError::List {
+        pattern: shown.to_string(),
+        dir: pattern.dir().to_path_buf(),
+        error,
+    })?;
+    let none = || SequenceError::NoFrames {
+        pattern: shown.to_string(),
+        range,
+    };
+    let Some(r) = range else {
+        return if existing.is_empty() {
+            Err(none())
+        } else {
+            Ok(existing)
+        };
+    };
+    let first = match r.first {
+        Some(f) => f,
+        None => existing
+            .iter()
+            .map(|f| f.0)
+            .find(|&f| r.last.is_none_or(|l| f <= l))
+            .ok_or_else(none)?,
+    };
+    let last = match r.last {
+        Some(l) => l,
+        None => existing
+            .iter()
+            .map(|f| f.0)
+            .rfind(|&f| f >= first)
+            .ok_or_else(none)?,
+    };
+    if last - first >= MAX_RANGE_FRAMES {
+        return Err(SequenceError::TooMany { first, last });
+    }
+    Ok((first..=last).map(|f| (f, pattern.path(f))).collect())
+}
+
+/// Where the sequence's field ranges came from (said on stderr, since it decides the
+/// colours).
+#[derive(Debug, Clone, PartialEq)]
+pub enum RangeSource {
+    /// The bake's manifest, over every frame it baked.
+    Manifest(PathBuf),
+    /// No manifest: the union over this many frames that could be opened.
+    Frames(usize),
+}
+
+/// What the frames of a sequence share.
+#[derive(Debug, Clone)]
+pub struct SequenceInfo {
+    /// Union of the frames' data boxes (world), `None` when no frame could be opened.
+    pub bounds: Option<([f64; 3], [f64; 3])>,
+    /// Per field, its range over the sequence (manifest order, then fields only the
+    /// frames have).
+    pub fields: Vec<FieldRange>,
+    pub source: RangeSource,
+}
+
+/// Opens every frame once, without hashing it (validation still runs; the render opens
+/// it again with the checksum), for the union of the data boxes and of the field ranges;
+/// takes the ranges from the manifest next to the frames when there is one. A frame that
+/// does not open is left out here: its error is reported when it is rendered.
+pub fn survey(
+    pattern: &FramePattern,
+    frames: &[(u64, PathBuf)],
+) -> Result<SequenceInfo, ManifestError> {
+    let mut bounds: Option<([f64; 3], [f64; 3])> = None;
+    let mut own: Vec<FieldRange> = Vec::new();
+    let mut opened = 0;
+    let options = OpenOptions {
+        verify_checksum: false,
+    };
+    for (_, path) in frames {
+        let Ok(view) = format::BrickFileView::open_with(path, &options) else {
+            continue;
+        };
+        opened += 1;
+        let file = view.file();
+        let b = format::query::bounds(file);
+        bounds = Some(match bounds {
+            None => (b.min, b.max),
+            Some((lo, hi)) => (
+                std::array::from_fn(|a| lo[a].min(b.min[a])),
+                std::array::from_fn(|a| hi[a].max(b.max[a])),
+            ),
+        });
+        for f in file.fields.iter() {
+            let (name, min, max) = (f.name.as_str(), f.min.to_native(), f.max.to_native());
+            match own.iter_mut().find(|r| r.name == name) {
+                Some(r) => {
+                    r.min = r.min.min(min);
+                    r.max = r.max.max(max);
+                }
+                None => own.push(FieldRange {
+                    name: name.to_string(),
+                    min,
+                    max,
+                }),
+            }
+        }
+    }
+    let (fields, source) = match Manifest::find(pattern)? {
+        Some((path, manifest)) => {
+            let mut fields = manifest.fields;
+            for f in own {
+                if !fields.iter().any(|m| m.name == f.name) {
+                    fields.push(f);
+                }
+            }
+            (fields, RangeSource::Manifest(path))
+        }
+        None => (own, RangeSource::Frames(opened)),
+    };
+    Ok(SequenceInfo {
+        bounds,
+        fields,
+        source,
+    })
+}
+
+/// Output path of `frame` for an output pattern, refusing a plain output name: every frame
+/// would overwrite the one before.
+pub fn output_pattern(output: &Path) -> Result<FramePattern, String> {
+    match FramePattern::parse(output) {
+        Ok(Some(p)) => Ok(p),
+        Ok(None) => Err(format!(
+            "{}: the input is a frame sequence, so -o must be a pattern too \
+             (e.g. png/frame_####.png or png/frame_%04d.png)",
+            output.display()
+        )),
+        Err(e) => Err(e.to_string()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frame_ranges_parse() {
+        let r = |a, b| FrameRange { first: a, last: b };
+        assert_eq!("2..5".parse(), Ok(r(Some(2), Some(5))));
+        assert_eq!("2..=5".parse(), Ok(r(Some(2), Some(5))));
+        assert_eq!("7".parse(), Ok(r(Some(7), Some(7))));
+        assert_eq!("3..".parse(), Ok(r(Some(3), None)));
+        assert_eq!("..3".parse(), Ok(r(None, Some(3))));
+        for bad in ["", "a..b", "5..2", "-1..3", "1...3", ".."] {
+            let got: Result<FrameRange, _> = bad.parse();
+            // `..` alone is every frame: allowed.
+            if bad == ".." {
+                assert_eq!(got, Ok(r(None, None)));
+            } else {
+                assert!(got.is_err(), "{bad}: {got:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn frames_are_chosen_from_disk_or_the_range() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        for f in [1, 2, 4] {
+            std::fs::write(dir.path().join(format!("f_{f:04}.qbk")), b"x").expect("write");
+        }
+        let p = FramePattern::parse(&dir.path().join("f_####.qbk"))
+            .expect("pattern")
+            .expect("some");
+        let nums = |v: Vec<(u64, PathBuf)>| v.into_iter().map(|f| f.0).collect::<Vec<_>>();
+        assert_eq!(nums(select_frames(&p, "f", None).expect("all")), [1, 2, 4]);
+        let range = |s: &str| Some(s.parse::<FrameRange>().expect("range"));
+        assert_eq!(
+            nums(select_frames(&p, "f", range("2..4")).expect("range")),
+            [2, 3, 4]
+        );
+        assert_eq!(
+            nums(select_frames(&p, "f", range("3..")).expect("open end")),
+            [3, 4]
+        );
+        assert_eq!(
+            nums(select_frames(&p, "f", range("..2")).expect("open start")),
+            [1, 2]
+        );
+        assert!(matches!(
+            select_frames(&p, "f", range("5..")),
+            Err(SequenceError::NoFrames { .. })
+        ));
+        assert!(matches!(
+            select_frames(&p, "f", range("0..1000000")),
+            Err(SequenceError::TooMany { .. })
+        ));
+        let empty = FramePattern::parse(&dir.path().join("g_####.qbk"))
+            .expect("pattern")
+            .expect("some");
+        assert!(matches!(
+            select_frames(&empty, "g", None),
+            Err(SequenceError::NoFrames { .. })
+        ));
+        assert!(output_pattern(Path::new("out.png")).is_err());
+        assert!(output_pattern(Path::new("png/f_%04d.png")).is_ok());
+    }
+}
