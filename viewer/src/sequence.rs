@@ -14,6 +14,8 @@ use std::str::FromStr;
 use format::sequence::{FieldRange, FramePattern, Manifest, ManifestError};
 use format::OpenOptions;
 
+use crate::view_state::ViewState;
+
 /// Most frames `--frames` may name (a typo like `1..1000000000` would otherwise report a
 /// billion missing files).
 pub const MAX_RANGE_FRAMES: u64 = 100_000;
@@ -147,6 +149,18 @@ pub struct SequenceInfo {
     /// frames have).
     pub fields: Vec<FieldRange>,
     pub source: RangeSource,
+}
+
+impl SequenceInfo {
+    /// The view a sequence starts with when no state file says otherwise: the camera
+    /// frames the union of the frames' boxes (the flow moves, so one frame's box or
+    /// iso-surface would lose it later), iso value and colour map from the sequence's
+    /// ranges.
+    pub fn default_state(&self) -> ViewState {
+        // No frame opened: every frame fails with its own error anyway.
+        let (lo, hi) = self.bounds.unwrap_or(([0.0; 3], [1.0; 3]));
+        ViewState::default_for(lo, hi, &self.fields)
+    }
 }
 
 /// Opens every frame once, without hashing it (validation still runs; the render opens

@@ -10,6 +10,7 @@
 
 mod navigation;
 mod panel;
+mod player;
 mod script;
 mod viewer;
 mod widgets;
@@ -18,6 +19,7 @@ use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 
 pub use navigation::{frame_box, orbit, pan, zoom};
+pub use player::{Player, FPS_RANGE};
 pub use script::{OrbitReport, Script};
 pub use viewer::ViewerApp;
 

@@ -19,6 +19,10 @@ pub fn show(app: &mut ViewerApp, ui: &mut egui::Ui) {
     if let Some(msg) = &app.error {
         ui.label(RichText::new(msg).color(Color32::from_rgb(255, 110, 100)));
     }
+    if app.sequence.is_some() {
+        ui.separator();
+        sequence(app, ui);
+    }
     if app.doc.is_none() {
         return;
     }
@@ -50,6 +54,55 @@ fn files(app: &mut ViewerApp, ui: &mut egui::Ui) {
             app.open_dialog(DialogPurpose::LoadState);
         }
     });
+}
+
+/// The frame slider and play/pause of a sequence.
+fn sequence(app: &mut ViewerApp, ui: &mut egui::Ui) {
+    let Some(player) = &mut app.sequence else {
+        return;
+    };
+    let n = player.frames.len();
+    ui.label(RichText::new(&player.pattern).strong());
+    let numbers: Vec<u64> = player.frames.iter().map(|f| f.0).collect();
+    let mut index = player.index;
+    let mut changed = false;
+    ui.add(
+        egui::Slider::new(&mut index, 0..=n.saturating_sub(1))
+            .text("frame")
+            .custom_formatter(|v, _| {
+                let i = (v.round().max(0.0) as usize).min(numbers.len().saturating_sub(1));
+                numbers.get(i).map_or_else(String::new, u64::to_string)
+            })
+            .custom_parser(|s| {
+                let f: u64 = s.trim().parse().ok()?;
+                numbers.iter().position(|&x| x == f).map(|i| i as f64)
+            }),
+    );
+    if index != player.index {
+        changed |= player.seek(index);
+    }
+    ui.horizontal(|ui| {
+        if ui.button("◀").on_hover_text("previous frame").clicked() {
+            changed |= player.step_back();
+        }
+        let label = if player.playing { "Pause" } else { "Play" };
+        if ui.button(label).clicked() {
+            player.toggle();
+        }
+        if ui.button("▶").on_hover_text("next frame").clicked() {
+            changed |= player.step_forward();
+        }
+        ui.add(
+            egui::DragValue::new(&mut player.fps)
+                .range(super::FPS_RANGE)
+                .speed(0.1)
+                .suffix(" fps"),
+        );
+    });
+    ui.label(format!("{} of {n} frames", player.index + 1));
+    if changed {
+        app.show_frame();
+    }
 }
 
 fn summary(app: &ViewerApp, ui: &mut egui::Ui) {

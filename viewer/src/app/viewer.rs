@@ -10,6 +10,7 @@ use egui_file_dialog::FileDialog;
 use glam::DVec3;
 
 use super::navigation;
+use super::player::Player;
 use super::script::{ScriptRunner, ScriptStep};
 use super::{OrbitReport, WindowOptions};
 use crate::dataset::Dataset;
@@ -18,8 +19,10 @@ use crate::mesh::{MeshInstance, Meshes};
 use crate::progressive::{Job, Level, Progressive, ProgressiveOptions, Update};
 use crate::ray::RayCaster;
 use crate::render::Scene;
+use crate::sequence::{select_frames, survey};
 use crate::shading::{default_lights, Light};
 use crate::view_state::{ViewState, MAX_IMAGE_SIDE};
+use format::sequence::FramePattern;
 
 /// The bundled sample, opened when no file is given.
 pub const DEFAULT_FILE: &str = "data/wake_small.qbk";
@@ -134,6 +137,11 @@ pub struct ViewerApp {
     /// Image size in pixels the central area asks for.
     viewport_px: [u32; 2],
     script: Option<ScriptRunner>,
+    /// The frames when the window was opened on a sequence pattern (`frame_####.qbk`).
+    pub sequence: Option<Player>,
+    /// Generation of the first job of the frame shown, so playback knows when that frame
+    /// is on screen (`None`: not submitted yet).
+    frame_job: Option<u64>,
     outcome: Arc<Mutex<Option<anyhow::Result<Option<OrbitReport>>>>>,
     last_ui: Option<Instant>,
 }
@@ -192,6 +200,8 @@ impl ViewerApp {
             hidden_meshes: Vec::new(),
             viewport_px: [0, 0],
             script: options.script.map(ScriptRunner::new),
+            sequence: None,
+            frame_job: None,
             outcome,
             last_ui: None,
         };
@@ -229,8 +239,19 @@ impl ViewerApp {
         self.doc.as_ref().map(|d| d.path.as_path())
     }
 
-    /// Opens `path`; on failure the error is shown and the current file stays open.
+    /// Opens `path`, or the sequence when it is a frame pattern (`frame_####.qbk`) that is
+    /// not itself a file; on failure the error is shown and the current file stays open.
     pub fn open_file(&mut self, path: &Path) {
+        if !path.exists() {
+            match FramePattern::parse(path) {
+                Ok(Some(pattern)) => return self.open_sequence(path, &pattern),
+                Ok(None) => {}
+                Err(e) => {
+                    self.error = Some(e.to_string());
+                    return;
+                }
+            }
+        }
         match Dataset::open(path) {
             Ok(ds) => {
                 let doc = Doc::new(ds, path);
@@ -244,8 +265,76 @@ impl ViewerApp {
                 self.error = None;
                 self.finished = None;
                 self.pick = None;
+                self.sequence = None;
             }
             Err(e) => self.error = Some(e.to_string()),
+        }
+    }
+
+    /// Opens a frame sequence: one view state for every frame, derived from what the
+    /// frames share (the union of their boxes, the manifest's field ranges) as `render`
+    /// does, so frames can be compared by colour; then the first frame.
+    fn open_sequence(&mut self, path: &Path, pattern: &FramePattern) {
+        let shown = path.display().to_string();
+        let info = select_frames(pattern, &shown, None)
+            .map_err(|e| e.to_string())
+            .and_then(|frames| {
+                let info = survey(pattern, &frames).map_err(|e| e.to_string())?;
+                Ok((frames, info))
+            });
+        let (frames, info) = match info {
+            Ok(v) => v,
+            Err(m) => {
+                self.error = Some(m);
+                return;
+            }
+        };
+        let mut state = info.default_state();
+        state.spp = WINDOW_SPP;
+        state.width = self.state.width;
+        state.height = self.state.height;
+        self.pivot = state.camera.look_at;
+        self.state = state;
+        self.lights_follow = true;
+        self.sequence = Some(Player::new(shown, frames));
+        self.doc = None;
+        self.show_frame();
+    }
+
+    /// Opens the player's current frame, keeping the view. A frame that fails shows its
+    /// error and leaves the last good frame on screen; playback goes on past it.
+    pub fn show_frame(&mut self) {
+        let Some(path) = self
+            .sequence
+            .as_ref()
+            .and_then(|p| p.path().map(Path::to_path_buf))
+        else {
+            return;
+        };
+        self.pick = None;
+        self.finished = None;
+        match Dataset::open(&path) {
+            Ok(ds) => {
+                self.doc = Some(Doc::new(ds, &path));
+                self.error = None;
+                // The view did not change, the data did: render again.
+                self.submitted = None;
+                self.frame_job = None;
+            }
+            Err(e) => {
+                self.error = Some(e.to_string());
+                // Counts as shown, so playback does not stall on it.
+                self.frame_job = Some(0);
+            }
+        }
+    }
+
+    /// Whether an image of the current frame is on screen (a preview counts).
+    fn frame_on_screen(&self) -> bool {
+        match (self.frame_job, &self.shown) {
+            (Some(0), _) => true,
+            (Some(g), Some(s)) => s.update.generation >= g,
+            _ => false,
         }
     }
 
@@ -691,7 +780,21 @@ impl ViewerApp {
         self.handle_dialog(&ctx);
 
         self.submit_if_changed();
+        if self.sequence.is_some() && self.frame_job.is_none() && self.submitted.is_some() {
+            self.frame_job = Some(self.generation);
+        }
         let received = self.receive(&ctx);
+        let on_screen = self.frame_on_screen();
+        let (stepped, playing) = match &mut self.sequence {
+            Some(p) => (p.tick(Instant::now(), on_screen), p.playing),
+            None => (false, false),
+        };
+        if stepped {
+            self.show_frame();
+        }
+        if playing {
+            ctx.request_repaint();
+        }
         if let Some(script) = &mut self.script {
             let shown = self.shown.as_ref().map(|s| &s.update);
             match script.after_frame(&ctx, received, shown, self.renderer.preview_scale()) {

@@ -71,11 +71,7 @@ pub fn run(args: &Args, path: &Path, pattern: FramePattern) -> anyhow::Result<()
     let from_file = args.state.is_some();
     let mut state = match &args.state {
         Some(s) => ViewState::load(s)?,
-        None => {
-            // No frame opened: every frame will fail with its own error below.
-            let (lo, hi) = info.bounds.unwrap_or(([0.0; 3], [1.0; 3]));
-            ViewState::default_for(lo, hi, &info.fields)
-        }
+        None => info.default_state(),
     };
     let notes = args
         .view
