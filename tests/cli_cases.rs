@@ -323,7 +323,7 @@ fn write_states(dir: &Path) {
     use viewer::view_state::ViewState;
     let view = format::BrickFileView::open(&util::root().join("data/wake_small.qbk"))
         .expect("open sample");
-    let vol = viewer::volume::Volume::new(view.file()).expect("volume");
+    let vol = viewer::volume::Volume::new(&view).expect("volume");
     let mut st = ViewState::default_for_volume(&vol);
     st.width = 8;
     st.height = 6;

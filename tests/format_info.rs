@@ -76,7 +76,10 @@ fn sample() -> BrickFile {
         region_bricks: vec![0, 1],
         region_ranges: vec![ValueRange { min: 0.0, max: 4.0 }; 2],
         kd_nodes: vec![KdNode::Leaf { region: Some(0) }],
+        kd_ranges: Vec::new(),
+        kd_full: Vec::new(),
     }
+    .with_kd_tables()
 }
 
 fn view(args: &[&str]) -> std::process::Output {

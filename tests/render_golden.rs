@@ -64,7 +64,7 @@ fn render_mode(mode: Mode, strategy: Strategy) -> (u32, u32, Vec<u8>) {
 fn render_at_step(mode: Mode, strategy: Strategy, step: Option<f64>) -> (u32, u32, Vec<u8>) {
     let file = testvol::nested(16, [0.0; 3], &[("q", &q), ("speed", &speed)], 8);
     let view = testvol::open(&file).expect("open");
-    let vol = Volume::new(view.file()).expect("volume");
+    let vol = Volume::new(&view).expect("volume");
     let mut st = state_for(&vol, mode, strategy);
     if let Some(s) = step {
         st.step = s;

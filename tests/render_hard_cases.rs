@@ -103,7 +103,7 @@ fn with_volume<R>(
 ) -> R {
     let file = testvol::build(grids, fields, max_brick);
     let view = testvol::open(&file).expect("open test volume");
-    let vol = Volume::new(view.file()).expect("volume");
+    let vol = Volume::new(&view).expect("volume");
     f(&vol)
 }
 
@@ -166,7 +166,7 @@ fn check_against_reference(
                 let p = vol.to_local(std::array::from_fn(|a| o[a] + g * du[a]));
                 let w = vol
                     .region_at(p)
-                    .map_or(vol.finest_w, |r| vol.regions[r as usize].finest_w);
+                    .map_or(vol.finest_w, |r| vol.region(r as usize).finest_w);
                 assert!(
                     (g - r).abs() <= STEP * w + REF_STEP * w,
                     "{what}: {s} jitter {j}: t={g}, reference {r}"
@@ -225,7 +225,7 @@ fn rays_exactly_on_level_boundaries() {
     let f = |p: [f64; 3]| 0.2 * p[0] + 0.05 * p[1] - 0.03 * p[2];
     let file = testvol::nested(8, [0.0; 3], &[("f", &f)], 4);
     let view = testvol::open(&file).expect("open");
-    let vol = Volume::new(view.file()).expect("volume");
+    let vol = Volume::new(&view).expect("volume");
     let range = 4.0;
     for y in [4.0, 12.0, 3.0, 5.0] {
         for z in [4.0, 12.0, 8.0] {
@@ -580,8 +580,8 @@ fn coordinates_offset_by_a_million() {
     let file1 = testvol::nested(8, [off; 3], &[("f", &f1)], 4);
     let view0 = testvol::open(&file0).expect("open");
     let view1 = testvol::open(&file1).expect("open");
-    let vol0 = Volume::new(view0.file()).expect("volume");
-    let vol1 = Volume::new(view1.file()).expect("volume");
+    let vol0 = Volume::new(&view0).expect("volume");
+    let vol1 = Volume::new(&view1).expect("volume");
     let rays: [([f64; 3], [f64; 3]); 4] = [
         ([-1.0, 4.0, 4.0], [1.0, 0.0, 0.0]),
         ([-1.0, 3.3, 7.7], [1.0, 0.1, 0.05]),
@@ -841,8 +841,8 @@ fn images_do_not_change_when_everything_moves_by_a_million() {
     let file1 = testvol::nested(8, [off; 3], &[("f", &f1)], 4);
     let view0 = testvol::open(&file0).expect("open");
     let view1 = testvol::open(&file1).expect("open");
-    let vol0 = Volume::new(view0.file()).expect("volume");
-    let vol1 = Volume::new(view1.file()).expect("volume");
+    let vol0 = Volume::new(&view0).expect("volume");
+    let vol1 = Volume::new(&view1).expect("volume");
     let cam0 = Camera::frame([0.0; 3], [16.0; 3]);
     let shift = |a: [f64; 3]| a.map(|x| x + off);
     let cam1 = Camera {
@@ -894,7 +894,7 @@ fn dvr_clipping_to_the_active_box_changes_nothing() {
     let f = |p: [f64; 3]| 0.2 * p[0] + 0.05 * p[1] - 0.03 * p[2];
     let file = testvol::nested(8, [0.0; 3], &[("f", &f)], 4);
     let view = testvol::open(&file).expect("open");
-    let vol = Volume::new(view.file()).expect("volume");
+    let vol = Volume::new(&view).expect("volume");
     for y in [4.0, 12.0, 3.0, 5.5] {
         for z in [4.0, 12.0, 8.0] {
             for x_band in [2.0, 4.0, 6.0, 12.0, 13.0] {
@@ -945,7 +945,7 @@ fn dvr_opacity_across_level_boundaries_matches_the_reference() {
     let f = |p: [f64; 3]| 0.2 * p[0] + 0.05 * p[1] - 0.03 * p[2];
     let file = testvol::nested(8, [0.0; 3], &[("f", &f)], 4);
     let view = testvol::open(&file).expect("open");
-    let vol = Volume::new(view.file()).expect("volume");
+    let vol = Volume::new(&view).expect("volume");
     for (y, z) in [(4.0, 4.0), (8.0, 8.0), (5.5, 12.0), (3.0, 8.0)] {
         for x_band in [2.0, 3.5, 4.0, 4.5, 6.0, 8.0, 12.0] {
             let iso = f([x_band, y, z]);

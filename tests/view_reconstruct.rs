@@ -36,7 +36,7 @@ fn one_grid_is_trilinear() {
     };
     let file = testvol::build(&[g], &[("f", &rough)], 4);
     let view = testvol::open(&file).expect("open");
-    let vol = Volume::new(view.file()).expect("volume");
+    let vol = Volume::new(&view).expect("volume");
     let mut rng = Rng(1);
     for _ in 0..2000 {
         // Continuous index strictly inside the cell-centre hull.
@@ -81,8 +81,11 @@ fn nested_volume(offset: [f64; 3]) -> format::BrickFileView {
 #[test]
 fn continuous_across_level_boundary() {
     let view = nested_volume([0.0; 3]);
-    let vol = Volume::new(view.file()).expect("volume");
-    assert!(vol.bricks.iter().any(|b| b.w == 1.0) && vol.bricks.iter().any(|b| b.w == 2.0));
+    let vol = Volume::new(&view).expect("volume");
+    let widths: Vec<f64> = (0..vol.brick_count() as u32)
+        .map(|b| vol.brick(b).w)
+        .collect();
+    assert!(widths.contains(&1.0) && widths.contains(&2.0));
     // Lines crossing the fine box face x = 8 (and the edge/corner regions) at several heights.
     let h = 1e-3;
     let mut rng = Rng(7);
@@ -114,7 +117,7 @@ fn continuous_across_level_boundary() {
 fn gradient_matches_finite_differences() {
     for offset in [[0.0; 3], [1e6, -1e6, 1e6]] {
         let view = nested_volume(offset);
-        let vol = Volume::new(view.file()).expect("volume");
+        let vol = Volume::new(&view).expect("volume");
         let mut rng = Rng(3);
         let e = 1e-5;
         for _ in 0..1000 {
@@ -201,7 +204,7 @@ fn rays(n: usize) -> Vec<([f64; 3], [f64; 3])> {
 fn exact_hits_are_on_the_surface_and_miss_nothing_uniform_finds() {
     for offset in [[0.0; 3], [1e6, 1e6, -1e6]] {
         let view = nested_volume(offset);
-        let vol = Volume::new(view.file()).expect("volume");
+        let vol = Volume::new(&view).expect("volume");
         let range = (vol.fields[0].max - vol.fields[0].min) as f64;
         for iso in [0.3, -0.5, 1.1] {
             let mut exact = Tracer::new(&vol, params(Strategy::Exact, 1.0, iso));
@@ -279,7 +282,7 @@ fn exact_finds_thin_shells_that_coarse_steps_miss() {
     };
     let file = testvol::nested(16, [0.0; 3], &[("f", &shell), ("c", &|_| 0.0)], 8);
     let view = testvol::open(&file).expect("open");
-    let vol = Volume::new(view.file()).expect("volume");
+    let vol = Volume::new(&view).expect("volume");
     let iso = 0.9;
     let mut exact = Tracer::new(&vol, params(Strategy::Exact, 1.0, iso));
     let mut coarse = Tracer::new(&vol, params(Strategy::Uniform, 1.0, iso));
@@ -306,7 +309,7 @@ fn exact_finds_thin_shells_that_coarse_steps_miss() {
 #[test]
 fn traversal_matches_brute_force() {
     let view = nested_volume([0.0; 3]);
-    let vol = Volume::new(view.file()).expect("volume");
+    let vol = Volume::new(&view).expect("volume");
     let file = view.file();
     let mut stack = Vec::new();
     for (o, d) in rays(200) {
@@ -319,8 +322,7 @@ fn traversal_matches_brute_force() {
         // Brute force over all regions (half-open boxes, as the KD descent).
         let inv = viewer::traverse::inverse(&d);
         let mut want: Vec<format::query::RegionSegment> = vol
-            .regions
-            .iter()
+            .regions()
             .enumerate()
             .filter_map(|(i, r)| {
                 viewer::traverse::ray_box(&r.min, &r.max, &o, &inv, 0.0, 1e3).map(|(a, b)| {
@@ -334,7 +336,7 @@ fn traversal_matches_brute_force() {
             .filter(|s| s.t_exit - s.t_enter > 1e-9)
             .collect();
         want.sort_by(|a, b| a.t_enter.total_cmp(&b.t_enter));
-        assert_eq!(file.regions.len(), vol.regions.len());
+        assert_eq!(file.regions.len(), vol.region_count());
         let got: Vec<_> = got.into_iter().filter(|s| s.t1 - s.t0 > 1e-9).collect();
         assert_eq!(got.len(), want.len(), "o {o:?} d {d:?}");
         for (g, w) in got.iter().zip(&want) {
@@ -383,7 +385,7 @@ fn one_voxel_thick_grid() {
     let f = |p: [f64; 3]| (p[0] / 2.0).sin() + (p[1] / 3.0).cos();
     let file = testvol::build(&[g], &[("f", &f), ("c", &f)], 8);
     let view = testvol::open(&file).expect("open");
-    let vol = Volume::new(view.file()).expect("volume");
+    let vol = Volume::new(&view).expect("volume");
     // Rays through the slab (support z in [-0.5, 1.5]) at many angles.
     let mut rays = Vec::new();
     let mut rng = Rng(5);
@@ -408,7 +410,7 @@ fn zero_gradient_and_flat_fields() {
     // gradient is zero. Nothing may panic, hits must be on the data.
     let file = testvol::nested(8, [0.0; 3], &[("f", &|_| 0.25), ("c", &|_| 0.0)], 8);
     let view = testvol::open(&file).expect("open");
-    let vol = Volume::new(view.file()).expect("volume");
+    let vol = Volume::new(&view).expect("volume");
     let mut t = Tracer::new(&vol, params(Strategy::Exact, 1.0, 0.25));
     for (o, d) in rays(50) {
         if let Some(h) = t.iso(vol.to_local(o), d, 0.0, 1e3, 0.5) {
@@ -420,7 +422,7 @@ fn zero_gradient_and_flat_fields() {
     let sad = |p: [f64; 3]| (p[0] - 16.0) * (p[1] - 16.0);
     let file = testvol::nested(16, [0.0; 3], &[("f", &sad), ("c", &sad)], 8);
     let view = testvol::open(&file).expect("open");
-    let vol = Volume::new(view.file()).expect("volume");
+    let vol = Volume::new(&view).expect("volume");
     let (e, r) = exact_covers_reference(&vol, 0.0, &rays(200));
     assert!(r > 50 && e >= r);
 }
@@ -429,8 +431,8 @@ fn zero_gradient_and_flat_fields() {
 fn empty_file_renders_nothing() {
     let file = testvol::build(&[], &[("f", &|_| 0.0)], 8);
     let view = testvol::open(&file).expect("open");
-    let vol = Volume::new(view.file()).expect("volume");
-    assert!(vol.regions.is_empty());
+    let vol = Volume::new(&view).expect("volume");
+    assert_eq!(vol.region_count(), 0);
     let mut t = Tracer::new(&vol, params(Strategy::Exact, 1.0, 0.0));
     assert!(t.iso([0.0; 3], [1.0, 0.0, 0.0], 0.0, 1e3, 0.5).is_none());
     assert!(vol.sample([0.0; 3], 0).is_none());

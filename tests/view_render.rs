@@ -29,7 +29,7 @@ fn state_for(vol: &Volume) -> ViewState {
 fn same_pixels_whatever_the_thread_count() {
     let file = testvol::nested(16, [0.0; 3], &[("q", &field), ("speed", &speed)], 8);
     let view = testvol::open(&file).expect("open");
-    let vol = Volume::new(view.file()).expect("volume");
+    let vol = Volume::new(&view).expect("volume");
     let meshes = Meshes::empty();
     for (mode, strategy, spp, shadows) in [
         (Mode::Iso, Strategy::Exact, 1, true),
@@ -70,7 +70,7 @@ fn same_pixels_whatever_the_thread_count() {
 fn iso_value_outside_the_data_hits_nothing_and_skips_everything() {
     let file = testvol::nested(8, [0.0; 3], &[("q", &field), ("speed", &speed)], 8);
     let view = testvol::open(&file).expect("open");
-    let vol = Volume::new(view.file()).expect("volume");
+    let vol = Volume::new(&view).expect("volume");
     let meshes = Meshes::empty();
     for strategy in [
         Strategy::Exact,

@@ -105,7 +105,10 @@ fn build(gib: f64) -> BrickFile {
         bricks,
         regions,
         kd_nodes,
+        kd_ranges: Vec::new(),
+        kd_full: Vec::new(),
     }
+    .with_kd_tables()
 }
 
 /// Median split on the widest axis of the region centres; returns the node index.

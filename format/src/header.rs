@@ -35,6 +35,7 @@
 //! | version | change |
 //! |---|---|
 //! | 1 | first version: header above, schema of `format::schema` |
+//! | 2 | per-node value ranges and fullness of the KD-tree (`kd_ranges`, `kd_full`), so the viewer traverses the archive without building tables at open |
 //!
 //! ```
 //! use qbricks_format::header::{Header, HEADER_LEN, MAGIC};
@@ -42,7 +43,7 @@
 //! let bytes = h.to_bytes();
 //! assert_eq!(bytes.len(), HEADER_LEN);
 //! assert_eq!(&bytes[0..8], MAGIC);
-//! assert_eq!(&bytes[8..12], &1u32.to_le_bytes());
+//! assert_eq!(&bytes[8..12], &2u32.to_le_bytes());
 //! assert_eq!(&bytes[16..24], &7u64.to_le_bytes());
 //! assert_eq!(Header::parse(&bytes).unwrap(), h);
 //! ```
@@ -53,7 +54,7 @@ use crate::error::FormatErrorKind;
 pub const MAGIC: &[u8; 8] = b"QBRICKS\0";
 
 /// The format version this build writes and reads.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 
 /// Size of the header; also the payload's offset (a multiple of [`PAYLOAD_ALIGN`]).
 pub const HEADER_LEN: usize = 48;
@@ -223,13 +224,13 @@ mod tests {
         ));
 
         let mut bad = file.clone();
-        bad[8] = 2;
-        let e = Header::parse(&bad).expect_err("version 2");
+        bad[8] = 1;
+        let e = Header::parse(&bad).expect_err("version 1");
         assert!(matches!(
             e,
             FormatErrorKind::UnsupportedVersion {
-                found: 2,
-                supported: 1
+                found: 1,
+                supported: 2
             }
         ));
 

@@ -174,8 +174,20 @@ impl BrickFileView {
         backing: Backing,
     ) -> Result<Self, FormatError> {
         let archive = ValidatedArchive::try_new(backing, |b| {
-            let file = rkyv::access::<ArchivedBrickFile, CheckError>(b.payload())
-                .map_err(|e| FormatErrorKind::Invalid(one_line(e)))?;
+            // Validate with rancor's zero-sized `Failure` first: it keeps no trace, so
+            // the per-element checks of the big value arrays compile to almost nothing
+            // (with a tracing error type every element's check goes through a call that
+            // records where it failed — half of the time to open a large file). Only an
+            // invalid file pays for a second pass that says where and why.
+            let file = match rkyv::access::<ArchivedBrickFile, rancor::Failure>(b.payload()) {
+                Ok(file) => file,
+                Err(_) => {
+                    let e = rkyv::access::<ArchivedBrickFile, CheckError>(b.payload())
+                        .err()
+                        .map_or_else(|| "validation failed".to_string(), |e| one_line(e));
+                    return Err(FormatErrorKind::Invalid(e));
+                }
+            };
             crate::validate::check(file).map_err(FormatErrorKind::Invalid)?;
             Ok::<_, FormatErrorKind>(file)
         })

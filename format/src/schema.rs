@@ -16,6 +16,8 @@
 //!   children).
 //! - A region's brick ids are one contiguous run of `region_bricks`, so visiting a region
 //!   reads one short slice instead of a linked list.
+//! - `kd_ranges` (node-major, like `region_ranges`) and `kd_full` let the ray walk skip
+//!   a whole subtree whose values cannot matter, without visiting its regions.
 //! - `region_ranges` is region-major (`r * fields.len() + f`): empty-space skipping asks
 //!   "can any field of this region matter?", and all fields of one region share a line.
 //! - Cell values are per field, x fastest inside a brick: the trilinear/tent stencil of a
@@ -51,6 +53,15 @@ pub struct BrickFile {
     pub region_ranges: Vec<ValueRange>,
     /// KD-tree over the regions; node 0 is the root (absent when there are no regions).
     pub kd_nodes: Vec<KdNode>,
+    /// Value range of every field over every KD node's subtree: entry `n * fields.len() + f`
+    /// is field `f` of node `n` (a region leaf: its region's range; an inner node: the
+    /// union of its children's; an empty leaf: `min = +∞, max = −∞`). Stored rather than
+    /// derived at open so that the traversal reads the file as it is (see
+    /// [`crate::query::segments`]) and opening costs no pass over the tree.
+    pub kd_ranges: Vec<ValueRange>,
+    /// Per KD node: every leaf of its subtree holds a region (no empty space in its cell),
+    /// so skipping it by its range cannot step over a gap in the data.
+    pub kd_full: Vec<bool>,
 }
 
 /// Provenance of a baked file.
@@ -160,4 +171,21 @@ pub enum KdNode {
     Leaf {
         region: Option<u32>,
     },
+}
+
+impl BrickFile {
+    /// Fills [`BrickFile::kd_ranges`] and [`BrickFile::kd_full`] from the tree and the
+    /// region ranges (the writer of a file calls this once its tree is final).
+    pub fn derive_kd_tables(&mut self) {
+        let (ranges, full) =
+            crate::kd::subtree_tables(&self.kd_nodes, &self.region_ranges, self.fields.len());
+        self.kd_ranges = ranges;
+        self.kd_full = full;
+    }
+
+    /// [`BrickFile::derive_kd_tables`] for a file built in one expression.
+    pub fn with_kd_tables(mut self) -> Self {
+        self.derive_kd_tables();
+        self
+    }
 }

@@ -99,18 +99,33 @@ pub fn check(file: &ArchivedBrickFile) -> Result<(), String> {
                 ));
             }
         }
-        let ids = file
-            .region_bricks
-            .get(start as usize..(start + len) as usize)
-            .unwrap_or_default();
-        for (j, id) in ids.iter().enumerate() {
-            let id = id.to_native();
-            if id as usize >= n_bricks {
-                return Err(format!(
-                    "regions[{i}].bricks[{j}]: brick {id} out of range ({n_bricks} bricks)"
-                ));
-            }
+    }
+    // Every entry of every list names a brick: one flat pass over the entries (a list is
+    // a slice of them, checked above), not one per region.
+    if let Some(at) = file
+        .region_bricks
+        .iter()
+        .position(|id| id.to_native() as usize >= n_bricks)
+    {
+        let id = file.region_bricks[at].to_native();
+        let (i, j) = file
+            .regions
+            .iter()
+            .enumerate()
+            .find_map(|(i, r)| {
+                let start = r.bricks_start.to_native() as usize;
+                let len = r.bricks_len.to_native() as usize;
+                (start..start + len).contains(&at).then(|| (i, at - start))
+            })
+            .unwrap_or((usize::MAX, at));
+        if i != usize::MAX {
+            return Err(format!(
+                "regions[{i}].bricks[{j}]: brick {id} out of range ({n_bricks} bricks)"
+            ));
         }
+        return Err(format!(
+            "region_bricks[{at}]: brick {id} out of range ({n_bricks} bricks)"
+        ));
     }
     let expected_ranges = n_regions as u64 * n_fields as u64;
     if file.region_ranges.len() as u64 != expected_ranges {
@@ -142,16 +157,41 @@ fn check_box(
 }
 
 /// The KD nodes reachable from node 0 form a tree (no node has two parents, no cycles),
-/// every index is in range and every region sits in at least one leaf.
+/// every index is in range, every region sits in at least one leaf, and the per-node
+/// ranges and fullness flags can be trusted for skipping: a node's range holds its
+/// children's (a leaf's its region's) and a node is full only if its children are (a leaf
+/// only if it holds a region). Wider ranges than needed are allowed (they skip less).
 fn check_kd(file: &ArchivedBrickFile) -> Result<(), String> {
     let nodes = &file.kd_nodes;
     let n_regions = file.regions.len();
+    let nf = file.fields.len();
+    let range = |n: usize, f: usize| {
+        let r = &file.kd_ranges[n * nf + f];
+        (r.min.to_native(), r.max.to_native())
+    };
+    // `outer` holds `inner` (NaN holds nothing and is held by nothing).
+    let holds = |outer: (f32, f32), inner: (f32, f32)| outer.0 <= inner.0 && outer.1 >= inner.1;
+    if nodes.is_empty() && n_regions > 0 {
+        return Err(format!(
+            "kd_nodes: empty, but there are {n_regions} regions"
+        ));
+    }
+    let expected = nodes.len() as u64 * nf as u64;
+    if file.kd_ranges.len() as u64 != expected {
+        return Err(format!(
+            "kd_ranges: expected {expected} entries ({} nodes x {nf} fields), found {}",
+            nodes.len(),
+            file.kd_ranges.len()
+        ));
+    }
+    if file.kd_full.len() != nodes.len() {
+        return Err(format!(
+            "kd_full: expected {} entries (one per node), found {}",
+            nodes.len(),
+            file.kd_full.len()
+        ));
+    }
     if nodes.is_empty() {
-        if n_regions > 0 {
-            return Err(format!(
-                "kd_nodes: empty, but there are {n_regions} regions"
-            ));
-        }
         return Ok(());
     }
     // Sized by counts that bytecheck has proven to be backed by bytes of the file.
@@ -185,6 +225,17 @@ fn check_kd(file: &ArchivedBrickFile) -> Result<(), String> {
                             nodes.len()
                         ));
                     };
+                    let (n, c) = (i as usize, child as usize);
+                    if (0..nf).any(|f| !holds(range(n, f), range(c, f))) {
+                        return Err(format!(
+                            "kd_ranges of node {i}: do not hold those of its child {child}"
+                        ));
+                    }
+                    if file.kd_full[n] && !file.kd_full[c] {
+                        return Err(format!(
+                            "kd_full of node {i}: set, but its child {child} is not full"
+                        ));
+                    }
                     if *flag {
                         return Err(format!(
                             "kd_nodes[{i}]: child {child} is reached twice (not a tree)"
@@ -194,8 +245,8 @@ fn check_kd(file: &ArchivedBrickFile) -> Result<(), String> {
                     stack.push(child);
                 }
             }
-            ArchivedKdNode::Leaf { region } => {
-                if let Some(r) = region.as_ref() {
+            ArchivedKdNode::Leaf { region } => match region.as_ref() {
+                Some(r) => {
                     let r = r.to_native();
                     match region_in_leaf.get_mut(r as usize) {
                         Some(flag) => *flag = true,
@@ -205,8 +256,22 @@ fn check_kd(file: &ArchivedBrickFile) -> Result<(), String> {
                             ))
                         }
                     }
+                    for f in 0..nf {
+                        let reg = &file.region_ranges[r as usize * nf + f];
+                        let reg = (reg.min.to_native(), reg.max.to_native());
+                        if !holds(range(i as usize, f), reg) {
+                            return Err(format!(
+                                "kd_ranges of leaf {i}: field {f} does not hold region {r}'s range"
+                            ));
+                        }
+                    }
                 }
-            }
+                None => {
+                    if file.kd_full[i as usize] {
+                        return Err(format!("kd_full of node {i}: set on an empty leaf"));
+                    }
+                }
+            },
         }
     }
     if let Some(r) = region_in_leaf.iter().position(|&s| !s) {

@@ -104,7 +104,43 @@ fn each_broken_invariant_is_named() {
             *node = KdNode::Leaf { region: None };
         }
     }
+    f.derive_kd_tables();
     refused(&f, "regions[0]: in no KD-tree leaf");
+
+    // The skipping tables: a node whose range misses its child's, a full flag on a node
+    // with an empty leaf below, an empty leaf flagged full, missing entries.
+    let mut f = base();
+    let nf = f.fields.len();
+    f.kd_ranges[0].max = f.kd_ranges[0].min - 1.0;
+    assert!(nf > 0);
+    refused(&f, "kd_ranges of node 0");
+    let mut f = base();
+    if let Some(empty) = f
+        .kd_nodes
+        .iter()
+        .position(|n| matches!(n, KdNode::Leaf { region: None }))
+    {
+        f.kd_full[empty] = true;
+        refused(
+            &f,
+            &format!("kd_full of node {empty}: set on an empty leaf"),
+        );
+    }
+    let mut f = base();
+    if let Some(leaf) = f
+        .kd_nodes
+        .iter()
+        .position(|n| matches!(n, KdNode::Leaf { region: Some(_) }))
+    {
+        f.kd_ranges[leaf * nf].min = f32::NAN;
+        refused(&f, &format!("kd_ranges of"));
+    }
+    let mut f = base();
+    f.kd_full.pop();
+    refused(&f, "kd_full: expected");
+    let mut f = base();
+    f.kd_ranges.pop();
+    refused(&f, "kd_ranges: expected");
     let mut f = base();
     f.kd_nodes.clear();
     refused(&f, "kd_nodes: empty");

@@ -292,7 +292,10 @@ fn deep_tree_spills_the_stack_and_stays_correct() {
         regions,
         region_bricks: vec![],
         kd_nodes,
-    };
+        kd_ranges: Vec::new(),
+        kd_full: Vec::new(),
+    }
+    .with_kd_tables();
     let bytes = writer::to_bytes(&file).expect("bytes");
     let view = BrickFileView::from_bytes(Path::new("deep.qbk"), &bytes).expect("open");
     let f = view.file();

@@ -61,17 +61,18 @@ fn payload_is_16_aligned_in_file_and_memory() {
 #[test]
 fn version_mismatch_names_both_versions() {
     let mut bytes = sample_bytes();
-    bytes[8..12].copy_from_slice(&2u32.to_le_bytes());
-    let err = BrickFileView::from_bytes(Path::new("new.qbk"), &bytes).expect_err("version 2");
+    // A file made by the previous version (1: no per-node ranges in the KD-tree).
+    bytes[8..12].copy_from_slice(&1u32.to_le_bytes());
+    let err = BrickFileView::from_bytes(Path::new("old.qbk"), &bytes).expect_err("version 1");
     assert!(matches!(
         err.kind,
         FormatErrorKind::UnsupportedVersion {
-            found: 2,
-            supported: 1
+            found: 1,
+            supported: 2
         }
     ));
     let msg = err.to_string();
-    assert!(msg.starts_with("new.qbk: "), "{msg}");
+    assert!(msg.starts_with("old.qbk: "), "{msg}");
     assert!(
         msg.contains("version 2") && msg.contains("version 1"),
         "{msg}"

@@ -715,7 +715,11 @@ fn run(
             .map(|[min, max]| ValueRange { min, max })
             .collect(),
         kd_nodes,
+        kd_ranges: Vec::new(),
+        kd_full: Vec::new(),
     };
+    let mut file = file;
+    file.derive_kd_tables();
     Ok((file, summary))
 }
 

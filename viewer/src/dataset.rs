@@ -57,7 +57,7 @@ impl Dataset {
     /// Wraps an already opened view (e.g. one read into memory by a test).
     pub fn from_view(view: BrickFileView, started: Instant) -> Result<Dataset, OpenError> {
         let path = view.path().to_path_buf();
-        let cell = Cell::try_new(view, |v| Volume::new(v.file()))
+        let cell = Cell::try_new(view, |v| Volume::new(v))
             .map_err(|error| OpenError::Volume { path, error })?;
         Ok(Dataset {
             cell,

@@ -356,7 +356,10 @@ mod tests {
                 KdNode::Leaf { region: Some(0) },
                 KdNode::Leaf { region: Some(1) },
             ],
+            kd_ranges: Vec::new(),
+            kd_full: Vec::new(),
         }
+        .with_kd_tables()
     }
 
     #[test]

@@ -117,8 +117,8 @@ impl Volume<'_> {
         let (mut sh, mut shv, mut shc) = (0.0f64, 0.0f64, 0.0f64);
         let mut dh = [0.0f64; 3];
         let mut dhv = [0.0f64; 3];
-        for &b in self.region_brick_ids(r) {
-            let br = &self.bricks[b as usize];
+        for b in self.region_brick_ids(r) {
+            let br = &self.brick(b.to_native());
             let Some([ax, ay, az]) = brick_axes(br, &p) else {
                 continue;
             };
@@ -167,8 +167,8 @@ impl Volume<'_> {
     pub fn eval_value(&self, r: usize, p: [f64; 3], f: usize) -> Option<f64> {
         let (mut sh, mut shv) = (0.0f64, 0.0f64);
         let vals = self.values[f];
-        for &b in self.region_brick_ids(r) {
-            let br = &self.bricks[b as usize];
+        for b in self.region_brick_ids(r) {
+            let br = &self.brick(b.to_native());
             let Some([ax, ay, az]) = brick_axes(br, &p) else {
                 continue;
             };
@@ -207,7 +207,7 @@ impl Volume<'_> {
         let r0 = self.region_at(p)? as usize;
         let h = self.finest_w;
         let at = |q: [f64; 3]| -> Option<f64> {
-            let reg = &self.regions[r0];
+            let reg = self.region(r0);
             let r = if (0..3).all(|a| q[a] >= reg.min[a] && q[a] < reg.max[a]) {
                 r0
             } else {
@@ -277,8 +277,8 @@ impl Volume<'_> {
         // iso and need no polynomial at all.
         let (mut any_above, mut any_below) = (false, false);
         let vals = self.values[f];
-        for &b in self.region_brick_ids(r) {
-            let br = &self.bricks[b as usize];
+        for b in self.region_brick_ids(r) {
+            let br = &self.brick(b.to_native());
             let Some([ax, ay, az]) = brick_axes(br, &pm) else {
                 continue;
             };
@@ -310,8 +310,8 @@ impl Volume<'_> {
         }
         let mut c = [0.0f64; 4];
         let mut wc = [0.0f64; 4];
-        for &b in self.region_brick_ids(r) {
-            let br = &self.bricks[b as usize];
+        for b in self.region_brick_ids(r) {
+            let br = &self.brick(b.to_native());
             let Some(axes) = brick_axes(br, &pm) else {
                 continue;
             };

@@ -440,7 +440,7 @@ pub fn render_aov(scene: &Scene, aov: Aov) -> Frame {
                             let level = vol.region_at(s.local).and_then(|r| {
                                 vol.region_brick_ids(r as usize)
                                     .iter()
-                                    .map(|&b| vol.bricks[b as usize].level)
+                                    .map(|b| vol.brick(b.to_native()).level)
                                     .min()
                             });
                             level.map_or([0.5; 3], |l| {

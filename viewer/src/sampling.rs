@@ -343,10 +343,10 @@ impl<'v> Tracer<'v> {
         // Refinement probes cluster: try the region of the previous probe before a KD descent.
         let r = match self.probe_hint {
             Some(r)
-                if vol
-                    .regions
-                    .get(r as usize)
-                    .is_some_and(|g| (0..3).all(|a| p[a] >= g.min[a] && p[a] < g.max[a])) =>
+                if (r as usize) < vol.region_count() && {
+                    let g = vol.region(r as usize);
+                    (0..3).all(|a| p[a] >= g.min[a] && p[a] < g.max[a])
+                } =>
             {
                 r
             }
@@ -873,22 +873,18 @@ impl Planes {
             inexact: false,
         };
         let ids = vol.region_brick_ids(r);
-        let mut lattices = [(0usize, [0.0f64; 3]); MAX_LATTICES];
+        // Distinct lattices: (cell width, 1 / width, a cell centre).
+        let mut lattices = [(0.0f64, 0.0f64, [0.0f64; 3]); MAX_LATTICES];
         let mut nl = 0;
-        // One level and one lattice (checked at open): the first brick's planes are all.
-        let single = vol.regions[r].single_lattice;
-        for (k, &b) in ids.iter().enumerate() {
-            if single && nl == 1 {
-                break;
-            }
-            let br = &vol.bricks[b as usize];
-            let same = |&(j, _): &(usize, [f64; 3])| {
-                let o2 = &vol.bricks[ids[j] as usize];
-                o2.w == br.w
-                    && (0..3).all(|a| {
-                        let q = (o2.origin[a] - br.origin[a]) * br.inv_w;
-                        (q - q.round()).abs() < 1e-9
-                    })
+        for b in ids {
+            let br = vol.brick(b.to_native());
+            let same = |&(w, _, origin): &(f64, f64, [f64; 3])| {
+                w == br.w
+                    && (origin == br.origin
+                        || (0..3).all(|a| {
+                            let q = (origin[a] - br.origin[a]) * br.inv_w;
+                            (q - q.round()).abs() < 1e-9
+                        }))
             };
             if lattices[..nl].iter().any(same) {
                 continue;
@@ -901,25 +897,24 @@ impl Planes {
                 pl.inexact = true;
                 break;
             }
-            lattices[nl] = (k, br.origin);
+            lattices[nl] = (br.w, br.inv_w, br.origin);
             nl += 1;
         }
-        for &(k, origin) in &lattices[..nl] {
-            let br = &vol.bricks[ids[k] as usize];
+        for &(w, inv_w, origin) in &lattices[..nl] {
             for a in 0..3 {
                 if d[a] == 0.0 {
                     continue;
                 }
                 let x = o[a] + t * d[a];
-                let u = (x - origin[a]) * br.inv_w;
+                let u = (x - origin[a]) * inv_w;
                 let kplane = if d[a] > 0.0 {
                     u.floor() + 1.0
                 } else {
                     u.ceil() - 1.0
                 };
-                let tp = (origin[a] + kplane * br.w - o[a]) / d[a];
+                let tp = (origin[a] + kplane * w - o[a]) / d[a];
                 pl.next[pl.n] = tp;
-                pl.step[pl.n] = br.w / d[a].abs();
+                pl.step[pl.n] = w / d[a].abs();
                 pl.n += 1;
             }
         }
@@ -1073,7 +1068,7 @@ impl Params {
         let tf = self.tf;
         let mut lo = [f64::INFINITY; 3];
         let mut hi = [f64::NEG_INFINITY; 3];
-        for (r, reg) in vol.regions.iter().enumerate() {
+        for (r, reg) in vol.regions().enumerate() {
             let [mn, mx] = vol.range(r, self.field);
             if tf.may_contribute(mn, mx) {
                 for a in 0..3 {

@@ -265,7 +265,10 @@ pub fn build(grids: &[GridSpec], fields: &[FieldFn], max_brick: u32) -> BrickFil
         region_bricks,
         region_ranges,
         kd_nodes: kd,
+        kd_ranges: Vec::new(),
+        kd_full: Vec::new(),
     }
+    .with_kd_tables()
 }
 
 /// Splits the index box `lo..hi` into boxes of leaf cells only.

@@ -149,7 +149,7 @@ impl ViewState {
         );
         if let Ok(f) = vol.field_index(&s.iso_field) {
             let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-            for (r, reg) in vol.regions.iter().enumerate() {
+            for (r, reg) in vol.regions().enumerate() {
                 let [mn, mx] = vol.range(r, f);
                 if f64::from(mn) <= s.iso && s.iso <= f64::from(mx) {
                     for a in 0..3 {

@@ -96,7 +96,7 @@ fn measure(vol: &Volume, shading: Shading) -> Stats {
 fn smooth_normals_are_continuous_across_cell_faces_and_level_boundaries() {
     let file = testvol::nested(16, [0.0; 3], &[("f", &dist)], 8);
     let view = testvol::open(&file).expect("open");
-    let vol = Volume::new(view.file()).expect("volume");
+    let vol = Volume::new(&view).expect("volume");
     let smooth = measure(&vol, Shading::Smooth);
     let analytic = measure(&vol, Shading::Analytic);
     eprintln!(
@@ -138,7 +138,7 @@ fn no_flat_band_in_the_shading_gradient_at_a_level_boundary() {
     let lin = |p: [f64; 3]| p[1];
     let file = testvol::nested(16, [0.0; 3], &[("f", &lin)], 8);
     let view = testvol::open(&file).expect("open");
-    let vol = Volume::new(view.file()).expect("volume");
+    let vol = Volume::new(&view).expect("volume");
     let (mut analytic_min, mut smooth_min, mut smooth_max_step) = (f64::MAX, f64::MAX, 0.0f64);
     let mut prev: Option<[f64; 3]> = None;
     for i in 0..=800 {
@@ -173,7 +173,7 @@ fn aov_buffers_show_normals_and_levels() {
     use qbricks_viewer::render::{render_aov, Aov};
     let file = testvol::nested(16, [0.0; 3], &[("f", &dist)], 8);
     let view = testvol::open(&file).expect("open");
-    let vol = Volume::new(view.file()).expect("volume");
+    let vol = Volume::new(&view).expect("volume");
     let meshes = Meshes::empty();
     let mut st = ViewState::default_for_volume(&vol);
     st.iso_field = "f".into();

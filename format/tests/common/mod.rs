@@ -238,5 +238,8 @@ pub fn random_file(seed: u64) -> BrickFile {
         region_bricks,
         region_ranges,
         kd_nodes: kd.nodes,
+        kd_ranges: Vec::new(),
+        kd_full: Vec::new(),
     }
+    .with_kd_tables()
 }

@@ -43,7 +43,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         _ => bail!("expected exactly one of --points CSV or --line x0,y0,z0:x1,y1,z1:N"),
     };
     let view = format::BrickFileView::open(&args.file)?;
-    let vol = Volume::new(view.file()).with_context(|| format!("{}", args.file.display()))?;
+    let vol = Volume::new(&view).with_context(|| format!("{}", args.file.display()))?;
     if vol.fields.is_empty() {
         bail!("{}: the file has no fields", args.file.display());
     }

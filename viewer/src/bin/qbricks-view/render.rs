@@ -118,8 +118,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // Open.
     let t_open = Instant::now();
     let view = open_volume(&path)?;
-    let file = view.file();
-    let vol = Volume::new(file).with_context(|| format!("{}", path.display()))?;
+    let vol = Volume::new(&view).with_context(|| format!("{}", path.display()))?;
     let open_ms = t_open.elapsed().as_secs_f64() * 1e3;
 
     // View state: file or data-derived defaults, then flags.
