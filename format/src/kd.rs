@@ -203,7 +203,7 @@ pub fn segments<K: Fn(f32, f32) -> bool, F: FnMut(Segment) -> bool>(
     mut f: F,
 ) {
     let nodes = file.kd_nodes.as_slice();
-    if nodes.is_empty() || !(t_min < t_max) {
+    if nodes.is_empty() || t_min >= t_max || t_min.is_nan() || t_max.is_nan() {
         return;
     }
     let nf = file.fields.len();

@@ -184,7 +184,7 @@ impl BrickFileView {
                 Err(_) => {
                     let e = rkyv::access::<ArchivedBrickFile, CheckError>(b.payload())
                         .err()
-                        .map_or_else(|| "validation failed".to_string(), |e| one_line(e));
+                        .map_or_else(|| "validation failed".to_string(), one_line);
                     return Err(FormatErrorKind::Invalid(e));
                 }
             };

@@ -133,7 +133,7 @@ fn each_broken_invariant_is_named() {
         .position(|n| matches!(n, KdNode::Leaf { region: Some(_) }))
     {
         f.kd_ranges[leaf * nf].min = f32::NAN;
-        refused(&f, &format!("kd_ranges of"));
+        refused(&f, "kd_ranges of");
     }
     let mut f = base();
     f.kd_full.pop();
