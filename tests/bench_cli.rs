@@ -151,6 +151,14 @@ fn accuracy_prints_every_key_and_plots_a_png() {
                 assert!(r[key][s].is_number(), "{key}.{s} missing: {r}");
             }
         }
+        for key in ["position", "normal_deg"] {
+            for st in stats {
+                assert!(r["surface"][key][st].is_number(), "surface.{key}.{st}: {r}");
+            }
+        }
+        for key in ["iso", "rays", "hits"] {
+            assert!(r["surface"][key].is_number(), "surface.{key}: {r}");
+        }
         // Three nested grids; at n0 8 a level can be covered entirely by the finer one,
         // so two or three levels keep cells. Points near the level boundaries exist.
         let levels = r["levels"].as_array().expect("levels").len();
@@ -161,6 +169,10 @@ fn accuracy_prints_every_key_and_plots_a_png() {
     assert_eq!(orders.len(), 1);
     for key in ["stored_q_rms", "stored_q_max", "reconstructed_q_rms"] {
         assert!(orders[0][key].is_number(), "{key}: {}", orders[0]);
+    }
+    // Null when a resolution has no surface hits (the n0-8 wake may have none).
+    for key in ["surface_position_rms", "normal_angle_rms"] {
+        assert!(orders[0].get(key).is_some(), "{key}: {}", orders[0]);
     }
     let png = std::fs::read(&plot).expect("plot written");
     assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n", "plot is not a PNG");

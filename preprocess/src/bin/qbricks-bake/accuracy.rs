@@ -28,6 +28,13 @@ pub struct Args {
     /// Random points for each reconstruction check.
     #[arg(long, default_value_t = 20_000)]
     pub points: usize,
+    /// Iso value of the surface checks [default: 0.05 for the wakes, else a fifth of the
+    /// largest exact Q].
+    #[arg(long)]
+    pub iso: Option<f64>,
+    /// The surface checks cast RAYS×RAYS camera rays with the viewer's `exact` strategy.
+    #[arg(long, default_value_t = 128)]
+    pub rays: u32,
     /// Print the report as JSON.
     #[arg(long)]
     pub json: bool,
@@ -43,6 +50,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.points == 0 || args.points > 10_000_000 {
         bail!("--points: expected 1..=10000000, found {}", args.points);
     }
+    if !(1..=4096).contains(&args.rays) {
+        bail!("--rays: expected 1..=4096, found {}", args.rays);
+    }
+    if args.iso.is_some_and(|v| !v.is_finite()) {
+        bail!("--iso: expected a finite number");
+    }
     let opts = AccuracyOptions {
         scene: args.scene.clone(),
         n0: args.n0.clone(),
@@ -52,6 +65,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             StencilArg::CrossLevel => Stencil::CrossLevel,
         },
         points: args.points,
+        iso: args.iso,
+        rays: args.rays,
         ..AccuracyOptions::default()
     };
     let bar = ProgressBar::with_draw_target(
@@ -127,11 +142,23 @@ fn write_text(out: &mut impl Write, r: &AccuracyReport) -> std::io::Result<()> {
                 e(&res.boundary_q)
             )?;
         }
+        let s = &res.surface;
+        writeln!(
+            out,
+            "  iso {:.4}, {} exact hits of {} rays: position RMS / max {:.2e} / {:.2e} cells, normal angle RMS / max {:.3}° / {:.3}°",
+            s.iso,
+            s.hits,
+            s.rays,
+            s.position.rms_rel,
+            s.position.max_rel,
+            s.normal_deg.rms,
+            s.normal_deg.max
+        )?;
     }
     for o in &r.orders {
         writeln!(
             out,
-            "order n0 {} → {}: stored Q rms {:.2} (max {:.2}), speed rms {:.2}, reconstructed Q rms {:.2}{}",
+            "order n0 {} → {}: stored Q rms {:.2} (max {:.2}), speed rms {:.2}, reconstructed Q rms {:.2}{}{}",
             o.n0_coarse,
             o.n0_fine,
             o.stored_q_rms,
@@ -140,7 +167,11 @@ fn write_text(out: &mut impl Write, r: &AccuracyReport) -> std::io::Result<()> {
             o.reconstructed_q_rms,
             o.boundary_q_rms
                 .map(|b| format!(", near boundaries {b:.2}"))
-                .unwrap_or_default()
+                .unwrap_or_default(),
+            match (o.surface_position_rms, o.normal_angle_rms) {
+                (Some(p), Some(n)) => format!(", surface position rms {p:.2}, normal angle rms {n:.2}"),
+                _ => String::new(),
+            }
         )?;
     }
     Ok(())
