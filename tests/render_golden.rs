@@ -44,6 +44,9 @@ fn state_for(vol: &Volume, mode: Mode, strategy: Strategy) -> ViewState {
     s.iso = 0.3;
     s.transfer.sigma = 0.05;
     s.shadows = true;
+    // Point-sampled opacity: `dvr_bisect` is the golden of bisect's search for the band;
+    // the default dvr (uniform, pre-integrated) has its golden in render_golden_sample.rs.
+    s.preintegrated = false;
     // Move in: the ring fills the middle of the data box.
     let eye: [f64; 3] = std::array::from_fn(|a| C[a] + 0.36 * (s.camera.eye[a] - C[a]));
     s.camera.eye = eye;

@@ -49,9 +49,10 @@ fn sample_iso_exact() {
 }
 
 #[test]
-fn sample_dvr_bisect_with_shadows() {
+fn sample_dvr_default_with_shadows() {
+    // The default dvr: `uniform` with pre-integrated opacity (see BENCHMARKS.md).
     render_sample(
-        "sample_dvr_bisect",
+        "sample_dvr_default",
         &["--mode", "dvr", "--iso", "0.05", "--spp", "2", "--shadows"],
     );
 }

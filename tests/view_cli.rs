@@ -251,9 +251,10 @@ fn probe_prints_fields_and_gradients() {
     assert_eq!(code, 2);
 }
 
-/// `--mode dvr` without `--strategy` uses the dvr strategy `bisect` quietly, while an
-/// explicit `--strategy exact` in dvr mode says what it does instead; a negative step is
-/// refused by the view-state check (not mistaken for a flag).
+/// `--mode dvr` without `--strategy` uses the dvr strategy `uniform` (pre-integrated)
+/// quietly, or `bisect` with `--no-preintegrated`, while an explicit `--strategy exact` in
+/// dvr mode says what it does instead; a negative step is refused by the view-state check
+/// (not mistaken for a flag).
 #[test]
 fn dvr_default_strategy_and_negative_step() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -268,8 +269,28 @@ fn dvr_default_strategy_and_negative_step() {
     );
     assert_eq!(code, 0, "{err}");
     let j: serde_json::Value = serde_json::from_str(&out).expect("json");
-    assert_eq!(j["strategy"], "bisect");
+    assert_eq!(j["strategy"], "uniform");
     assert!(!err.contains("note"), "{err}");
+    let (code, out, err) = run(
+        &[
+            "render",
+            f,
+            "-o",
+            "p.png",
+            "--mode",
+            "dvr",
+            "--no-preintegrated",
+            "--width",
+            "16",
+            "--height",
+            "12",
+            "--json",
+        ],
+        dir.path(),
+    );
+    assert_eq!(code, 0, "{err}");
+    let j: serde_json::Value = serde_json::from_str(&out).expect("json");
+    assert_eq!(j["strategy"], "bisect");
 
     let (code, _, err) = run(
         &[
@@ -289,7 +310,7 @@ fn dvr_default_strategy_and_negative_step() {
         dir.path(),
     );
     assert_eq!(code, 0, "{err}");
-    assert!(err.contains("samples as `bisect`"), "{err}");
+    assert!(err.contains("samples as `uniform`"), "{err}");
 
     let (code, _, err) = run(&["render", f, "-o", "n.png", "--step", "-1"], dir.path());
     assert_eq!(code, 2, "{err}");

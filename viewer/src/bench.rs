@@ -108,7 +108,7 @@ fn shows(hit_samples: u32, spp: u32) -> bool {
 }
 
 /// Strategies that make sense in `mode`: `exact` only finds iso-surfaces (in dvr it would
-/// sample as `bisect`, a duplicate run).
+/// sample as `uniform` or `bisect`, a duplicate run).
 pub fn strategies(mode: Mode) -> Vec<Strategy> {
     Strategy::ALL
         .into_iter()

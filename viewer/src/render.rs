@@ -43,7 +43,8 @@ pub struct Scene<'a> {
 
 impl<'a> Scene<'a> {
     /// Resolves field names and the transfer function of `state` against `vol`.
-    /// `exact` is an iso-surface strategy; in dvr mode it samples as `bisect`.
+    /// `exact` is an iso-surface strategy; in dvr mode it samples as
+    /// [`effective_strategy`] says.
     pub fn new(
         vol: &'a Volume<'a>,
         state: &'a ViewState,
@@ -95,10 +96,15 @@ impl<'a> Scene<'a> {
     }
 }
 
-/// The strategy actually used: `exact` in dvr mode samples as `bisect`
-/// (see [`ViewState::effective_strategy`]).
-pub fn effective_strategy(mode: Mode, strategy: Strategy) -> Strategy {
+/// The strategy actually used (see [`ViewState::effective_strategy`]): `exact` in dvr
+/// mode samples as `uniform` when the opacity is pre-integrated and as `bisect` when it is
+/// point-sampled. Point samples catch a band thinner than the step only by chance, which
+/// `bisect`'s search between samples repairs; pre-integration already counts the band
+/// between two samples, so plain `uniform` steps reach a lower error with fewer samples
+/// than either `bisect` variant (BENCHMARKS.md, "Direct volume rendering").
+pub fn effective_strategy(mode: Mode, strategy: Strategy, preintegrated: bool) -> Strategy {
     match (mode, strategy) {
+        (Mode::Dvr, Strategy::Exact) if preintegrated => Strategy::Uniform,
         (Mode::Dvr, Strategy::Exact) => Strategy::Bisect,
         _ => strategy,
     }

@@ -62,8 +62,10 @@ pub struct ViewState {
     #[serde(default)]
     pub shadows: bool,
     /// Dvr: pre-integrated opacity between consecutive samples (see
-    /// [`crate::transfer::PreIntegrated`]). Off by default so states saved before it
-    /// existed render as they did.
+    /// [`crate::transfer::PreIntegrated`]). On in new states ([`ViewState::default_for`]):
+    /// with it `uniform` sampling reaches a lower error than point-sampled `bisect` with
+    /// fewer samples (BENCHMARKS.md). Absent from a state file it reads as off, so states
+    /// saved before it existed render as they did.
     #[serde(default)]
     pub preintegrated: bool,
     /// Colour where rays leave the scene.
@@ -206,7 +208,7 @@ impl ViewState {
             material: Material::default(),
             meshes: Vec::new(),
             shadows: false,
-            preintegrated: false,
+            preintegrated: true,
             background: DEFAULT_BACKGROUND,
             width: 800,
             height: 600,
@@ -214,12 +216,10 @@ impl ViewState {
     }
 
     /// The strategy the rays use: `exact` finds iso-surface roots; a dvr band has no
-    /// single root, so in dvr mode it samples as `bisect`.
+    /// single root, so in dvr mode it samples as [`crate::render::effective_strategy`]
+    /// says: `uniform` with pre-integration, `bisect` without.
     pub fn effective_strategy(&self) -> Strategy {
-        match (self.mode, self.strategy) {
-            (Mode::Dvr, Strategy::Exact) => Strategy::Bisect,
-            (_, s) => s,
-        }
+        crate::render::effective_strategy(self.mode, self.strategy, self.preintegrated)
     }
 
     /// Puts the default lights back over the viewer's shoulder for the current camera
@@ -410,7 +410,8 @@ pub struct Overrides {
     /// Iso value of the iso field.
     #[arg(long, allow_hyphen_values = true)]
     pub iso: Option<f64>,
-    /// Sampling strategy (`exact` is for iso mode; in dvr it samples as `bisect`).
+    /// Sampling strategy (`exact` is for iso mode; in dvr it samples as `uniform`, or as
+    /// `bisect` with --no-preintegrated).
     #[arg(long, value_enum)]
     pub strategy: Option<Strategy>,
     /// Sample step in units of the local cell width.
@@ -422,9 +423,13 @@ pub struct Overrides {
     /// Shadow rays towards every light (through meshes and the volume).
     #[arg(long)]
     pub shadows: bool,
-    /// Dvr: pre-integrated opacity, so a band thinner than the step still counts fully.
-    #[arg(long)]
+    /// Dvr: pre-integrated opacity, so a band thinner than the step still counts fully
+    /// (the default for new views; a state file may have it off).
+    #[arg(long, conflicts_with = "no_preintegrated")]
     pub preintegrated: bool,
+    /// Dvr: point-sampled opacity (pre-integration off).
+    #[arg(long)]
+    pub no_preintegrated: bool,
     /// OBJ mesh, optionally placed: PATH[@x,y,z,scale]. Repeatable; replaces the state's meshes.
     #[arg(long = "mesh")]
     pub meshes: Vec<String>,
@@ -500,6 +505,9 @@ impl Overrides {
         if self.preintegrated {
             state.preintegrated = true;
         }
+        if self.no_preintegrated {
+            state.preintegrated = false;
+        }
         if !self.meshes.is_empty() {
             state.meshes = self
                 .meshes
@@ -537,12 +545,15 @@ impl Overrides {
             }
         }
         if state.mode == Mode::Dvr && state.strategy == Strategy::Exact {
+            let used = state.effective_strategy();
             if self.strategy.is_none() {
                 // The default strategy (exact) is for iso mode; a dvr request without an
                 // explicit strategy gets the one dvr uses anyway, without a note.
-                state.strategy = Strategy::Bisect;
+                state.strategy = used;
             } else {
-                notes.push("`exact` is an iso-surface strategy; dvr samples as `bisect`".into());
+                notes.push(format!(
+                    "`exact` is an iso-surface strategy; dvr samples as `{used}`"
+                ));
             }
         }
         Ok(notes)

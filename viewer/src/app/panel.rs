@@ -166,7 +166,8 @@ fn volume(app: &mut ViewerApp, ui: &mut egui::Ui) {
             }
         });
     if st.effective_strategy() != st.strategy {
-        ui.label(RichText::new("dvr samples `exact` as `bisect`").weak());
+        let used = st.effective_strategy();
+        ui.label(RichText::new(format!("dvr samples `exact` as `{used}`")).weak());
     }
     ui.add(
         egui::Slider::new(&mut st.step, 0.01..=4.0)
