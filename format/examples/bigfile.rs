@@ -42,6 +42,7 @@ fn build(gib: f64) -> BrickFile {
                     level: 0,
                     origin,
                     cell_width: w,
+                    inv_cell_width: 1.0 / w,
                     dims: [DIM; 3],
                     first_value,
                 });

@@ -183,16 +183,82 @@ pub fn keep_all() -> Skip<fn(f32, f32) -> bool> {
     }
 }
 
+/// What the ray walk reads per node: the node, and the walk's field's range and fullness
+/// over its subtree. The file's own tables ([`FileNodes`]) are one store; a reader may
+/// pack them per field for speed (the viewer does: node and range in one cache line) and
+/// walk the same way with [`segments`].
+pub trait WalkNodes {
+    fn node_count(&self) -> usize;
+    fn node(&self, n: u32) -> Option<Node>;
+    /// Range of the walk's field over node `n`'s subtree; `None` when the store has no
+    /// ranges (nothing is skipped).
+    fn range(&self, n: u32) -> Option<(f32, f32)>;
+    /// Every leaf below `n` holds a region.
+    fn full(&self, n: u32) -> bool;
+    /// All three at once (a store that keeps them together answers with one read).
+    #[inline]
+    fn get(&self, n: u32) -> Option<(Node, Option<(f32, f32)>, bool)> {
+        Some((self.node(n)?, self.range(n), self.full(n)))
+    }
+}
+
+/// The archived tree with field `field`'s ranges, as stored in the file.
+#[derive(Clone, Copy)]
+pub struct FileNodes<'a> {
+    file: &'a ArchivedBrickFile,
+    field: usize,
+    fields: usize,
+    ranges: bool,
+}
+
+impl<'a> FileNodes<'a> {
+    pub fn new(file: &'a ArchivedBrickFile, field: usize) -> Self {
+        let (n, nf) = (file.kd_nodes.len(), file.fields.len());
+        Self {
+            file,
+            field,
+            fields: nf,
+            ranges: field < nf && file.kd_ranges.len() == n * nf && file.kd_full.len() == n,
+        }
+    }
+}
+
+impl WalkNodes for FileNodes<'_> {
+    fn node_count(&self) -> usize {
+        self.file.kd_nodes.len()
+    }
+    #[inline]
+    fn node(&self, n: u32) -> Option<Node> {
+        self.file.kd_nodes.as_slice().node(n)
+    }
+    #[inline]
+    fn range(&self, n: u32) -> Option<(f32, f32)> {
+        if !self.ranges {
+            return None;
+        }
+        let r = self
+            .file
+            .kd_ranges
+            .get(n as usize * self.fields + self.field)?;
+        Some((r.min.to_native(), r.max.to_native()))
+    }
+    #[inline]
+    fn full(&self, n: u32) -> bool {
+        self.file.kd_full.get(n as usize).is_some_and(|f| *f)
+    }
+}
+
 /// Calls `f` for every region the ray `o + t d` crosses within `[t_min, t_max]`, front to
-/// back, with the region's box clipped to the ray; a subtree whose range of `skip.field`
-/// `skip.keep` rejects (and which is full, unless `skip.across_gaps`) is reported as one
-/// [`SKIPPED`] segment over the ray's part of its cell. `o`, `d` and the result are in the
-/// frame shifted by `shift`. `f` returns `false` to stop. `stack` is reused between calls
-/// so that the walk does not allocate.
+/// back, with the region's box clipped to the ray; a subtree whose range (from `nodes`,
+/// the field of `skip.field`) `skip.keep` rejects (and which is full, unless
+/// `skip.across_gaps`) is reported as one [`SKIPPED`] segment over the ray's part of its
+/// cell. `o`, `d` and the result are in the frame shifted by `shift`. `f` returns `false`
+/// to stop. `stack` is reused between calls so that the walk does not allocate.
 #[allow(clippy::too_many_arguments)]
 #[inline]
-pub fn segments<K: Fn(f32, f32) -> bool, F: FnMut(Segment) -> bool>(
+pub fn segments<N: WalkNodes, K: Fn(f32, f32) -> bool, F: FnMut(Segment) -> bool>(
     file: &ArchivedBrickFile,
+    nodes: &N,
     shift: [f64; 3],
     o: [f64; 3],
     d: [f64; 3],
@@ -202,21 +268,10 @@ pub fn segments<K: Fn(f32, f32) -> bool, F: FnMut(Segment) -> bool>(
     skip: &Skip<K>,
     mut f: F,
 ) {
-    let nodes = file.kd_nodes.as_slice();
-    if nodes.is_empty() || t_min >= t_max || t_min.is_nan() || t_max.is_nan() {
+    if nodes.node_count() == 0 || t_min >= t_max || t_min.is_nan() || t_max.is_nan() {
         return;
     }
-    let nf = file.fields.len();
-    let ranges = file.kd_ranges.as_slice();
-    let full = file.kd_full.as_slice();
-    let field = skip.field;
-    let use_ranges = field < nf && ranges.len() == nodes.len() * nf && full.len() == nodes.len();
-    let range = |n: u32| -> (f32, f32) {
-        match ranges.get(n as usize * nf + field) {
-            Some(r) if use_ranges => (r.min.to_native(), r.max.to_native()),
-            _ => (f32::NEG_INFINITY, f32::INFINITY),
-        }
-    };
+    let all = (f32::NEG_INFINITY, f32::INFINITY);
     let inv = inverse(&d);
     let b = &file.bounds;
     let bmin: [f64; 3] = std::array::from_fn(|a| b.min[a].to_native() - shift[a]);
@@ -226,7 +281,7 @@ pub fn segments<K: Fn(f32, f32) -> bool, F: FnMut(Segment) -> bool>(
     };
     // Each node is entered at most once per ray in a tree: the budget stops the walk on
     // a malformed one.
-    let mut budget = nodes.len().saturating_mul(2);
+    let mut budget = nodes.node_count().saturating_mul(2);
     stack.clear();
     stack.push((0, t0, t1));
     while let Some((mut node, ta, mut tb)) = stack.pop() {
@@ -235,7 +290,9 @@ pub fn segments<K: Fn(f32, f32) -> bool, F: FnMut(Segment) -> bool>(
                 return;
             }
             budget -= 1;
-            let Some(n) = nodes.node(node) else { break };
+            let Some((n, range, full)) = nodes.get(node) else {
+                break;
+            };
             match n {
                 Node::Inner {
                     axis,
@@ -243,21 +300,22 @@ pub fn segments<K: Fn(f32, f32) -> bool, F: FnMut(Segment) -> bool>(
                     left,
                     right,
                 } => {
-                    if use_ranges && (skip.across_gaps || full[node as usize]) {
-                        let (mn, mx) = range(node);
-                        if !(skip.keep)(mn, mx) {
-                            if ta < tb
-                                && !f(Segment {
-                                    region: SKIPPED,
-                                    t0: ta,
-                                    t1: tb,
-                                    min: mn,
-                                    max: mx,
-                                })
-                            {
-                                return;
+                    if skip.across_gaps || full {
+                        if let Some((mn, mx)) = range {
+                            if !(skip.keep)(mn, mx) {
+                                if ta < tb
+                                    && !f(Segment {
+                                        region: SKIPPED,
+                                        t0: ta,
+                                        t1: tb,
+                                        min: mn,
+                                        max: mx,
+                                    })
+                                {
+                                    return;
+                                }
+                                break;
                             }
-                            break;
                         }
                     }
                     let a = axis.min(2);
@@ -293,7 +351,7 @@ pub fn segments<K: Fn(f32, f32) -> bool, F: FnMut(Segment) -> bool>(
                     let rmax: [f64; 3] =
                         std::array::from_fn(|a| reg.bounds.max[a].to_native() - shift[a]);
                     if let Some((s0, s1)) = ray_box(&rmin, &rmax, &o, &inv, ta, tb) {
-                        let (mn, mx) = range(node);
+                        let (mn, mx) = range.unwrap_or(all);
                         if !f(Segment {
                             region: r,
                             t0: s0,

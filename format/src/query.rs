@@ -97,6 +97,7 @@ impl RayRegions {
             let mut stack = Vec::new();
             kd::segments(
                 file,
+                &kd::FileNodes::new(file, 0),
                 [0.0; 3],
                 origin,
                 dir,

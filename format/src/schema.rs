@@ -123,19 +123,24 @@ pub struct Field {
     pub values: Vec<f32>,
 }
 
-/// A dense box of leaf cells of one level.
+/// A dense box of leaf cells of one level. Fields are ordered so that the archived record
+/// is exactly 64 bytes.
 #[derive(Archive, Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
 #[rkyv(derive(Debug))]
 pub struct Brick {
-    pub level: u32,
     /// Centre of the brick's first cell (lowest x, y, z) in world units.
     pub origin: [f64; 3],
     /// Cell edge length (equal to its level's `cell_width`).
     pub cell_width: f64,
-    /// Cells per axis, each >= 1.
-    pub dims: [u32; 3],
+    /// `1 / cell_width`, exactly as computed in `f64`: the reconstruction maps every sample
+    /// into every brick of its region with it, and a multiplication is cheaper than the
+    /// division there.
+    pub inv_cell_width: f64,
     /// Index of the brick's first cell in every field's `values`.
     pub first_value: u64,
+    /// Cells per axis, each >= 1.
+    pub dims: [u32; 3],
+    pub level: u32,
 }
 
 /// An active brick region: a box in which the set of overlapping supports is constant.

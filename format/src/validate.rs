@@ -61,6 +61,13 @@ pub fn check(file: &ArchivedBrickFile) -> Result<(), String> {
         if !(w.is_finite() && w > 0.0) {
             return Err(format!("bricks[{i}].cell_width: expected > 0, found {w}"));
         }
+        let inv = brick.inv_cell_width.to_native();
+        if inv != 1.0 / w {
+            return Err(format!(
+                "bricks[{i}].inv_cell_width: expected 1 / {w} = {}, found {inv}",
+                1.0 / w
+            ));
+        }
         if brick.origin.iter().any(|c| !c.to_native().is_finite()) {
             return Err(format!("bricks[{i}].origin: not finite"));
         }

@@ -655,6 +655,7 @@ fn run(
             level: b.level,
             origin: *o,
             cell_width: sets[b.set].width,
+            inv_cell_width: 1.0 / sets[b.set].width,
             dims: b.dims,
             first_value: *f,
         })

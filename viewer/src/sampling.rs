@@ -882,8 +882,11 @@ impl Planes {
                 w == br.w
                     && (origin == br.origin
                         || (0..3).all(|a| {
+                            // Whole cells apart (a cast truncates in one instruction;
+                            // `round` is a library call on the baseline target).
                             let q = (origin[a] - br.origin[a]) * br.inv_w;
-                            (q - q.round()).abs() < 1e-9
+                            let frac = (q - q as i64 as f64).abs();
+                            !(1e-9..=1.0 - 1e-9).contains(&frac)
                         }))
             };
             if lattices[..nl].iter().any(same) {

@@ -99,6 +99,7 @@ pub fn build(grids: &[GridSpec], fields: &[FieldFn], max_brick: u32) -> BrickFil
                                 g.origin[a] + lo[a] as f64 * g.cell_width
                             }),
                             cell_width: g.cell_width,
+                            inv_cell_width: 1.0 / g.cell_width,
                             dims,
                             first_value: first,
                         });

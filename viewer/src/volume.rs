@@ -66,6 +66,9 @@ pub struct Volume<'a> {
     pub(crate) file: &'a ArchivedBrickFile,
     /// Cell width per level.
     level_w: Vec<f64>,
+    /// Per field, the KD-tree packed for the ray walk on first use (see
+    /// [`crate::traverse`]).
+    packed: Vec<std::sync::OnceLock<crate::traverse::Packed>>,
     /// Finest cell width in the file (reference length for opacity).
     pub finest_w: f64,
 }
@@ -114,6 +117,9 @@ impl<'a> Volume<'a> {
             values,
             file,
             level_w,
+            packed: (0..file.fields.len())
+                .map(|_| std::sync::OnceLock::new())
+                .collect(),
             finest_w: if finest_w.is_finite() { finest_w } else { 1.0 },
         })
     }
@@ -139,6 +145,13 @@ impl<'a> Volume<'a> {
         std::array::from_fn(|a| p[a] + self.frame[a])
     }
 
+    /// The KD-tree packed with field `f`'s ranges (built on first use); `None` for a
+    /// field the file does not have.
+    pub(crate) fn packed(&self, f: usize) -> Option<&crate::traverse::Packed> {
+        let cell = self.packed.get(f)?;
+        Some(cell.get_or_init(|| crate::traverse::Packed::build(self.file, f)))
+    }
+
     /// Number of bricks.
     pub fn brick_count(&self) -> usize {
         self.file.bricks.len()
@@ -152,7 +165,7 @@ impl<'a> Volume<'a> {
         BrickN {
             origin: std::array::from_fn(|a| br.origin[a].to_native() - self.frame[a]),
             w,
-            inv_w: 1.0 / w,
+            inv_w: br.inv_cell_width.to_native(),
             dims: std::array::from_fn(|a| i64::from(br.dims[a].to_native())),
             first: br.first_value.to_native() as usize,
             level: br.level.to_native(),
@@ -184,11 +197,12 @@ impl<'a> Volume<'a> {
     /// Local cell width of a segment's region (the finest width for a skipped subtree).
     #[inline]
     pub fn step_width(&self, region: u32) -> f64 {
-        if (region as usize) < self.region_count() {
-            self.region(region as usize).finest_w
-        } else {
-            self.finest_w
-        }
+        self.file
+            .regions
+            .get(region as usize)
+            .and_then(|r| self.level_w.get(r.finest_level.to_native() as usize))
+            .copied()
+            .unwrap_or(self.finest_w)
     }
 
     /// Bricks of region `r`.
@@ -208,7 +222,11 @@ impl<'a> Volume<'a> {
 
     /// Region containing the local point `p` (half-open boxes), by KD descent.
     pub fn region_at(&self, p: [f64; 3]) -> Option<u32> {
-        let r = format::kd::locate(self.file.kd_nodes.as_slice(), p, self.frame)?;
+        // The packed copy of field 0's tree (when there is one) is the denser read.
+        let r = match self.packed(0) {
+            Some(packed) => format::kd::locate(packed, p, self.frame)?,
+            None => format::kd::locate(self.file.kd_nodes.as_slice(), p, self.frame)?,
+        };
         let reg = self.region(r as usize);
         let inside = (0..3).all(|a| p[a] >= reg.min[a] && p[a] < reg.max[a]);
         inside.then_some(r)

@@ -161,6 +161,7 @@ pub fn random_file(seed: u64) -> BrickFile {
             level: level as u32,
             origin: [0; 3].map(|_: i32| offset + rng.range(-4.0, 4.0)),
             cell_width: levels[level].cell_width,
+            inv_cell_width: 1.0 / levels[level].cell_width,
             dims,
             first_value,
         });
