@@ -183,6 +183,10 @@ pub fn keep_all() -> Skip<fn(f32, f32) -> bool> {
     }
 }
 
+/// A node with the walk's field's range over its subtree (`None`: no ranges, skip
+/// nothing) and whether it is full.
+pub type NodeEntry = (Node, Option<(f32, f32)>, bool);
+
 /// What the ray walk reads per node: the node, and the walk's field's range and fullness
 /// over its subtree. The file's own tables ([`FileNodes`]) are one store; a reader may
 /// pack them per field for speed (the viewer does: node and range in one cache line) and
@@ -197,7 +201,7 @@ pub trait WalkNodes {
     fn full(&self, n: u32) -> bool;
     /// All three at once (a store that keeps them together answers with one read).
     #[inline]
-    fn get(&self, n: u32) -> Option<(Node, Option<(f32, f32)>, bool)> {
+    fn get(&self, n: u32) -> Option<NodeEntry> {
         Some((self.node(n)?, self.range(n), self.full(n)))
     }
 }

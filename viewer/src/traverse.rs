@@ -115,7 +115,7 @@ impl WalkNodes for Packed {
         self.0.get(n as usize).is_some_and(|p| p.full)
     }
     #[inline(always)]
-    fn get(&self, n: u32) -> Option<(Node, Option<(f32, f32)>, bool)> {
+    fn get(&self, n: u32) -> Option<format::kd::NodeEntry> {
         let p = self.0.get(n as usize)?;
         let node = if p.axis < 3 {
             Node::Inner {
