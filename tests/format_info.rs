@@ -61,7 +61,7 @@ fn sample() -> BrickFile {
                 level: 1,
                 origin: [2.0, 0.0, 0.0],
                 cell_width: 1.0,
-                inv_cell_width: 1.0 / 1.0,
+                inv_cell_width: 1.0,
                 dims: [1, 1, 1],
                 first_value: 8,
             },

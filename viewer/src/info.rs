@@ -321,7 +321,7 @@ mod tests {
                     level: 1,
                     origin: [1.0; 3],
                     cell_width: 1.0,
-                    inv_cell_width: 1.0 / 1.0,
+                    inv_cell_width: 1.0,
                     dims: [1, 1, 1],
                     first_value: 8,
                 },
