@@ -46,24 +46,8 @@ fn emit(t: &RegionTree, nodes: &mut Vec<KdNode>, regions: &mut Vec<(Bbox, Vec<u3
     id
 }
 
-/// Region containing `p` by descending the nodes (for tests and the baker's self-check).
+/// Region containing `p` by descending the nodes (for tests and the baker's self-check):
+/// the file's own descent, [`format::kd::locate`].
 pub fn locate(nodes: &[KdNode], p: [f64; 3]) -> Option<u32> {
-    let mut n = 0usize;
-    loop {
-        match nodes.get(n)? {
-            KdNode::Leaf { region } => return *region,
-            KdNode::Inner {
-                axis,
-                split,
-                left,
-                right,
-            } => {
-                n = if p[*axis as usize] < *split {
-                    *left as usize
-                } else {
-                    *right as usize
-                };
-            }
-        }
-    }
+    format::kd::locate(nodes, p, [0.0; 3])
 }

@@ -2,7 +2,7 @@
 //! reconstruction (basis method) written independently of the baker and the viewer.
 #![allow(dead_code)]
 
-use format::{BrickFile, KdNode};
+use format::BrickFile;
 
 /// One stored leaf cell.
 #[derive(Debug, Clone, Copy)]
@@ -44,26 +44,9 @@ pub fn field(file: &BrickFile, name: &str) -> usize {
         .unwrap_or_else(|| panic!("field {name} missing"))
 }
 
-/// Region containing `p` by KD-tree descent.
+/// Region containing `p` by KD-tree descent (the file's own, [`format::kd::locate`]).
 pub fn locate(file: &BrickFile, p: [f64; 3]) -> Option<u32> {
-    let mut n = 0usize;
-    loop {
-        match file.kd_nodes.get(n)? {
-            KdNode::Leaf { region } => return *region,
-            KdNode::Inner {
-                axis,
-                split,
-                left,
-                right,
-            } => {
-                n = if p[*axis as usize] < *split {
-                    *left
-                } else {
-                    *right
-                } as usize
-            }
-        }
-    }
+    format::kd::locate(file.kd_nodes.as_slice(), p, [0.0; 3])
 }
 
 /// Brick ids of region `r`.
