@@ -272,7 +272,7 @@ pub const BLOCK_DIM: i32 = LEAF_DIM;
 fn round_half_away(x: f64) -> f64 {
     const BIG: f64 = 4_503_599_627_370_496.0; // 2^52
     let a = x.abs();
-    if !(a < BIG) {
+    if a.is_nan() || a >= BIG {
         return x;
     }
     let t = a as i64 as f64; // trunc(|x|), exact here
