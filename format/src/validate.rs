@@ -71,8 +71,19 @@ pub fn check(file: &ArchivedBrickFile) -> Result<(), String> {
         if brick.origin.iter().any(|c| !c.to_native().is_finite()) {
             return Err(format!("bricks[{i}].origin: not finite"));
         }
+        // Three u32 dims can hold up to 2^96 cells. Unchecked, the product wraps in
+        // release builds (found by the `qbk_open` fuzz target): a brick of 2^22 x 2^21 x
+        // 2^21 cells then counts as 0 cells, passes the range check below, and the viewer
+        // indexes far past the value arrays.
+        let Some(cells) = dims
+            .iter()
+            .try_fold(1u64, |n, &d| n.checked_mul(u64::from(d)))
+        else {
+            return Err(format!(
+                "bricks[{i}].dims: {dims:?} is more cells than a file can hold"
+            ));
+        };
         if n_fields > 0 {
-            let cells = dims.iter().map(|&d| u64::from(d)).product::<u64>();
             let first = brick.first_value.to_native();
             let end = first.checked_add(cells);
             if end.is_none_or(|e| e > n_values) {

@@ -130,3 +130,41 @@ fn appended_bytes_are_an_error() {
         "{err}"
     );
 }
+
+/// Regression (found by the `qbk_open` fuzz target): a brick's cell count is the product
+/// of three u32 dims, up to 2^96. Validation computed it in u64 unchecked, so in release
+/// builds 2^22 x 2^21 x 2^21 = 2^64 wrapped to 0 cells, the brick passed the range check
+/// against the value arrays, and the viewer indexed far past them. Now such a brick is an
+/// error naming it, with fields or without (a file without fields has no values to bound
+/// its bricks, but the count must still fit).
+#[test]
+fn brick_cell_count_overflowing_u64_is_an_error() {
+    let base = (0..200)
+        .map(common::random_file)
+        .find(|f| !f.bricks.is_empty())
+        .expect("some seed gives bricks");
+    for (dims, no_fields) in [
+        ([1 << 22, 1 << 21, 1 << 21], false),
+        ([u32::MAX; 3], false),
+        ([1 << 22, 1 << 21, 1 << 21], true),
+    ] {
+        let mut file = base.clone();
+        let last = file.bricks.len() - 1;
+        file.bricks[last].dims = dims;
+        if no_fields {
+            file.fields.clear();
+            file.region_ranges.clear();
+            file.kd_ranges.clear();
+        }
+        let bytes = writer::to_bytes(&file).expect("to_bytes");
+        let err = BrickFileView::from_bytes(Path::new("huge_brick.qbk"), &bytes)
+            .expect_err("a brick with more than 2^64 cells must not open");
+        let msg = err.to_string();
+        assert!(
+            matches!(err.kind, FormatErrorKind::Invalid(_))
+                && msg.contains("huge_brick.qbk")
+                && msg.contains(&format!("bricks[{last}].dims")),
+            "{dims:?} (no fields: {no_fields}): {msg}"
+        );
+    }
+}

@@ -95,10 +95,12 @@ pub fn info(view: &BrickFileView) -> Info {
         .collect();
     let mut cells = 0u64;
     for brick in file.bricks.iter() {
+        // Saturating: a file without fields has no values to bound its bricks' cell
+        // counts, so their sum may exceed u64 (the counts are only reported).
         let n = query::brick_cells(brick);
-        cells += n;
+        cells = cells.saturating_add(n);
         if let Some(l) = levels.get_mut(brick.level.to_native() as usize) {
-            l.cells += n;
+            l.cells = l.cells.saturating_add(n);
             l.bricks += 1;
         }
     }

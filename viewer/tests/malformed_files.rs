@@ -1,0 +1,121 @@
+//! Files that pass `format::BrickFileView` validation must be safe to render: the viewer's
+//! hot loops index the archive with `[]`, trusting validation for every index. Each case
+//! here is a crash the `qbk_open` fuzz target found (`fuzz/fuzz_targets/qbk_open.rs`),
+//! rebuilt in code from a small test volume so that it needs no stored fixture: it must
+//! now be refused with an error naming the file, or, if it opens, walk without a panic.
+
+use std::path::Path;
+
+use format::{BrickFile, BrickFileView, FormatErrorKind};
+use qbricks_viewer::sampling::{Params, Strategy, Tracer};
+use qbricks_viewer::testvol::{self, GridSpec};
+use qbricks_viewer::transfer::{Band, Mode, Transfer};
+use qbricks_viewer::volume::Volume;
+
+/// Two nested grids with a smooth field, a few bricks each.
+fn small_volume() -> BrickFile {
+    let coarse = GridSpec::covering([0.0; 3], [8.0; 3], 1.0);
+    let fine = GridSpec::covering([2.0; 3], [6.0; 3], 0.5);
+    let f = |p: [f64; 3]| p[0] + 0.5 * p[1] - 0.25 * p[2];
+    testvol::build(&[coarse, fine], &[("q", &f)], 4)
+}
+
+/// What the viewer does with an open file, in small: every region, its bricks, the
+/// reconstruction at its centre, and a few rays per strategy (as the fuzz target does).
+fn walk(view: &BrickFileView) {
+    let vol = Volume::new(view).expect("volume");
+    let file = view.file();
+    for r in 0..vol.region_count() {
+        let reg = vol.region(r);
+        let _ = vol.region_brick_ids(r);
+        let c: [f64; 3] = std::array::from_fn(|a| 0.5 * (reg.min[a] + reg.max[a]));
+        let _ = format::query::region_at(file, vol.to_world(c));
+        for f in 0..vol.fields.len() {
+            let _ = vol.eval(r, c, f, Some(0));
+            let _ = vol.eval_value(r, c, f);
+            let _ = vol.shading_gradient(c, f);
+            let _ = vol.sample(vol.to_world(c), f);
+        }
+    }
+    let (lo, hi) = (vol.bounds_min, vol.bounds_max);
+    let o = lo.map(|x| x - 1.0);
+    let d = {
+        let d: [f64; 3] = std::array::from_fn(|a| hi[a] + 1.0 - o[a]);
+        let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        d.map(|x| x / n)
+    };
+    for (mode, strategy) in [
+        (Mode::Iso, Strategy::Exact),
+        (Mode::Iso, Strategy::Uniform),
+        (Mode::Dvr, Strategy::Bisect),
+    ] {
+        let params = Params {
+            strategy,
+            step: 0.5,
+            tf: Transfer {
+                mode,
+                iso: 4.0,
+                band: Band {
+                    sigma: 0.5,
+                    peak: 1.6,
+                    k: 2.0,
+                },
+            },
+            field: 0,
+            colour_field: None,
+            delta0: 0.5 * vol.finest_w,
+            clip: None,
+            preintegrated: None,
+        };
+        let mut tr = Tracer::new(&vol, params);
+        match mode {
+            Mode::Iso => {
+                let _ = tr.iso(o, d, 0.0, f64::INFINITY, 0.37);
+            }
+            Mode::Dvr => {
+                let _ = tr.dvr(o, d, 0.0, f64::INFINITY, 0.37, &mut |_, _| [1.0; 3]);
+            }
+        }
+    }
+}
+
+fn open(file: &BrickFile, name: &str) -> Result<BrickFileView, format::FormatError> {
+    let bytes = format::writer::to_bytes(file).expect("to_bytes");
+    BrickFileView::from_bytes(Path::new(name), &bytes)
+}
+
+#[test]
+fn intact_volume_walks() {
+    let view = open(&small_volume(), "intact.qbk").expect("open");
+    walk(&view);
+}
+
+/// Fuzz crash 1: brick dims whose product overflows u64. Validation multiplied them
+/// unchecked, so 2^22 x 2^21 x 2^21 wrapped to 0 cells in release builds, the brick passed
+/// the range check against the value arrays, and `Volume::eval` indexed far past them.
+#[test]
+fn brick_dims_overflowing_the_cell_count_are_refused() {
+    let base = small_volume();
+    // A brick some region reads, so that the reconstruction would reach it.
+    let b = base.region_bricks[0] as usize;
+    for dims in [
+        [1 << 22, 1 << 21, 1 << 21],
+        [u32::MAX; 3],
+        [1 << 31, 1 << 31, 4],
+    ] {
+        let mut file = base.clone();
+        file.bricks[b].dims = dims;
+        match open(&file, "overflow.qbk") {
+            Err(e) => {
+                let msg = e.to_string();
+                assert!(
+                    matches!(e.kind, FormatErrorKind::Invalid(_))
+                        && msg.contains("overflow.qbk")
+                        && msg.contains(&format!("bricks[{b}]")),
+                    "{dims:?}: {msg}"
+                );
+            }
+            Ok(view) => panic!("{dims:?}: opened ({view:?})"),
+        }
+    }
+}
