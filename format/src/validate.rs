@@ -68,6 +68,16 @@ pub fn check(file: &ArchivedBrickFile) -> Result<(), String> {
                 1.0 / w
             ));
         }
+        // The viewer steps through a region in units of its finest *level's* width and
+        // reconstructs with the *bricks'* widths: a level far finer than its bricks made
+        // every ray take millions of samples per region (found by the `qbk_open` fuzz
+        // target). The baker merges widths equal to 1e-6, so 1e-3 is loose enough.
+        let lw = file.levels[level as usize].cell_width.to_native();
+        if (w - lw).abs() > 1e-3 * lw {
+            return Err(format!(
+                "bricks[{i}].cell_width: {w:?} differs from its level {level}'s cell width {lw:?}"
+            ));
+        }
         if brick.origin.iter().any(|c| !c.to_native().is_finite()) {
             return Err(format!("bricks[{i}].origin: not finite"));
         }
@@ -144,6 +154,25 @@ pub fn check(file: &ArchivedBrickFile) -> Result<(), String> {
         return Err(format!(
             "region_bricks[{at}]: brick {id} out of range ({n_bricks} bricks)"
         ));
+    }
+    // The region's step width is its finest level's: it must be the finest level of its
+    // bricks, as the schema says (a finer one makes rays crawl, a coarser one misses
+    // detail). Checked after the entries, so that every id indexes a brick.
+    for (i, region) in file.regions.iter().enumerate() {
+        let start = region.bricks_start.to_native() as usize;
+        let len = region.bricks_len.to_native() as usize;
+        let finest = file.region_bricks[start..start + len]
+            .iter()
+            .map(|id| file.bricks[id.to_native() as usize].level.to_native())
+            .min();
+        if let Some(finest) = finest {
+            let stored = region.finest_level.to_native();
+            if stored != finest {
+                return Err(format!(
+                    "regions[{i}].finest_level: {stored}, but its finest brick is on level {finest}"
+                ));
+            }
+        }
     }
     let expected_ranges = n_regions as u64 * n_fields as u64;
     if file.region_ranges.len() as u64 != expected_ranges {

@@ -168,3 +168,46 @@ fn brick_cell_count_overflowing_u64_is_an_error() {
         );
     }
 }
+
+/// Regression (a timeout found by the `qbk_open` fuzz target): a level's cell width of
+/// 1.1e-12 under bricks of width 1. The viewer steps through a region in units of its
+/// finest level's width, so every ray took a million samples per region. Now a brick
+/// whose width is not its level's, or a region whose `finest_level` is not the finest
+/// level of its bricks, is an error naming it.
+#[test]
+fn level_widths_and_finest_levels_must_match_the_bricks() {
+    let base = (0..500)
+        .map(common::random_file)
+        .find(|f| f.levels.len() >= 2 && f.regions.iter().any(|r| r.bricks_len > 0))
+        .expect("some seed gives two levels and a region with bricks");
+    let open = |file: &qbricks_format::BrickFile| {
+        let bytes = writer::to_bytes(file).expect("to_bytes");
+        BrickFileView::from_bytes(Path::new("levels.qbk"), &bytes)
+    };
+    open(&base).expect("the base file opens");
+
+    let r = base
+        .regions
+        .iter()
+        .position(|r| r.bricks_len > 0)
+        .expect("a region with bricks");
+    let b = base.region_bricks[base.regions[r].bricks_start as usize] as usize;
+    let level = base.bricks[b].level as usize;
+
+    let mut tiny_level = base.clone();
+    tiny_level.levels[level].cell_width = 1.1368683772161603e-12;
+    let msg = open(&tiny_level).expect_err("level width").to_string();
+    assert!(
+        msg.contains("levels.qbk") && msg.contains(".cell_width") && msg.contains("differs"),
+        "{msg}"
+    );
+
+    let mut wrong_finest = base.clone();
+    let finest = wrong_finest.regions[r].finest_level;
+    wrong_finest.regions[r].finest_level = if finest == 0 { 1 } else { 0 };
+    let msg = open(&wrong_finest).expect_err("finest level").to_string();
+    assert!(
+        msg.contains("levels.qbk") && msg.contains(&format!("regions[{r}].finest_level")),
+        "{msg}"
+    );
+}

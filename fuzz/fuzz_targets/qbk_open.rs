@@ -15,7 +15,7 @@ use std::path::Path;
 use format::{BrickFileView, OpenOptions};
 use libfuzzer_sys::fuzz_target;
 use viewer::sampling::{Params, Strategy, Tracer};
-use viewer::transfer::{Band, Mode, Transfer};
+use viewer::transfer::{Band, Mode, PreIntegrated, Transfer};
 use viewer::volume::Volume;
 
 /// Regions walked per input (the seeds have a few hundred).
@@ -115,12 +115,14 @@ fn exercise(view: &BrickFileView) {
     } else {
         1.0
     };
+    // Mode, strategy, step, pre-integrated dvr opacity (the window's default).
     let runs = [
-        (Mode::Iso, Strategy::Exact, 1.0),
-        (Mode::Iso, Strategy::Uniform, 1.0),
-        (Mode::Dvr, Strategy::Bisect, 1.0),
+        (Mode::Iso, Strategy::Exact, 1.0, false),
+        (Mode::Iso, Strategy::Uniform, 1.0, false),
+        (Mode::Dvr, Strategy::Bisect, 1.0, false),
+        (Mode::Dvr, Strategy::Uniform, 1.0, true),
     ];
-    for (mode, strategy, step) in runs {
+    for (mode, strategy, step, preintegrated) in runs {
         for clip in [false, true] {
             let mut params = Params {
                 strategy,
@@ -142,6 +144,9 @@ fn exercise(view: &BrickFileView) {
             };
             if clip {
                 params.clip_to_active(&vol);
+            }
+            if preintegrated {
+                params.preintegrated = PreIntegrated::new(&params.tf, params.delta0);
             }
             let mut tr = Tracer::new(&vol, params);
             for (o, e) in origins.iter().zip(ends.iter()) {

@@ -119,3 +119,41 @@ fn brick_dims_overflowing_the_cell_count_are_refused() {
         }
     }
 }
+
+/// Fuzz timeout 1: a level's cell width of 1.1e-12 under bricks of width 1 (the fuzzer
+/// changed one byte of a baked file). The viewer steps in units of the region's finest
+/// level width, so one `uniform` ray took a million samples per region and a frame
+/// hours. Now refused: brick widths must be their level's, and a region's finest level
+/// the finest of its bricks.
+#[test]
+fn level_width_far_from_its_bricks_is_refused() {
+    let base = small_volume();
+    let b = base.region_bricks[0] as usize;
+    let level = base.bricks[b].level as usize;
+    let mut file = base.clone();
+    file.levels[level].cell_width = 1.1368683772161603e-12;
+    let msg = open(&file, "tiny_level.qbk")
+        .expect_err("a level width far from its bricks' must not open")
+        .to_string();
+    assert!(
+        msg.contains("tiny_level.qbk") && msg.contains("cell_width"),
+        "{msg}"
+    );
+
+    // The same slowness through `finest_level`: an extra, very fine level without
+    // bricks named as a region's finest.
+    let mut file = base.clone();
+    file.levels.push(format::Level {
+        cell_width: 1.1368683772161603e-12,
+        cells: 0,
+        bricks: 0,
+    });
+    file.regions[0].finest_level = (file.levels.len() - 1) as u32;
+    let msg = open(&file, "finest.qbk")
+        .expect_err("a region's finest level must be its bricks' finest")
+        .to_string();
+    assert!(
+        msg.contains("finest.qbk") && msg.contains("regions[0].finest_level"),
+        "{msg}"
+    );
+}
