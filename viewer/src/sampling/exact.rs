@@ -1,0 +1,319 @@
+//! `exact`: iso search without samples. Between two consecutive lattice planes (of every
+//! cell lattice present in the region) `Σ H (v − iso)` along the ray is a cubic, so each
+//! such interval whose cells straddle the iso value is solved for its first root.
+
+use super::{Event, Tracer, MAX_LATTICES};
+use crate::reconstruct::Cubic;
+use crate::traverse::{Skip, SKIPPED};
+use crate::volume::Volume;
+
+impl Tracer<'_> {
+    /// Exact iso search: per region (skipped by bounds), per interval between lattice
+    /// planes of every level present (inside which `Σ H (v − iso)` is a cubic), skip when
+    /// all contributing cells lie on one side, else take the cubic's first root.
+    pub(super) fn iso_exact(
+        &mut self,
+        o: [f64; 3],
+        d: [f64; 3],
+        t0: f64,
+        t1: f64,
+    ) -> Option<(f64, Option<u32>)> {
+        let vol = self.vol;
+        let params = self.params;
+        let iso = params.tf.iso;
+        let mut found = None;
+        let mut stack = std::mem::take(&mut self.stack);
+        let skip = Skip {
+            field: params.field,
+            keep: |a: f32, b: f32| a as f64 <= iso && iso <= b as f64,
+            across_gaps: true,
+        };
+        vol.segments_skipping(o, d, t0, t1, &mut stack, &skip, |seg| {
+            let r = seg.region as usize;
+            let (mn, mx) = (seg.min, seg.max);
+            let skipped = seg.region == SKIPPED || !(mn as f64 <= iso && iso <= mx as f64);
+            self.enter_segment(&seg, skipped);
+            if skipped {
+                return true;
+            }
+            let mut planes = Planes::new(vol, r, &o, &d, seg.t0);
+            if planes.inexact {
+                self.stats.inexact_segments += 1;
+            }
+            let mut ta = seg.t0;
+            while ta < seg.t1 {
+                let tb = planes.next(ta).min(seg.t1);
+                if tb <= ta {
+                    break;
+                }
+                let cubic = vol.cubic(r, &o, &d, ta, tb, params.field, iso);
+                self.stats.samples += 1;
+                let may_cross = cubic.any_above && cubic.any_below;
+                self.record(Event::Interval {
+                    t0: ta,
+                    t1: tb,
+                    may_cross,
+                });
+                if may_cross {
+                    if let Some(x) = first_root(&cubic) {
+                        found = Some((ta + x * (tb - ta), Some(seg.region)));
+                        return false;
+                    }
+                }
+                ta = tb;
+            }
+            true
+        });
+        self.stack = stack;
+        found
+    }
+}
+
+/// Walks the lattice planes (cell-centre planes) of every lattice present in a region.
+struct Planes {
+    /// Next plane crossing per (lattice, axis) and the spacing in t.
+    next: [f64; 3 * MAX_LATTICES],
+    step: [f64; 3 * MAX_LATTICES],
+    n: usize,
+    /// The region has more lattices than are cut (see
+    /// [`Stats::inexact_segments`](super::Stats::inexact_segments)).
+    inexact: bool,
+}
+
+impl Planes {
+    fn new(vol: &Volume, r: usize, o: &[f64; 3], d: &[f64; 3], t: f64) -> Planes {
+        let mut pl = Planes {
+            next: [f64::INFINITY; 3 * MAX_LATTICES],
+            step: [f64::INFINITY; 3 * MAX_LATTICES],
+            n: 0,
+            inexact: false,
+        };
+        let ids = vol.region_brick_ids(r);
+        // Distinct lattices: (cell width, 1 / width, a cell centre).
+        let mut lattices = [(0.0f64, 0.0f64, [0.0f64; 3]); MAX_LATTICES];
+        let mut nl = 0;
+        for b in ids {
+            let br = vol.brick(b.to_native());
+            let same = |&(w, _, origin): &(f64, f64, [f64; 3])| {
+                w == br.w
+                    && (origin == br.origin
+                        || (0..3).all(|a| {
+                            // Whole cells apart (a cast truncates in one instruction;
+                            // `round` is a library call on the baseline target).
+                            let q = (origin[a] - br.origin[a]) * br.inv_w;
+                            let frac = (q - q as i64 as f64).abs();
+                            !(1e-9..=1.0 - 1e-9).contains(&frac)
+                        }))
+            };
+            if lattices[..nl].iter().any(same) {
+                continue;
+            }
+            if nl == MAX_LATTICES {
+                // More distinct lattices in one region than are cut (never produced by
+                // nested grids of one refinement ratio): the remaining lattices' planes are
+                // not cut, so intervals there are only approximately cubic. Counted in
+                // `Stats::inexact_segments` and reported by `render --json`.
+                pl.inexact = true;
+                break;
+            }
+            lattices[nl] = (br.w, br.inv_w, br.origin);
+            nl += 1;
+        }
+        for &(w, inv_w, origin) in &lattices[..nl] {
+            for a in 0..3 {
+                if d[a] == 0.0 {
+                    continue;
+                }
+                let x = o[a] + t * d[a];
+                let u = (x - origin[a]) * inv_w;
+                let kplane = if d[a] > 0.0 {
+                    u.floor() + 1.0
+                } else {
+                    u.ceil() - 1.0
+                };
+                let tp = (origin[a] + kplane * w - o[a]) / d[a];
+                pl.next[pl.n] = tp;
+                pl.step[pl.n] = w / d[a].abs();
+                pl.n += 1;
+            }
+        }
+        pl
+    }
+
+    /// The next plane crossing after `t`.
+    fn next(&mut self, t: f64) -> f64 {
+        let mut best = f64::INFINITY;
+        for i in 0..self.n {
+            // Round-off can leave a plane at or just before t: step past it.
+            while self.next[i] <= t + 1e-12 * self.step[i] {
+                let n = self.next[i] + self.step[i];
+                if n <= self.next[i] || n.is_nan() {
+                    // The spacing is below the resolution of t here: stop cutting.
+                    self.next[i] = f64::INFINITY;
+                    break;
+                }
+                self.next[i] = n;
+            }
+            best = best.min(self.next[i]);
+        }
+        best
+    }
+}
+
+/// First root of the cubic on `[0, 1]` (a sign change or an exact zero), refined by
+/// bisection to round-off.
+pub fn first_root(c: &Cubic) -> Option<f64> {
+    // Bernstein coefficients on [0, 1]: g lies in their convex hull, so when all of them
+    // are clearly of one sign g has no zero there (most intervals whose cells straddle
+    // the iso value), without the critical points and evaluations below.
+    let b = [
+        c.c[0],
+        c.c[0] + c.c[1] / 3.0,
+        c.c[0] + (2.0 * c.c[1] + c.c[2]) / 3.0,
+        c.c[0] + c.c[1] + c.c[2] + c.c[3],
+    ];
+    let margin = 1e-9 * (c.c[0].abs() + c.c[1].abs() + c.c[2].abs() + c.c[3].abs());
+    if b.iter().all(|&x| x > margin) || b.iter().all(|&x| x < -margin) {
+        return None;
+    }
+    // Where the weights vanish (outer support boundary) g is zero without a surface.
+    let wscale = c.weight.iter().map(|x| x.abs()).sum::<f64>();
+    let real_zero = |x: f64| c.weight_at(x) > 1e-7 * wscale;
+    let mut g0 = c.eval(0.0);
+    if g0 == 0.0 {
+        if real_zero(0.0) {
+            return Some(0.0);
+        }
+        g0 = c.eval(1e-9);
+        if g0 == 0.0 {
+            return None;
+        }
+    }
+    // Monotone pieces between the critical points.
+    let mut cuts = [0.0, 1.0, 1.0, 1.0];
+    let mut n = 1;
+    let (qa, qb, qc) = (3.0 * c.c[3], 2.0 * c.c[2], c.c[1]);
+    let scale = qa.abs() + qb.abs() + qc.abs();
+    let mut roots = [f64::NAN; 2];
+    if qa.abs() <= 1e-14 * scale {
+        if qb != 0.0 {
+            roots[0] = -qc / qb;
+        }
+    } else {
+        let disc = qb * qb - 4.0 * qa * qc;
+        if disc >= 0.0 {
+            let q = -0.5 * (qb + qb.signum() * disc.sqrt());
+            roots[0] = q / qa;
+            if q != 0.0 {
+                roots[1] = qc / q;
+            }
+        }
+    }
+    if roots[0] > roots[1] {
+        roots.swap(0, 1);
+    }
+    for x in roots {
+        if x > 0.0 && x < 1.0 {
+            cuts[n] = x;
+            n += 1;
+        }
+    }
+    cuts[n] = 1.0;
+    let mut xa = 0.0;
+    let mut ga = g0;
+    for &xb in &cuts[1..=n] {
+        if xb <= xa {
+            continue;
+        }
+        let gb = c.eval(xb);
+        if gb == 0.0 {
+            if real_zero(xb) {
+                return Some(xb);
+            }
+            xa = xb;
+            continue;
+        }
+        if (ga < 0.0) != (gb < 0.0) {
+            // g is monotone on [xa, xb]: Newton steps kept inside the shrinking bracket
+            // (bisection where a step would leave it), to round-off.
+            let (mut lo, mut hi) = (xa, xb);
+            let mut x = 0.5 * (lo + hi);
+            for _ in 0..100 {
+                let gm = c.eval(x);
+                if gm == 0.0 {
+                    if real_zero(x) {
+                        return Some(x);
+                    }
+                    break;
+                }
+                if (gm < 0.0) == (ga < 0.0) {
+                    lo = x;
+                } else {
+                    hi = x;
+                }
+                let dg = c.slope(x);
+                let newton = x - gm / dg;
+                let next = if newton > lo && newton < hi {
+                    newton
+                } else {
+                    0.5 * (lo + hi)
+                };
+                if next <= lo || next >= hi || (next - x).abs() <= 4.0 * f64::EPSILON {
+                    x = next.clamp(lo, hi);
+                    break;
+                }
+                x = next;
+            }
+            if real_zero(x) {
+                return Some(x);
+            }
+        }
+        xa = xb;
+        ga = gb;
+    }
+    None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cubic_from_roots(r: [f64; 3], scale: f64) -> Cubic {
+        // scale·(x − r0)(x − r1)(x − r2), weights constant 1.
+        let [a, b, c] = r;
+        Cubic {
+            c: [
+                -scale * a * b * c,
+                scale * (a * b + a * c + b * c),
+                -scale * (a + b + c),
+                scale,
+            ],
+            weight: [1.0, 0.0, 0.0, 0.0],
+            any_above: true,
+            any_below: true,
+        }
+    }
+
+    #[test]
+    fn first_root_of_cubics() {
+        for (roots, want) in [
+            ([0.3, 0.5, 0.9], Some(0.3)),
+            ([-1.0, 0.7, 2.0], Some(0.7)),
+            ([-1.0, 1.5, 2.0], None),
+            ([0.25, 0.2500001, 3.0], Some(0.25)), // two close roots: the first
+        ] {
+            for scale in [1.0, -3.0, 1e-6] {
+                let got = first_root(&cubic_from_roots(roots, scale));
+                match (got, want) {
+                    (Some(g), Some(w)) => assert!((g - w).abs() < 1e-9, "{roots:?}: {g} vs {w}"),
+                    (None, None) => {}
+                    _ => panic!("{roots:?} scale {scale}: got {got:?}, want {want:?}"),
+                }
+            }
+        }
+        // A zero where the weights vanish (outer support boundary) is not a surface.
+        let mut c = cubic_from_roots([0.0, 5.0, 6.0], 1.0);
+        c.weight = [0.0, 1.0, 0.0, 0.0];
+        assert_eq!(first_root(&c), None);
+    }
+}

@@ -1,0 +1,312 @@
+//! Sampling strategies along one ray: `uniform`, `paper`, `bisect`, `exact`
+//! (see `docs/design.md`, "Sampling strategies").
+//!
+//! All strategies walk the regions front to back ([`Volume::segments`]) and skip a region
+//! whose value bounds miss the transfer function's non-zero band. A skipped region still
+//! tells on which side of the band the field is there: when the last sample before it lies
+//! on the other side, the band was crossed in between and is searched for there, so
+//! skipping never loses a crossing.
+//!
+//! The files follow the algorithms, because that is what one reads or changes at a time;
+//! what every strategy shares stays here, once:
+//!
+//! - here: the public types ([`Strategy`], [`Params`], [`Stats`], [`Event`], [`IsoHit`]),
+//!   the limits, and [`Tracer`] with the per-segment bookkeeping every walk uses (clipping
+//!   to the active box, counting and logging a segment, probing a point during refinement)
+//!   and the bisection depth that `iso` and `dvr` both refine to under `bisect`;
+//! - `positions`: where the samples of one region segment go (`uniform`'s fixed step carried
+//!   from region to region, `paper`/`bisect` interval midpoints);
+//! - `iso`: iso mode ([`Tracer::iso`], [`Tracer::iso_occluded`]) and its sample-based
+//!   search for `uniform`, `paper` and `bisect`: bracket a crossing, then narrow it;
+//! - `exact`: the `exact` iso search, a cubic per interval between lattice planes and its
+//!   first root ([`first_root`]);
+//! - `dvr`: direct volume rendering ([`Tracer::dvr`], [`Tracer::transmittance`]) and
+//!   `bisect`'s search for the band between two samples.
+//!
+//! Every strategy is a method of the one [`Tracer`] (the files add `impl Tracer` blocks), so
+//! the scratch stack, counters and log have a single owner and the skip bookkeeping a single
+//! copy; the strategy is picked by matching on [`Strategy`], not through a trait per strategy.
+
+use std::fmt;
+use std::str::FromStr;
+
+use serde::{Deserialize, Serialize};
+
+use crate::reconstruct::Eval;
+use crate::transfer::PreIntegrated;
+use crate::transfer::{Mode, Transfer};
+use crate::volume::Volume;
+
+mod dvr;
+mod exact;
+mod iso;
+mod positions;
+
+pub use exact::first_root;
+
+/// Smallest bisection interval of `bisect`, in cell widths.
+pub const BISECT_RESOLUTION: f64 = 0.005;
+
+/// Sampling strategy along a ray (see `docs/design.md`, "Sampling strategies").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Strategy {
+    /// Fixed step in units of the local cell width.
+    Uniform,
+    /// ExaBricks adaptive sampling at interval midpoints.
+    Paper,
+    /// Adaptive sampling plus bisection into the transfer function's band.
+    Bisect,
+    /// Root finding on the trilinear cubic per dual cell (iso mode).
+    Exact,
+}
+
+impl Strategy {
+    pub const ALL: [Strategy; 4] = [
+        Strategy::Uniform,
+        Strategy::Paper,
+        Strategy::Bisect,
+        Strategy::Exact,
+    ];
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Strategy::Uniform => "uniform",
+            Strategy::Paper => "paper",
+            Strategy::Bisect => "bisect",
+            Strategy::Exact => "exact",
+        }
+    }
+}
+
+impl fmt::Display for Strategy {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl FromStr for Strategy {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Strategy::ALL
+            .into_iter()
+            .find(|m| m.as_str() == s)
+            .ok_or_else(|| {
+                format!("unknown strategy `{s}`: expected uniform, paper, bisect or exact")
+            })
+    }
+}
+
+/// What a ray needs to know about the volume's transfer and sampling.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Params {
+    pub strategy: Strategy,
+    /// Step in units of the local cell width.
+    pub step: f64,
+    pub tf: Transfer,
+    /// Field of the iso value / transfer function.
+    pub field: usize,
+    /// Field that drives the colour.
+    pub colour_field: Option<usize>,
+    /// Reference length of the transfer function's opacity (world units).
+    pub delta0: f64,
+    /// Local box holding every region that can contribute (rays are clipped to it);
+    /// `None`: no clipping. See [`Params::clip_to_active`].
+    pub clip: Option<([f64; 3], [f64; 3])>,
+    /// Pre-integrated dvr opacity (`None`: point-sampled opacity with the usual correction).
+    pub preintegrated: Option<PreIntegrated>,
+}
+
+impl Params {
+    pub fn mode(&self) -> Mode {
+        self.tf.mode
+    }
+
+    /// Sets [`Params::clip`] to the bounding box of the regions whose value range can
+    /// contribute (contains iso / meets the band). Everything outside it is skipped anyway;
+    /// the strategies that track the side of skipped space take an entry sample in the first
+    /// region they process, so nothing is lost by starting there.
+    pub fn clip_to_active(&mut self, vol: &Volume) {
+        let tf = self.tf;
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for (r, reg) in vol.regions().enumerate() {
+            let [mn, mx] = vol.range(r, self.field);
+            if tf.may_contribute(mn, mx) {
+                for a in 0..3 {
+                    lo[a] = lo[a].min(reg.min[a]);
+                    hi[a] = hi[a].max(reg.max[a]);
+                }
+            }
+        }
+        // Nothing can contribute: an empty box (min > max) that no ray enters.
+        self.clip = Some((lo, hi));
+    }
+}
+
+/// Work counters of one or more rays (summed in integers: deterministic).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Stats {
+    /// Reconstructions (samples, refinement probes, exact's dual-cell cubics).
+    pub samples: u64,
+    pub segments: u64,
+    pub skipped: u64,
+    /// `exact` segments through a region with more than [`MAX_LATTICES`] distinct cell
+    /// lattices: the extra lattices' planes are not cut there, so the search is only
+    /// approximately exact (reported, never silent; nested grids of one refinement ratio
+    /// never produce such a region).
+    pub inexact_segments: u64,
+    /// Segments whose sample sequence stopped at [`MAX_POSITIONS_PER_SEGMENT`] or because
+    /// the step fell below the resolution of `t` (`t + dt == t`).
+    pub truncated_segments: u64,
+}
+
+impl std::ops::AddAssign for Stats {
+    fn add_assign(&mut self, o: Stats) {
+        self.samples += o.samples;
+        self.segments += o.segments;
+        self.skipped += o.skipped;
+        self.inexact_segments += o.inexact_segments;
+        self.truncated_segments += o.truncated_segments;
+    }
+}
+
+/// Most distinct cell lattices `exact` cuts planes for in one region.
+pub const MAX_LATTICES: usize = 8;
+
+/// Most sample positions in one region segment. With the smallest step
+/// (`view_state::MIN_STEP`, a thousand per cell width) that is a thousand cells along one
+/// segment; bricks are far smaller, so only a degenerate step or geometry reaches it.
+pub const MAX_POSITIONS_PER_SEGMENT: u32 = 1 << 20;
+
+/// What `--pixel` prints.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[serde(tag = "event", rename_all = "snake_case")]
+pub enum Event {
+    Segment {
+        region: u32,
+        t0: f64,
+        t1: f64,
+        min: f32,
+        max: f32,
+        skipped: bool,
+    },
+    Sample {
+        t: f64,
+        value: Option<f64>,
+        alpha: f64,
+    },
+    Interval {
+        t0: f64,
+        t1: f64,
+        may_cross: bool,
+    },
+    Hit {
+        t: f64,
+        value: Option<f64>,
+        /// Unit shading normal (world), filled in by the ray caster that shades the hit.
+        #[serde(skip_serializing_if = "Option::is_none")]
+        normal: Option<[f64; 3]>,
+    },
+}
+
+/// First iso-surface crossing along a ray.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct IsoHit {
+    pub t: f64,
+    /// Local frame.
+    pub p: [f64; 3],
+    /// Reconstruction at the hit (`None` only where the weights vanish).
+    pub eval: Option<Eval>,
+}
+
+#[inline]
+fn at(o: &[f64; 3], d: &[f64; 3], t: f64) -> [f64; 3] {
+    std::array::from_fn(|a| o[a] + t * d[a])
+}
+
+/// Casts rays through one volume with one set of parameters; keeps its scratch space.
+pub struct Tracer<'v> {
+    pub vol: &'v Volume<'v>,
+    pub params: Params,
+    pub stats: Stats,
+    /// Set to `Some` to record what the next rays do (`--pixel`).
+    pub log: Option<Vec<Event>>,
+    stack: Vec<(u32, f64, f64)>,
+    /// Region of the last refinement probe.
+    probe_hint: Option<u32>,
+}
+
+impl<'v> Tracer<'v> {
+    pub fn new(vol: &'v Volume<'v>, params: Params) -> Self {
+        Tracer {
+            vol,
+            params,
+            stats: Stats::default(),
+            log: None,
+            stack: Vec::with_capacity(64),
+            probe_hint: None,
+        }
+    }
+
+    /// `[t0, t1]` clipped to the active box.
+    fn clip(&self, o: &[f64; 3], d: &[f64; 3], t0: f64, t1: f64) -> Option<(f64, f64)> {
+        match &self.params.clip {
+            None => Some((t0, t1)),
+            Some((lo, hi)) => {
+                if (0..3).any(|a| lo[a] > hi[a]) {
+                    return None;
+                }
+                crate::traverse::ray_box(lo, hi, o, &crate::traverse::inverse(d), t0, t1)
+            }
+        }
+    }
+
+    fn record(&mut self, e: Event) {
+        if let Some(l) = &mut self.log {
+            l.push(e);
+        }
+    }
+
+    /// Counts a region segment the ray enters (and whether its bounds let it be skipped)
+    /// and logs it for `--pixel`.
+    fn enter_segment(&mut self, seg: &crate::traverse::Segment, skipped: bool) {
+        self.stats.segments += 1;
+        if skipped {
+            self.stats.skipped += 1;
+        }
+        self.record(Event::Segment {
+            region: seg.region,
+            t0: seg.t0,
+            t1: seg.t1,
+            min: seg.min,
+            max: seg.max,
+            skipped,
+        });
+    }
+
+    /// Value at any local point (probe during refinement, regions found by KD descent).
+    fn probe(&mut self, p: [f64; 3]) -> Option<f64> {
+        self.stats.samples += 1;
+        let vol = self.vol;
+        // Refinement probes cluster: try the region of the previous probe before a KD descent.
+        let r = match self.probe_hint {
+            Some(r)
+                if (r as usize) < vol.region_count() && {
+                    let g = vol.region(r as usize);
+                    (0..3).all(|a| p[a] >= g.min[a] && p[a] < g.max[a])
+                } =>
+            {
+                r
+            }
+            _ => vol.region_at(p)?,
+        };
+        self.probe_hint = Some(r);
+        vol.eval_value(r as usize, p, self.params.field)
+    }
+}
+
+/// Bisection depth that narrows `len` (world units) to `BISECT_RESOLUTION` cells of width `w`.
+fn bisect_depth(len: f64, w: f64) -> u32 {
+    let r = (len / w / BISECT_RESOLUTION).max(1.0);
+    (r.log2().ceil() as u32).clamp(1, 40)
+}
