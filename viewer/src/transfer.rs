@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum Mode {
-    /// Opaque surface at the iso value, Phong-shaded from the analytic gradient.
+    /// Opaque surface at the iso value, Phong-shaded with smooth normals (central differences of the reconstruction).
     Iso,
     /// Semi-transparent Gaussian band around the iso value (direct volume rendering).
     Dvr,
