@@ -1,6 +1,6 @@
-//! The repository holds every document it refers to: each `*.md` path named in the README,
-//! in `docs/` or in a source comment exists (relative to the repository root, or to the
-//! referring document's folder).
+//! The documents stay true to the code: each `*.md` path named in the README, in `docs/` or
+//! in a source comment exists (relative to the repository root, or to the referring
+//! document's folder), and the README names every command-line flag the programs accept.
 
 mod util;
 
@@ -75,4 +75,83 @@ fn reference_scan_finds_paths_in_prose_and_links() {
         md_references("see DESIGN.md, and [x](docs/design.md#a-b) or `docs/y.md`."),
         vec!["DESIGN.md", "docs/design.md", "docs/y.md"]
     );
+}
+
+/// Long flags (`--name`) in a `--help` text, except the ones clap adds to every command.
+fn long_flags(help: &str) -> Vec<String> {
+    let mut flags: Vec<String> = help
+        .split(|c: char| c.is_whitespace() || ",=[]<>".contains(c))
+        .filter(|w| w.starts_with("--") && w[2..].starts_with(|c: char| c.is_ascii_lowercase()))
+        .map(|w| {
+            w.trim_end_matches(|c: char| !c.is_ascii_alphanumeric())
+                .to_string()
+        })
+        .filter(|w| w != "--help" && w != "--version")
+        .collect();
+    flags.sort();
+    flags.dedup();
+    flags
+}
+
+/// Whether `text` holds `flag` as a whole word (`--iso` must not be found inside `--iso-field`).
+fn names_flag(text: &str, flag: &str) -> bool {
+    text.match_indices(flag).any(|(i, _)| {
+        !text[i + flag.len()..].starts_with(|c: char| c.is_ascii_alphanumeric() || c == '-')
+    })
+}
+
+/// A user reads the README, not `--help`: a flag added to a command but not to the README is
+/// a feature nobody finds. `-o`/`--output` may be written in its short form.
+#[test]
+fn readme_names_every_flag_of_every_command() {
+    let readme = std::fs::read_to_string(util::root().join("README.md")).expect("README.md");
+    let commands: [(&str, &[&str]); 9] = [
+        ("qbricks-bake", &["bake"]),
+        ("qbricks-bake", &["synth"]),
+        ("qbricks-bake", &["inspect"]),
+        ("qbricks-bake", &["accuracy"]),
+        ("qbricks-view", &[]),
+        ("qbricks-view", &["render"]),
+        ("qbricks-view", &["probe"]),
+        ("qbricks-view", &["info"]),
+        ("qbricks-view", &["bench"]),
+    ];
+    let mut missing = Vec::new();
+    let mut checked = 0;
+    for (bin, sub) in commands {
+        let out = std::process::Command::new(util::bin(bin))
+            .args(sub)
+            .arg("--help")
+            .output()
+            .expect("run --help");
+        assert!(out.status.success(), "{bin} {sub:?} --help failed");
+        for flag in long_flags(&String::from_utf8_lossy(&out.stdout)) {
+            checked += 1;
+            let short_output = flag == "--output" && readme.contains(" -o ");
+            if !names_flag(&readme, &flag) && !short_output {
+                missing.push(format!("{bin} {} {flag}", sub.join(" ")));
+            }
+        }
+    }
+    assert!(
+        checked > 20,
+        "only {checked} flags found: the --help scan is broken"
+    );
+    assert!(
+        missing.is_empty(),
+        "README.md does not mention:\n{}",
+        missing.join("\n")
+    );
+}
+
+#[test]
+fn flag_scan_finds_long_flags_and_whole_words() {
+    assert_eq!(
+        long_flags(
+            "  -o, --output <OUTPUT>  out\n      --iso-field <F>  [default: q]\n  -h, --help"
+        ),
+        vec!["--iso-field", "--output"]
+    );
+    assert!(names_flag("use --iso 3", "--iso"));
+    assert!(!names_flag("use --iso-field q", "--iso"));
 }
