@@ -18,6 +18,9 @@ use crate::levels::assign_levels;
 use crate::nonfinite::{self, CellValue};
 use crate::regions::{self, Bbox};
 
+/// Re-exported from [`crate::error`], where it lives since [`crate::levels`] returns it too.
+pub use crate::error::BakeError;
+
 /// Default cap on brick edge length (cells).
 pub const DEFAULT_MAX_BRICK: u32 = 8;
 /// Default cap on the number of input cells (tiles counted as the voxels they cover).
@@ -95,64 +98,6 @@ pub struct BakeSummary {
     /// Non-fatal problems (non-finite values replaced, …), one line each.
     #[serde(skip)]
     pub warnings: Vec<String>,
-}
-
-/// Why a bake was refused.
-#[derive(Debug, thiserror::Error)]
-pub enum BakeError {
-    #[error("no grids to bake: the input has no vec3 or scalar grid")]
-    NoGrids,
-    #[error("no grid named \"{name}\" (grids: {available})")]
-    GridNotFound { name: String, available: String },
-    #[error("grid \"{grid}\" has a value type that cannot be baked (expected vec3s, vec3d, float or double)")]
-    UnsupportedGrid { grid: String },
-    #[error("several scalar grids ({names}) and no vec3 grid: choose one with --grid")]
-    AmbiguousScalar { names: String },
-    #[error("cannot bake vec3 grids and scalar grids together: {vector} vs {scalar}")]
-    MixedKinds { vector: String, scalar: String },
-    #[error(
-        "scalar grid \"{grid}\" is baked as its own field; --fields applies to velocity grids only"
-    )]
-    FieldsForScalar { grid: String },
-    #[error("no fields requested")]
-    NoFields,
-    #[error("--fields: field \"{0}\" is requested twice")]
-    DuplicateField(String),
-    #[error("--fields: no scalar grid named \"{name}\" (scalar grids: {available})")]
-    FieldGridNotFound { name: String, available: String },
-    #[error("--grid names several scalar grids ({names}): a scalar grid is baked as its own field, one per bake (or bake the velocity with --fields q,speed,<grid>,…)")]
-    SeveralScalarGrids { names: String },
-    #[error("grid \"{grid}\": field \"{field}\": {count} values are not finite as 32-bit floats (first at voxel {first:?}); refused because of --strict")]
-    NonFiniteDerived {
-        grid: String,
-        field: String,
-        count: u64,
-        first: [i32; 3],
-    },
-    #[error("grid \"{grid}\": transform is not usable: {found}")]
-    BadTransform { grid: String, found: String },
-    #[error("grid \"{grid}\": voxels must be cubes, found voxel size {voxel_size:?}")]
-    NonCubicVoxels { grid: String, voxel_size: [f64; 3] },
-    #[error("grid \"{grid}\": voxel size {voxel_size} is not the finest voxel size {finest} times a power of two")]
-    NonPowerOfTwo {
-        grid: String,
-        voxel_size: f64,
-        finest: f64,
-    },
-    #[error("{cells} input cells (tiles counted as voxels) exceed the limit of {limit}")]
-    TooManyCells { cells: u64, limit: u64 },
-    #[error("grid \"{grid}\": {count} non-finite values (first at voxel {first:?}); refused because of --strict")]
-    NonFinite {
-        grid: String,
-        count: u64,
-        first: [i32; 3],
-    },
-    #[error("--max-brick must be at least 1, found {0}")]
-    BadMaxBrick(u32),
-    #[error("grids have no active cells")]
-    Empty,
-    #[error("thread pool: {0}")]
-    ThreadPool(String),
 }
 
 /// Bakes `grids` into a brick file.

@@ -2,7 +2,7 @@
 //! size times a power of two. Transforms are uniform scale plus translation (the grid type
 //! cannot express rotation or shear; the reader refuses those).
 
-use crate::bake::BakeError;
+use crate::error::BakeError;
 use crate::grid::Transform;
 
 /// Relative tolerance when comparing voxel sizes.

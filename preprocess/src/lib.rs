@@ -8,6 +8,7 @@ pub mod bake;
 pub mod bricks;
 pub mod cells;
 pub mod derive;
+pub mod error;
 pub mod fields;
 pub mod grid;
 pub mod inputs;
