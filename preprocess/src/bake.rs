@@ -126,37 +126,6 @@ pub fn bake_with_progress(
     }
 }
 
-fn grid_name(g: &AnyGrid) -> &str {
-    match g {
-        AnyGrid::Float(g) => &g.name,
-        AnyGrid::Double(g) => &g.name,
-        AnyGrid::Vec3s(g) => &g.name,
-        AnyGrid::Vec3d(g) => &g.name,
-    }
-}
-
-fn grid_transform(g: &AnyGrid) -> Transform {
-    match g {
-        AnyGrid::Float(g) => g.transform,
-        AnyGrid::Double(g) => g.transform,
-        AnyGrid::Vec3s(g) => g.transform,
-        AnyGrid::Vec3d(g) => g.transform,
-    }
-}
-
-fn grid_voxels(g: &AnyGrid) -> u64 {
-    match g {
-        AnyGrid::Float(g) => g.active_voxel_count(),
-        AnyGrid::Double(g) => g.active_voxel_count(),
-        AnyGrid::Vec3s(g) => g.active_voxel_count(),
-        AnyGrid::Vec3d(g) => g.active_voxel_count(),
-    }
-}
-
-fn is_vector(g: &AnyGrid) -> bool {
-    matches!(g, AnyGrid::Vec3s(_) | AnyGrid::Vec3d(_))
-}
-
 /// Kind of an input grid, for selection.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum GridKind {
@@ -241,12 +210,12 @@ fn select(grids: Vec<AnyGrid>, names: &[String]) -> Result<Vec<AnyGrid>, BakeErr
     let kinds: Vec<(&str, GridKind)> = grids
         .iter()
         .map(|g| {
-            let k = if is_vector(g) {
+            let k = if g.is_vector() {
                 GridKind::Vector
             } else {
                 GridKind::Scalar
             };
-            (grid_name(g), k)
+            (g.name(), k)
         })
         .collect();
     let keep = select_grids(&kinds, names)?;
@@ -338,16 +307,16 @@ fn run(
     }
     let (extra_grids, grids): (Vec<AnyGrid>, Vec<AnyGrid>) = grids
         .into_iter()
-        .partition(|g| !is_vector(g) && extra_names.iter().any(|n| n == grid_name(g)));
+        .partition(|g| !g.is_vector() && extra_names.iter().any(|n| n == g.name()));
     if let Some(missing) = extra_names
         .iter()
-        .find(|n| !extra_grids.iter().any(|g| grid_name(g) == n.as_str()))
+        .find(|n| !extra_grids.iter().any(|g| g.name() == n.as_str()))
     {
         let mut available: Vec<&str> = grids
             .iter()
             .chain(&extra_grids)
-            .filter(|g| !is_vector(g))
-            .map(grid_name)
+            .filter(|g| !g.is_vector())
+            .map(AnyGrid::name)
             .collect();
         available.sort_unstable();
         available.dedup();
@@ -364,13 +333,10 @@ fn run(
     if grids.is_empty() {
         return Err(BakeError::NoGrids);
     }
-    let named: Vec<(&str, Transform)> = grids
-        .iter()
-        .map(|g| (grid_name(g), grid_transform(g)))
-        .collect();
+    let named: Vec<(&str, Transform)> = grids.iter().map(|g| (g.name(), g.transform())).collect();
     let (levels, widths) = assign_levels(&named)?;
-    let input_cells: u64 = grids.iter().map(grid_voxels).sum();
-    let extra_cells: u64 = extra_grids.iter().map(grid_voxels).sum();
+    let input_cells: u64 = grids.iter().map(AnyGrid::active_voxel_count).sum();
+    let extra_cells: u64 = extra_grids.iter().map(AnyGrid::active_voxel_count).sum();
     if input_cells.saturating_add(extra_cells) > opts.max_cells {
         return Err(BakeError::TooManyCells {
             cells: input_cells.saturating_add(extra_cells),
@@ -384,15 +350,15 @@ fn run(
         .iter()
         .zip(&levels)
         .map(|(g, &level)| SourceGrid {
-            name: grid_name(g).to_string(),
-            voxel_size: grid_transform(g).voxel_size,
+            name: g.name().to_string(),
+            voxel_size: g.transform().voxel_size,
             level,
         })
         .collect();
 
     // Cells.
     stage("reading cells");
-    let vector = is_vector(&grids[0]);
+    let vector = grids[0].is_vector();
     let mut input = if vector {
         if let Some(f) = &opts.fields {
             if f.is_empty() {
@@ -406,7 +372,7 @@ fn run(
         });
         Input::Vector(sets, vals, Vec::new())
     } else {
-        let name = grid_name(&grids[0]).to_string();
+        let name = grids[0].name().to_string();
         if opts.fields.is_some() {
             return Err(BakeError::FieldsForScalar { grid: name });
         }
@@ -840,7 +806,7 @@ fn extra_fields(
 ) -> Result<Vec<ExtraGrid>, BakeError> {
     let mut out = Vec::with_capacity(names.len());
     for name in names {
-        let mine: Vec<&AnyGrid> = grids.iter().filter(|g| grid_name(g) == name).collect();
+        let mine: Vec<&AnyGrid> = grids.iter().filter(|g| g.name() == name).collect();
         let mut sets = Vec::with_capacity(mine.len());
         let mut vals = Vec::with_capacity(mine.len());
         let mut bgs = Vec::with_capacity(mine.len());

@@ -106,3 +106,53 @@ pub enum AnyGrid {
     Vec3s(Grid<[f32; 3]>),
     Vec3d(Grid<[f64; 3]>),
 }
+
+/// Evaluates `$body` with `$g` bound to the typed grid inside whichever variant `$any` is:
+/// for code that does not depend on the value type.
+macro_rules! with_grid {
+    ($any:expr, $g:ident => $body:expr) => {
+        match $any {
+            AnyGrid::Float($g) => $body,
+            AnyGrid::Double($g) => $body,
+            AnyGrid::Vec3s($g) => $body,
+            AnyGrid::Vec3d($g) => $body,
+        }
+    };
+}
+
+impl AnyGrid {
+    pub fn name(&self) -> &str {
+        with_grid!(self, g => &g.name)
+    }
+
+    pub fn transform(&self) -> Transform {
+        with_grid!(self, g => g.transform)
+    }
+
+    /// Active voxels, tiles counted as the voxels they cover.
+    pub fn active_voxel_count(&self) -> u64 {
+        with_grid!(self, g => g.active_voxel_count())
+    }
+
+    pub fn leaf_count(&self) -> usize {
+        with_grid!(self, g => g.leaves.len())
+    }
+
+    pub fn tile_count(&self) -> usize {
+        with_grid!(self, g => g.tiles.len())
+    }
+
+    /// A vec3 grid (single or double precision).
+    pub fn is_vector(&self) -> bool {
+        matches!(self, AnyGrid::Vec3s(_) | AnyGrid::Vec3d(_))
+    }
+
+    /// Gives the grid another name and transform, keeping its tree: how an instanced grid
+    /// (one that shares another grid's tree in the file) is made from its parent.
+    pub fn rename(&mut self, name: &str, transform: Transform) {
+        with_grid!(self, g => {
+            g.name = name.to_string();
+            g.transform = transform;
+        })
+    }
+}

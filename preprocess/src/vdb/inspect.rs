@@ -50,12 +50,7 @@ pub fn report(file: &VdbFile) -> Result<Report, VdbError> {
             AnyGrid::Vec3s(g) => stats(g, |v| v.map(f64::from), 3),
             AnyGrid::Vec3d(g) => stats(g, |v| *v, 3),
         };
-        let transform = match &grid {
-            AnyGrid::Float(g) => g.transform,
-            AnyGrid::Double(g) => g.transform,
-            AnyGrid::Vec3s(g) => g.transform,
-            AnyGrid::Vec3d(g) => g.transform,
-        };
+        let transform = grid.transform();
         let vector = d.value_type.is_vector();
         let some = stats.count > 0;
         let mean = (0..if vector { 3 } else { 1 })

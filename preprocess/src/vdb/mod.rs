@@ -412,7 +412,7 @@ impl VdbFile {
             let decoded = match (g.instance_of, g.transform) {
                 (Some(p), Some(t)) if p < i && self.grids[p].value_type == g.value_type => {
                     let mut copy = out[p].clone();
-                    rename(&mut copy, &g.name, t);
+                    copy.rename(&g.name, t);
                     copy
                 }
                 _ => self.read_grid(i)?,
@@ -520,19 +520,6 @@ fn scan_grid(
     // OpenVDB does not record where buffers start in a stream; any offset inside the grid
     // is fine for us.
     Ok((start as u64, cur.pos() as u64))
-}
-
-fn rename(grid: &mut AnyGrid, name: &str, transform: Transform) {
-    fn set<V>(g: &mut Grid<V>, name: &str, transform: Transform) {
-        g.name = name.to_string();
-        g.transform = transform;
-    }
-    match grid {
-        AnyGrid::Float(g) => set(g, name, transform),
-        AnyGrid::Double(g) => set(g, name, transform),
-        AnyGrid::Vec3s(g) => set(g, name, transform),
-        AnyGrid::Vec3d(g) => set(g, name, transform),
-    }
 }
 
 fn read<V: VdbValue>(

@@ -197,7 +197,7 @@ pub fn write_vdb_with(
         }
         .map_err(|reason| WriteError::InvalidGrid {
             path: path.to_path_buf(),
-            grid: grid_name(grid).to_string(),
+            grid: grid.name().to_string(),
             reason,
         })?;
         bodies.push(body);
@@ -253,15 +253,6 @@ pub fn write_vdb_with(
     Ok(pos)
 }
 
-fn grid_name(grid: &AnyGrid) -> &str {
-    match grid {
-        AnyGrid::Float(g) => &g.name,
-        AnyGrid::Double(g) => &g.name,
-        AnyGrid::Vec3s(g) => &g.name,
-        AnyGrid::Vec3d(g) => &g.name,
-    }
-}
-
 fn tree_type(grid: &AnyGrid) -> &'static str {
     match grid {
         AnyGrid::Float(_) => f32::TREE_TYPE,
@@ -276,13 +267,13 @@ fn tree_type(grid: &AnyGrid) -> &'static str {
 fn unique_names(grids: &[AnyGrid]) -> Vec<String> {
     let mut count: BTreeMap<&str, usize> = BTreeMap::new();
     for g in grids {
-        *count.entry(grid_name(g)).or_default() += 1;
+        *count.entry(g.name()).or_default() += 1;
     }
     let mut used = std::collections::BTreeSet::new();
     grids
         .iter()
         .map(|g| {
-            let base = grid_name(g);
+            let base = g.name();
             let mut name = base.to_string();
             if base.is_empty() || count[base] > 1 {
                 name = format!("{base}\x1e0");
@@ -319,12 +310,7 @@ fn write_atomically(
 fn uuid(grids: &[AnyGrid], names: &[String]) -> String {
     let mut text = String::new();
     for (g, name) in grids.iter().zip(names) {
-        let (t, leaves, tiles) = match g {
-            AnyGrid::Float(g) => (g.transform, g.leaves.len(), g.tiles.len()),
-            AnyGrid::Double(g) => (g.transform, g.leaves.len(), g.tiles.len()),
-            AnyGrid::Vec3s(g) => (g.transform, g.leaves.len(), g.tiles.len()),
-            AnyGrid::Vec3d(g) => (g.transform, g.leaves.len(), g.tiles.len()),
-        };
+        let (t, leaves, tiles) = (g.transform(), g.leaf_count(), g.tile_count());
         text.push_str(&format!(
             "{name}/{}/{:?}/{:?}/{leaves}/{tiles};",
             tree_type(g),
