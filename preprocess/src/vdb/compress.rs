@@ -9,27 +9,9 @@
 use std::borrow::Cow;
 use std::io::Read;
 
+use super::codec::CompressionFlags;
 use super::cursor::Cursor;
 use super::error::{ErrorKind, RawError, RawResult};
-
-pub const COMPRESS_ZIP: u32 = 0x1;
-pub const COMPRESS_ACTIVE_MASK: u32 = 0x2;
-pub const COMPRESS_BLOSC: u32 = 0x4;
-
-/// Names of the set compression flags, for reports.
-pub fn flag_names(flags: u32) -> Vec<&'static str> {
-    let mut out = Vec::new();
-    if flags & COMPRESS_ZIP != 0 {
-        out.push("zip");
-    }
-    if flags & COMPRESS_BLOSC != 0 {
-        out.push("blosc");
-    }
-    if flags & COMPRESS_ACTIVE_MASK != 0 {
-        out.push("active_mask");
-    }
-    out
-}
 
 /// One data chunk located in the file but not decoded yet, so that decoding can run in
 /// parallel once the sequential walk over the file has found every chunk.
@@ -65,7 +47,7 @@ impl<'a> LocatedChunk<'a> {
 /// Finds one data chunk of `nbytes` decoded bytes (OpenVDB `readData`) and moves past it.
 pub(crate) fn locate_chunk<'a>(
     cur: &mut Cursor<'a>,
-    flags: u32,
+    flags: CompressionFlags,
     nbytes: usize,
     what: &'static str,
     count: usize,
@@ -73,7 +55,7 @@ pub(crate) fn locate_chunk<'a>(
     let expected = || format!("{count} values");
     let start = cur.pos();
     let located = |chunk| LocatedChunk { chunk, start, what };
-    if flags & (COMPRESS_BLOSC | COMPRESS_ZIP) == 0 {
+    if !flags.contains(CompressionFlags::BLOSC) && !flags.contains(CompressionFlags::ZIP) {
         return Ok(located(Chunk::Raw(cur.take_as(nbytes, what, expected)?)));
     }
     let size = cur.i64(what)?;
@@ -103,7 +85,7 @@ pub(crate) fn locate_chunk<'a>(
         ));
     }
     let src = cur.take(len, what)?;
-    Ok(located(if flags & COMPRESS_BLOSC != 0 {
+    Ok(located(if flags.contains(CompressionFlags::BLOSC) {
         Chunk::Blosc(src, nbytes)
     } else {
         Chunk::Zip(src, nbytes)

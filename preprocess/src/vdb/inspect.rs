@@ -2,7 +2,7 @@
 
 use serde::Serialize;
 
-use super::{compress, MetaValue, VdbError, VdbFile};
+use super::{MetaValue, VdbError, VdbFile};
 use crate::grid::{AnyGrid, Grid};
 
 /// The whole report (`--json` output).
@@ -62,7 +62,7 @@ pub fn report(file: &VdbFile) -> Result<Report, VdbError> {
             class: d.class().to_string(),
             voxel_size: transform.voxel_size,
             translation: transform.translation,
-            compression: compress::flag_names(d.compression),
+            compression: d.compression_flags().names(),
             half_float: d.half_float,
             active_voxels: stats.count,
             bbox_min: some.then_some(stats.lo),

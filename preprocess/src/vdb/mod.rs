@@ -19,6 +19,7 @@
 //! # Ok(()) }
 //! ```
 
+pub mod codec;
 pub mod compress;
 mod cursor;
 pub mod error;
@@ -32,16 +33,16 @@ use std::path::Path;
 
 use format::input::{read_whole, Limits};
 
+pub use codec::MAGIC;
 pub use error::{ErrorKind, VdbError};
 pub use metadata::{MetaValue, Metadata};
 
 use crate::grid::{AnyGrid, Grid, Transform};
+use codec::{CompressionFlags, VdbValue};
 use cursor::Cursor;
 use error::{RawError, RawResult};
-use tree::{Codec, VdbValue};
+use tree::Codec;
 
-/// OpenVDB's magic number (" BDV" followed by four zero bytes, little endian).
-pub const MAGIC: u64 = 0x5644_4220;
 /// Oldest supported file format version (node mask compression, OpenVDB 3+).
 pub const MIN_FILE_VERSION: u32 = 222;
 /// Newest supported file format version (OpenVDB 12).
@@ -61,10 +62,10 @@ pub enum ValueType {
 impl ValueType {
     fn from_grid_type(t: &str) -> Self {
         match t {
-            "Tree_float_5_4_3" => ValueType::Float,
-            "Tree_double_5_4_3" => ValueType::Double,
-            "Tree_vec3s_5_4_3" => ValueType::Vec3s,
-            "Tree_vec3d_5_4_3" => ValueType::Vec3d,
+            <f32 as VdbValue>::TREE_TYPE => ValueType::Float,
+            <f64 as VdbValue>::TREE_TYPE => ValueType::Double,
+            <[f32; 3] as VdbValue>::TREE_TYPE => ValueType::Vec3s,
+            <[f64; 3] as VdbValue>::TREE_TYPE => ValueType::Vec3d,
             other => ValueType::Unsupported(other.to_string()),
         }
     }
@@ -72,10 +73,10 @@ impl ValueType {
     /// `float`, `double`, `vec3s`, `vec3d`, or the grid type name.
     pub fn name(&self) -> &str {
         match self {
-            ValueType::Float => "float",
-            ValueType::Double => "double",
-            ValueType::Vec3s => "vec3s",
-            ValueType::Vec3d => "vec3d",
+            ValueType::Float => f32::VALUE_TYPE,
+            ValueType::Double => f64::VALUE_TYPE,
+            ValueType::Vec3s => <[f32; 3]>::VALUE_TYPE,
+            ValueType::Vec3d => <[f64; 3]>::VALUE_TYPE,
             ValueType::Unsupported(t) => t,
         }
     }
@@ -99,7 +100,7 @@ pub struct GridDescriptor {
     pub map_type: String,
     /// `None` when the map rotates or shears (reading the grid then fails).
     pub transform: Option<Transform>,
-    /// Compression flags (see [`compress`]); names via [`compress::flag_names`].
+    /// Compression flags as stored; see [`GridDescriptor::compression_flags`].
     pub compression: u32,
     /// Values stored as 16-bit floats.
     pub half_float: bool,
@@ -124,6 +125,11 @@ impl GridDescriptor {
             Some(MetaValue::String(s)) => s,
             _ => "unknown",
         }
+    }
+
+    /// The compression flags, checked when the file was opened (no unknown bits).
+    pub fn compression_flags(&self) -> CompressionFlags {
+        CompressionFlags(self.compression)
     }
 
     /// A MAC grid: vector components on the lower cell faces (see [`crate::derive`]).
@@ -324,7 +330,7 @@ impl VdbFile {
             // A grid's header and tree never extend past its end offset.
             let mut cur = Cursor::new(&data[..g.end_pos as usize], g.grid_pos as usize);
             let compression = cur.u32("grid compression flags")?;
-            if compression & !0x7 != 0 {
+            if !CompressionFlags(compression).is_known() {
                 return Err(RawError::invalid(
                     g.grid_pos as usize,
                     "grid compression flags",
@@ -463,7 +469,7 @@ impl VdbFile {
             }
         }
         let codec = Codec {
-            flags: tree_owner.compression,
+            flags: tree_owner.compression_flags(),
             half: tree_owner.half_float,
         };
         let mut cur = Cursor::new(
@@ -503,7 +509,10 @@ fn scan_grid(
     if instance {
         return Ok((0, cur.pos() as u64));
     }
-    let codec = Codec { flags, half };
+    let codec = Codec {
+        flags: CompressionFlags(flags),
+        half,
+    };
     match ty {
         ValueType::Float => drop(tree::read_tree::<f32>(&mut cur, codec, false)?),
         ValueType::Double => drop(tree::read_tree::<f64>(&mut cur, codec, false)?),

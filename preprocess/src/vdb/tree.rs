@@ -7,104 +7,16 @@
 
 use rayon::prelude::*;
 
-use super::compress::{locate_chunk, LocatedChunk, COMPRESS_ACTIVE_MASK};
+use super::codec::{mask_is_on, CompressionFlags, NodeMeta, VdbValue};
+use super::compress::{locate_chunk, LocatedChunk};
 use super::cursor::Cursor;
 use super::error::{ErrorKind, RawError, RawResult};
 use crate::grid::{Leaf, Tile, LEAF_VOXELS};
 
-/// A value type that can be stored in a grid file.
-pub trait VdbValue: Copy + Default + PartialEq + std::fmt::Debug + Send + Sync + 'static {
-    /// Bytes per value at full precision.
-    const SIZE: usize;
-    /// Bytes per value when the grid is saved as half floats.
-    const HALF_SIZE: usize;
-    fn from_bytes(b: &[u8]) -> Self;
-    fn from_half_bytes(b: &[u8]) -> Self;
-    fn negate(self) -> Self;
-}
-
-fn f32_at(b: &[u8], i: usize) -> f32 {
-    f32::from_le_bytes([b[4 * i], b[4 * i + 1], b[4 * i + 2], b[4 * i + 3]])
-}
-
-fn f64_at(b: &[u8], i: usize) -> f64 {
-    let mut a = [0u8; 8];
-    a.copy_from_slice(&b[8 * i..8 * i + 8]);
-    f64::from_le_bytes(a)
-}
-
-fn half_at(b: &[u8], i: usize) -> half::f16 {
-    half::f16::from_le_bytes([b[2 * i], b[2 * i + 1]])
-}
-
-impl VdbValue for f32 {
-    const SIZE: usize = 4;
-    const HALF_SIZE: usize = 2;
-    fn from_bytes(b: &[u8]) -> Self {
-        f32_at(b, 0)
-    }
-    fn from_half_bytes(b: &[u8]) -> Self {
-        half_at(b, 0).to_f32()
-    }
-    fn negate(self) -> Self {
-        -self
-    }
-}
-
-impl VdbValue for f64 {
-    const SIZE: usize = 8;
-    const HALF_SIZE: usize = 2;
-    fn from_bytes(b: &[u8]) -> Self {
-        f64_at(b, 0)
-    }
-    fn from_half_bytes(b: &[u8]) -> Self {
-        half_at(b, 0).to_f64()
-    }
-    fn negate(self) -> Self {
-        -self
-    }
-}
-
-impl VdbValue for [f32; 3] {
-    const SIZE: usize = 12;
-    const HALF_SIZE: usize = 6;
-    fn from_bytes(b: &[u8]) -> Self {
-        [f32_at(b, 0), f32_at(b, 1), f32_at(b, 2)]
-    }
-    fn from_half_bytes(b: &[u8]) -> Self {
-        [
-            half_at(b, 0).to_f32(),
-            half_at(b, 1).to_f32(),
-            half_at(b, 2).to_f32(),
-        ]
-    }
-    fn negate(self) -> Self {
-        [-self[0], -self[1], -self[2]]
-    }
-}
-
-impl VdbValue for [f64; 3] {
-    const SIZE: usize = 24;
-    const HALF_SIZE: usize = 6;
-    fn from_bytes(b: &[u8]) -> Self {
-        [f64_at(b, 0), f64_at(b, 1), f64_at(b, 2)]
-    }
-    fn from_half_bytes(b: &[u8]) -> Self {
-        [
-            half_at(b, 0).to_f64(),
-            half_at(b, 1).to_f64(),
-            half_at(b, 2).to_f64(),
-        ]
-    }
-    fn negate(self) -> Self {
-        [-self[0], -self[1], -self[2]]
-    }
-}
-
 /// Decoding settings shared by every node of one grid.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Codec {
-    pub flags: u32,
+    pub flags: CompressionFlags,
     pub half: bool,
 }
 
@@ -120,10 +32,6 @@ const ROOT_CHILD_LOG2: u32 = 12; // 4096 voxels per root child
 const INT1_LOG2: u32 = 5; // 32³ entries in an upper internal node
 const INT2_LOG2: u32 = 4; // 16³ entries in a lower internal node
 const LEAF_LOG2: u32 = 3;
-
-fn mask_is_on(mask: &[u64], n: usize) -> bool {
-    (mask[n >> 6] >> (n & 63)) & 1 == 1
-}
 
 fn read_mask(cur: &mut Cursor<'_>, bits: usize, what: &'static str) -> RawResult<Vec<u64>> {
     let bytes = cur.take(bits / 8, what)?;
@@ -160,32 +68,39 @@ pub(crate) fn locate_values<'a, V: VdbValue>(
     what: &'static str,
 ) -> RawResult<ValuesFrame<'a, V>> {
     let start = cur.pos();
-    let meta = cur.u8(what)?;
-    if meta > 6 {
-        return Err(RawError::invalid(
+    let byte = cur.u8(what)?;
+    let meta = NodeMeta::from_byte(byte).ok_or_else(|| {
+        RawError::invalid(
             start,
             what,
-            format!("mask-compression code {meta} is not one of 0 to 6"),
-        ));
-    }
-    let mut inactive0 = if meta == 0 {
+            format!("mask-compression code {byte} is not one of 0 to 6"),
+        )
+    })?;
+    // Inactive values not stored are −background, or +background when selected (or when
+    // the node says they all are).
+    let mut inactive0 = if meta == NodeMeta::NoMaskOrInactiveVals {
         background
     } else {
         background.negate()
     };
     let mut inactive1 = background;
-    if matches!(meta, 2 | 4 | 5) {
-        inactive0 = V::from_bytes(cur.take(V::SIZE, what)?);
-        if meta == 5 {
+    match meta {
+        NodeMeta::NoMaskAndOneInactiveVal | NodeMeta::MaskAndOneInactiveVal => {
+            inactive0 = V::from_bytes(cur.take(V::SIZE, what)?);
+        }
+        NodeMeta::MaskAndTwoInactiveVals => {
+            inactive0 = V::from_bytes(cur.take(V::SIZE, what)?);
             inactive1 = V::from_bytes(cur.take(V::SIZE, what)?);
         }
+        _ => {}
     }
-    let selection = if matches!(meta, 3..=5) {
+    let selection = if meta.has_selection_mask() {
         Some(read_mask(cur, count, what)?)
     } else {
         None
     };
-    let mask_compressed = codec.flags & COMPRESS_ACTIVE_MASK != 0 && meta != 6;
+    let mask_compressed =
+        codec.flags.contains(CompressionFlags::ACTIVE_MASK) && meta != NodeMeta::NoMaskAndAllVals;
     let stored = if mask_compressed {
         value_mask.iter().map(|w| w.count_ones() as usize).sum()
     } else {

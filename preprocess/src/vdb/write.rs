@@ -36,17 +36,13 @@ use flate2::write::ZlibEncoder;
 use rayon::prelude::*;
 use thiserror::Error;
 
+use super::codec::{mask_is_on, CompressionFlags, NodeMeta, VdbValue, MAGIC};
 use crate::grid::{AnyGrid, Grid, Leaf, Tile, Transform, LEAF_VOXELS};
 
-/// `OPENVDB_MAGIC`, written as a little-endian `i64`.
-pub const VDB_MAGIC: i64 = 0x5644_4220;
 /// `OPENVDB_FILE_VERSION_MULTIPASS_IO`: the newest format before half-float grid types.
 pub const FILE_VERSION: u32 = 224;
 /// Library version written into the header: qbricks' own, not an OpenVDB release.
 pub const LIBRARY_VERSION: (u32, u32) = (0, 1);
-
-const COMPRESS_ZIP: u32 = 0x1;
-const COMPRESS_ACTIVE_MASK: u32 = 0x2;
 
 /// Per-grid compression of node values.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -60,12 +56,12 @@ pub enum Compression {
 }
 
 impl Compression {
-    /// The `COMPRESS_*` flags written into the file.
-    pub fn flags(self) -> u32 {
+    /// The flags written into the file.
+    pub fn flags(self) -> CompressionFlags {
         match self {
-            Compression::None => 0,
-            Compression::ActiveMask => COMPRESS_ACTIVE_MASK,
-            Compression::Zip => COMPRESS_ZIP | COMPRESS_ACTIVE_MASK,
+            Compression::None => CompressionFlags::NONE,
+            Compression::ActiveMask => CompressionFlags::ACTIVE_MASK,
+            Compression::Zip => CompressionFlags::ZIP.union(CompressionFlags::ACTIVE_MASK),
         }
     }
 
@@ -205,7 +201,7 @@ pub fn write_vdb_with(
 
     // Header and file metadata.
     let mut head = Vec::new();
-    head.extend_from_slice(&VDB_MAGIC.to_le_bytes());
+    head.extend_from_slice(&MAGIC.to_le_bytes());
     head.extend_from_slice(&FILE_VERSION.to_le_bytes());
     head.extend_from_slice(&LIBRARY_VERSION.0.to_le_bytes());
     head.extend_from_slice(&LIBRARY_VERSION.1.to_le_bytes());
@@ -356,106 +352,6 @@ fn write_meta_map(out: &mut Vec<u8>, meta: &MetaMap) -> Result<(), String> {
     Ok(())
 }
 
-/// A value type OpenVDB stores in a standard tree.
-pub trait VdbValue: Copy + PartialEq + Send + Sync {
-    const TREE_TYPE: &'static str;
-    /// Our `value_type` metadata and `inspect`'s name for it.
-    const VALUE_TYPE: &'static str;
-    const SIZE: usize;
-    const IS_VECTOR: bool;
-    fn zero() -> Self;
-    fn negative(self) -> Self;
-    fn put(&self, out: &mut Vec<u8>);
-}
-
-impl VdbValue for f32 {
-    const TREE_TYPE: &'static str = "Tree_float_5_4_3";
-    const VALUE_TYPE: &'static str = "float";
-    const SIZE: usize = 4;
-    const IS_VECTOR: bool = false;
-    fn zero() -> Self {
-        0.0
-    }
-    fn negative(self) -> Self {
-        -self
-    }
-    fn put(&self, out: &mut Vec<u8>) {
-        out.extend_from_slice(&self.to_le_bytes());
-    }
-}
-
-impl VdbValue for f64 {
-    const TREE_TYPE: &'static str = "Tree_double_5_4_3";
-    const VALUE_TYPE: &'static str = "double";
-    const SIZE: usize = 8;
-    const IS_VECTOR: bool = false;
-    fn zero() -> Self {
-        0.0
-    }
-    fn negative(self) -> Self {
-        -self
-    }
-    fn put(&self, out: &mut Vec<u8>) {
-        out.extend_from_slice(&self.to_le_bytes());
-    }
-}
-
-impl VdbValue for [f32; 3] {
-    const TREE_TYPE: &'static str = "Tree_vec3s_5_4_3";
-    const VALUE_TYPE: &'static str = "vec3s";
-    const SIZE: usize = 12;
-    const IS_VECTOR: bool = true;
-    fn zero() -> Self {
-        [0.0; 3]
-    }
-    fn negative(self) -> Self {
-        self.map(|v| -v)
-    }
-    fn put(&self, out: &mut Vec<u8>) {
-        for v in self {
-            out.extend_from_slice(&v.to_le_bytes());
-        }
-    }
-}
-
-impl VdbValue for [f64; 3] {
-    const TREE_TYPE: &'static str = "Tree_vec3d_5_4_3";
-    const VALUE_TYPE: &'static str = "vec3d";
-    const SIZE: usize = 24;
-    const IS_VECTOR: bool = true;
-    fn zero() -> Self {
-        [0.0; 3]
-    }
-    fn negative(self) -> Self {
-        self.map(|v| -v)
-    }
-    fn put(&self, out: &mut Vec<u8>) {
-        for v in self {
-            out.extend_from_slice(&v.to_le_bytes());
-        }
-    }
-}
-
-/// The per-node metadata byte of OpenVDB's node-value compression (`io/Compression.h`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u8)]
-pub enum NodeMeta {
-    /// No inactive values, or all equal the background: only active values stored.
-    NoMaskOrInactiveVals = 0,
-    /// All inactive values are −background.
-    NoMaskAndMinusBg = 1,
-    /// All inactive values equal one other value, stored once.
-    NoMaskAndOneInactiveVal = 2,
-    /// A selection mask picks −background or +background per inactive value.
-    MaskAndNoInactiveVals = 3,
-    /// A selection mask picks the background or one stored value.
-    MaskAndOneInactiveVal = 4,
-    /// A selection mask picks one of two stored values.
-    MaskAndTwoInactiveVals = 5,
-    /// More than two distinct inactive values: every value is stored.
-    NoMaskAndAllVals = 6,
-}
-
 /// Leaves, lower internal nodes (16³ children of 8³) and upper internal nodes (32³
 /// children of 128³), keyed by their index inside the parent, in the order OpenVDB visits
 /// them.
@@ -604,7 +500,7 @@ fn encode_grid<V: VdbValue>(
     let root = build_tree(grid)?;
     let flags = compression.flags();
     let mut head = Vec::new();
-    head.extend_from_slice(&flags.to_le_bytes());
+    head.extend_from_slice(&flags.0.to_le_bytes());
     write_meta_map(&mut head, &grid_metadata(grid, compression, extra))?;
     write_transform(&mut head, &t);
 
@@ -669,11 +565,10 @@ fn encode_grid<V: VdbValue>(
             leaf.active
                 .iter()
                 .for_each(|w| out.extend_from_slice(&w.to_le_bytes()));
-            let mask = BitMask(&leaf.active[..]);
             write_values(
                 &mut out,
                 &leaf.values[..],
-                &mask,
+                &leaf.active[..],
                 None,
                 grid.background,
                 flags,
@@ -767,15 +662,6 @@ fn write_transform(out: &mut Vec<u8>, t: &Transform) {
     }
 }
 
-/// A node's value mask as a bit view.
-struct BitMask<'a>(&'a [u64]);
-
-impl BitMask<'_> {
-    fn is_on(&self, n: usize) -> bool {
-        (self.0[n >> 6] >> (n & 63)) & 1 == 1
-    }
-}
-
 /// Child mask, value mask and compressed values of an internal node with `size` slots.
 fn write_internal<V: VdbValue>(
     out: &mut Vec<u8>,
@@ -783,7 +669,7 @@ fn write_internal<V: VdbValue>(
     children: &[usize],
     tiles: &BTreeMap<usize, V>,
     background: V,
-    flags: u32,
+    flags: CompressionFlags,
 ) {
     let words = size / 64;
     let mut child_mask = vec![0u64; words];
@@ -794,7 +680,7 @@ fn write_internal<V: VdbValue>(
     // Slots that are neither children nor tiles hold the background; child slots hold zero.
     let mut values = vec![background; size];
     for &c in children {
-        values[c] = V::zero();
+        values[c] = V::default();
     }
     for (&i, &v) in tiles {
         value_mask[i >> 6] |= 1 << (i & 63);
@@ -809,8 +695,8 @@ fn write_internal<V: VdbValue>(
     write_values(
         out,
         &values,
-        &BitMask(&value_mask),
-        Some(&BitMask(&child_mask)),
+        &value_mask,
+        Some(&child_mask),
         background,
         flags,
     );
@@ -821,14 +707,15 @@ fn write_internal<V: VdbValue>(
 fn write_values<V: VdbValue>(
     out: &mut Vec<u8>,
     values: &[V],
-    active: &BitMask<'_>,
-    children: Option<&BitMask<'_>>,
+    active: &[u64],
+    children: Option<&[u64]>,
     background: V,
-    flags: u32,
+    flags: CompressionFlags,
 ) {
-    let is_child = |n: usize| children.is_some_and(|c| c.is_on(n));
+    let is_on = |n: usize| mask_is_on(active, n);
+    let is_child = |n: usize| children.is_some_and(|c| mask_is_on(c, n));
     let mut stored: Vec<V> = Vec::with_capacity(values.len());
-    if flags & COMPRESS_ACTIVE_MASK == 0 {
+    if !flags.contains(CompressionFlags::ACTIVE_MASK) {
         out.push(NodeMeta::NoMaskAndAllVals as u8);
         stored.extend_from_slice(values);
     } else {
@@ -839,7 +726,7 @@ fn write_values<V: VdbValue>(
             if unique >= 3 {
                 break;
             }
-            if active.is_on(n) || is_child(n) {
+            if is_on(n) || is_child(n) {
                 continue;
             }
             let seen = (unique > 0 && *v == inactive[0]) || (unique > 1 && *v == inactive[1]);
@@ -850,7 +737,7 @@ fn write_values<V: VdbValue>(
                 unique += 1;
             }
         }
-        let neg_bg = background.negative();
+        let neg_bg = background.negate();
         let meta = match unique {
             0 => NodeMeta::NoMaskOrInactiveVals,
             1 if inactive[0] == background => NodeMeta::NoMaskOrInactiveVals,
@@ -893,11 +780,7 @@ fn write_values<V: VdbValue>(
             NodeMeta::NoMaskOrInactiveVals
             | NodeMeta::NoMaskAndMinusBg
             | NodeMeta::NoMaskAndOneInactiveVal => {
-                stored.extend(
-                    (0..values.len())
-                        .filter(|&n| active.is_on(n))
-                        .map(|n| values[n]),
-                );
+                stored.extend((0..values.len()).filter(|&n| is_on(n)).map(|n| values[n]));
             }
             NodeMeta::MaskAndNoInactiveVals
             | NodeMeta::MaskAndOneInactiveVal
@@ -905,7 +788,7 @@ fn write_values<V: VdbValue>(
                 // Selection bit set where an inactive value equals inactive[1].
                 let mut selection = vec![0u64; values.len().div_ceil(64)];
                 for (n, v) in values.iter().enumerate() {
-                    if active.is_on(n) {
+                    if is_on(n) {
                         stored.push(*v);
                     } else if *v == inactive[1] {
                         selection[n >> 6] |= 1 << (n & 63);
@@ -919,7 +802,7 @@ fn write_values<V: VdbValue>(
     }
     let mut raw = Vec::with_capacity(stored.len() * V::SIZE);
     stored.iter().for_each(|v| v.put(&mut raw));
-    if flags & COMPRESS_ZIP != 0 {
+    if flags.contains(CompressionFlags::ZIP) {
         write_zipped(out, &raw);
     } else {
         out.extend_from_slice(&raw);
@@ -984,10 +867,10 @@ mod tests {
         write_values(
             &mut out,
             values,
-            &BitMask(active),
+            active,
             None,
             bg,
-            COMPRESS_ACTIVE_MASK,
+            CompressionFlags::ACTIVE_MASK,
         );
         (out[0], out)
     }
