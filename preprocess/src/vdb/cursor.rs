@@ -108,6 +108,19 @@ impl<'a> Cursor<'a> {
     pub fn string(&mut self, what: &'static str) -> RawResult<String> {
         Ok(String::from_utf8_lossy(self.bytes_with_len(what)?).into_owned())
     }
+
+    /// A node mask of `bits` bits (a multiple of 64), as little-endian words.
+    pub fn mask(&mut self, bits: usize, what: &'static str) -> RawResult<Vec<u64>> {
+        let bytes = self.take(bits / 8, what)?;
+        Ok(bytes
+            .chunks_exact(8)
+            .map(|c| {
+                let mut a = [0u8; 8];
+                a.copy_from_slice(c);
+                u64::from_le_bytes(a)
+            })
+            .collect())
+    }
 }
 
 #[cfg(test)]

@@ -1,4 +1,4 @@
-//! File and grid metadata (`MetaMap`): a count, then name, type name, byte size and value
+//! File and grid metadata ([`Metadata`]): a count, then name, type name, byte size and value
 //! per entry. Types we don't know are kept as their type name; OpenVDB's temporary entries
 //! (type names starting with `__`, e.g. delayed-load tables) are skipped.
 

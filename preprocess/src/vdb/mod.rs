@@ -27,6 +27,7 @@ pub mod inspect;
 pub mod metadata;
 mod transform;
 pub mod tree;
+mod values;
 pub mod write;
 
 use std::path::Path;
@@ -41,7 +42,7 @@ use crate::grid::{AnyGrid, Grid, Transform};
 use codec::{CompressionFlags, VdbValue};
 use cursor::Cursor;
 use error::{RawError, RawResult};
-use tree::Codec;
+use values::Codec;
 
 /// Oldest supported file format version (node mask compression, OpenVDB 3+).
 pub const MIN_FILE_VERSION: u32 = 222;

@@ -3,22 +3,16 @@
 //!
 //! A tree is stored as *topology* (all nodes depth first, internal-node values included,
 //! leaves only as their value masks) followed by *buffers* (leaf values, in the same
-//! depth-first order, root children visited in sorted-coordinate order).
+//! depth-first order, root children visited in sorted-coordinate order). How each node's
+//! values are stored is [`super::values`]' business.
 
 use rayon::prelude::*;
 
-use super::codec::{mask_is_on, CompressionFlags, NodeMeta, VdbValue};
-use super::compress::{locate_chunk, LocatedChunk};
+use super::codec::VdbValue;
 use super::cursor::Cursor;
 use super::error::{ErrorKind, RawError, RawResult};
+use super::values::{decode_values, locate_values, read_values, Codec};
 use crate::grid::{Leaf, Tile, LEAF_VOXELS};
-
-/// Decoding settings shared by every node of one grid.
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct Codec {
-    pub flags: CompressionFlags,
-    pub half: bool,
-}
 
 /// Everything read from one tree.
 #[derive(Debug)]
@@ -32,154 +26,6 @@ const ROOT_CHILD_LOG2: u32 = 12; // 4096 voxels per root child
 const INT1_LOG2: u32 = 5; // 32³ entries in an upper internal node
 const INT2_LOG2: u32 = 4; // 16³ entries in a lower internal node
 const LEAF_LOG2: u32 = 3;
-
-fn read_mask(cur: &mut Cursor<'_>, bits: usize, what: &'static str) -> RawResult<Vec<u64>> {
-    let bytes = cur.take(bits / 8, what)?;
-    Ok(bytes
-        .chunks_exact(8)
-        .map(|c| {
-            let mut a = [0u8; 8];
-            a.copy_from_slice(c);
-            u64::from_le_bytes(a)
-        })
-        .collect())
-}
-
-/// One node's stored values, located but not decoded (see [`locate_values`]).
-#[derive(Debug, Clone)]
-pub(crate) struct ValuesFrame<'a, V> {
-    inactive0: V,
-    inactive1: V,
-    selection: Option<Vec<u64>>,
-    /// Number of values stored (all, or only the active ones).
-    stored: usize,
-    chunk: Option<LocatedChunk<'a>>,
-}
-
-/// OpenVDB `readCompressedValues`, first half: a metadata byte saying how inactive values
-/// are encoded, up to two inactive values and a selection mask, then the (possibly only
-/// active) values as one data chunk, which is located but not decoded.
-pub(crate) fn locate_values<'a, V: VdbValue>(
-    cur: &mut Cursor<'a>,
-    codec: Codec,
-    background: V,
-    value_mask: &[u64],
-    count: usize,
-    what: &'static str,
-) -> RawResult<ValuesFrame<'a, V>> {
-    let start = cur.pos();
-    let byte = cur.u8(what)?;
-    let meta = NodeMeta::from_byte(byte).ok_or_else(|| {
-        RawError::invalid(
-            start,
-            what,
-            format!("mask-compression code {byte} is not one of 0 to 6"),
-        )
-    })?;
-    // Inactive values not stored are −background, or +background when selected (or when
-    // the node says they all are).
-    let mut inactive0 = if meta == NodeMeta::NoMaskOrInactiveVals {
-        background
-    } else {
-        background.negate()
-    };
-    let mut inactive1 = background;
-    match meta {
-        NodeMeta::NoMaskAndOneInactiveVal | NodeMeta::MaskAndOneInactiveVal => {
-            inactive0 = V::from_bytes(cur.take(V::SIZE, what)?);
-        }
-        NodeMeta::MaskAndTwoInactiveVals => {
-            inactive0 = V::from_bytes(cur.take(V::SIZE, what)?);
-            inactive1 = V::from_bytes(cur.take(V::SIZE, what)?);
-        }
-        _ => {}
-    }
-    let selection = if meta.has_selection_mask() {
-        Some(read_mask(cur, count, what)?)
-    } else {
-        None
-    };
-    let mask_compressed =
-        codec.flags.contains(CompressionFlags::ACTIVE_MASK) && meta != NodeMeta::NoMaskAndAllVals;
-    let stored = if mask_compressed {
-        value_mask.iter().map(|w| w.count_ones() as usize).sum()
-    } else {
-        count
-    };
-    let value_size = if codec.half { V::HALF_SIZE } else { V::SIZE };
-    // Half-float writers write nothing at all for an empty buffer.
-    let chunk = if codec.half && stored == 0 {
-        None
-    } else {
-        Some(locate_chunk(
-            cur,
-            codec.flags,
-            stored * value_size,
-            what,
-            stored,
-        )?)
-    };
-    Ok(ValuesFrame {
-        inactive0,
-        inactive1,
-        selection,
-        stored,
-        chunk,
-    })
-}
-
-/// Second half: decodes a located frame into `out` (one value per node entry).
-pub(crate) fn decode_values<V: VdbValue>(
-    frame: &ValuesFrame<'_, V>,
-    codec: Codec,
-    value_mask: &[u64],
-    out: &mut [V],
-) -> RawResult<()> {
-    let bytes = match &frame.chunk {
-        Some(c) => c.decode()?,
-        None => std::borrow::Cow::Borrowed(&[][..]),
-    };
-    let value_size = if codec.half { V::HALF_SIZE } else { V::SIZE };
-    let decode = |i: usize| -> V {
-        let b = &bytes[i * value_size..(i + 1) * value_size];
-        if codec.half {
-            V::from_half_bytes(b)
-        } else {
-            V::from_bytes(b)
-        }
-    };
-    if frame.stored == out.len() {
-        for (i, v) in out.iter_mut().enumerate() {
-            *v = decode(i);
-        }
-    } else {
-        let mut next = 0;
-        for (n, v) in out.iter_mut().enumerate() {
-            if mask_is_on(value_mask, n) {
-                *v = decode(next);
-                next += 1;
-            } else if frame.selection.as_deref().is_some_and(|s| mask_is_on(s, n)) {
-                *v = frame.inactive1;
-            } else {
-                *v = frame.inactive0;
-            }
-        }
-    }
-    Ok(())
-}
-
-/// Both halves at once.
-pub(crate) fn read_values<V: VdbValue>(
-    cur: &mut Cursor<'_>,
-    codec: Codec,
-    background: V,
-    value_mask: &[u64],
-    out: &mut [V],
-    what: &'static str,
-) -> RawResult<()> {
-    let frame = locate_values(cur, codec, background, value_mask, out.len(), what)?;
-    decode_values(&frame, codec, value_mask, out)
-}
 
 /// Leaf topology kept between the topology and buffer passes.
 struct LeafTopo {
@@ -217,8 +63,8 @@ impl<V: VdbValue> TopoReader<V> {
             LEAF_LOG2
         };
         let what = "internal node";
-        let child_mask = read_mask(cur, entries, what)?;
-        let value_mask = read_mask(cur, entries, what)?;
+        let child_mask = cur.mask(entries, what)?;
+        let value_mask = cur.mask(entries, what)?;
         self.scratch.resize(entries, V::default());
         let mut values = std::mem::take(&mut self.scratch);
         read_values(

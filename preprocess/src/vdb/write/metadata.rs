@@ -1,0 +1,150 @@
+//! File and grid metadata, the writer's side of [`crate::vdb::metadata`]: a count, then per
+//! entry name, OpenVDB type name, byte size and little-endian value. Besides what the
+//! caller gives, every grid gets the entries OpenVDB itself writes (`class`, `value_type`,
+//! `file_bbox_min`, …) so that OpenVDB tools show the file as they would one of their own.
+
+use super::{write_string, Compression, MetaMap, MetaValue};
+use crate::grid::{Grid, Tile};
+use crate::vdb::codec::VdbValue;
+
+/// OpenVDB type name and little-endian bytes of a metadata value; `Other` (a type the
+/// reader only names) cannot be written.
+fn meta_encoding(value: &MetaValue) -> Result<(&'static str, Vec<u8>), String> {
+    let mut b = Vec::new();
+    let name = match value {
+        MetaValue::Bool(v) => {
+            b.push(u8::from(*v));
+            "bool"
+        }
+        MetaValue::Int32(v) => {
+            b.extend_from_slice(&v.to_le_bytes());
+            "int32"
+        }
+        MetaValue::Int64(v) => {
+            b.extend_from_slice(&v.to_le_bytes());
+            "int64"
+        }
+        MetaValue::Float(v) => {
+            b.extend_from_slice(&v.to_le_bytes());
+            "float"
+        }
+        MetaValue::Double(v) => {
+            b.extend_from_slice(&v.to_le_bytes());
+            "double"
+        }
+        MetaValue::String(v) => {
+            b.extend_from_slice(v.as_bytes());
+            "string"
+        }
+        MetaValue::Vec3i(v) => {
+            v.iter().for_each(|c| b.extend_from_slice(&c.to_le_bytes()));
+            "vec3i"
+        }
+        MetaValue::Vec3s(v) => {
+            v.iter().for_each(|c| b.extend_from_slice(&c.to_le_bytes()));
+            "vec3s"
+        }
+        MetaValue::Vec3d(v) => {
+            v.iter().for_each(|c| b.extend_from_slice(&c.to_le_bytes()));
+            "vec3d"
+        }
+        MetaValue::Other(t) => return Err(format!("cannot write metadata of type {t:?}")),
+    };
+    Ok((name, b))
+}
+
+pub(super) fn write_meta_map(out: &mut Vec<u8>, meta: &MetaMap) -> Result<(), String> {
+    out.extend_from_slice(&(meta.len() as u32).to_le_bytes());
+    for (name, value) in meta {
+        let (type_name, bytes) =
+            meta_encoding(value).map_err(|e| format!("metadata {name:?}: {e}"))?;
+        write_string(out, name);
+        write_string(out, type_name);
+        out.extend_from_slice(&(bytes.len() as u32).to_le_bytes());
+        out.extend_from_slice(&bytes);
+    }
+    Ok(())
+}
+
+/// The entries OpenVDB writes for a grid, then `extra` (which overrides them).
+pub(super) fn grid_metadata<V: VdbValue>(
+    grid: &Grid<V>,
+    compression: Compression,
+    extra: Option<&MetaMap>,
+) -> MetaMap {
+    let mut meta = MetaMap::new();
+    let s = |v: &str| MetaValue::String(v.to_string());
+    meta.insert("class".into(), s("unknown"));
+    meta.insert("name".into(), s(&grid.name));
+    meta.insert("file_compression".into(), s(compression.describe()));
+    meta.insert("is_saved_as_half_float".into(), MetaValue::Bool(false));
+    meta.insert("value_type".into(), s(V::VALUE_TYPE));
+    meta.insert("dx".into(), MetaValue::Double(grid.transform.voxel_size[0]));
+    if V::IS_VECTOR {
+        meta.insert("vector_type".into(), s("invariant"));
+    }
+    meta.insert(
+        "file_voxel_count".into(),
+        MetaValue::Int64(grid.active_voxel_count() as i64),
+    );
+    if let Some((lo, hi)) = active_bbox(grid) {
+        meta.insert("file_bbox_min".into(), MetaValue::Vec3i(lo));
+        meta.insert("file_bbox_max".into(), MetaValue::Vec3i(hi));
+    }
+    if let Some(extra) = extra {
+        for (k, v) in extra {
+            meta.insert(k.clone(), v.clone());
+        }
+    }
+    meta
+}
+
+/// Inclusive index-space bounding box of the active voxels and tiles.
+fn active_bbox<V: VdbValue>(grid: &Grid<V>) -> Option<([i32; 3], [i32; 3])> {
+    let mut lo = [i32::MAX; 3];
+    let mut hi = [i32::MIN; 3];
+    let mut any = false;
+    let mut add = |a: [i32; 3], b: [i32; 3]| {
+        any = true;
+        for i in 0..3 {
+            lo[i] = lo[i].min(a[i]);
+            hi[i] = hi[i].max(b[i]);
+        }
+    };
+    for leaf in &grid.leaves {
+        for (ijk, _) in leaf.active_voxels() {
+            add(ijk, ijk);
+        }
+    }
+    for t in &grid.tiles {
+        let Tile { origin, size, .. } = *t;
+        let far = origin.map(|v| v.saturating_add(size as i32 - 1));
+        add(origin, far);
+    }
+    any.then_some((lo, hi))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn metadata_encodes_as_openvdb_types_and_refuses_unknown_ones() {
+        let mut out = Vec::new();
+        let mut meta = MetaMap::new();
+        meta.insert("dx".into(), MetaValue::Double(0.5));
+        write_meta_map(&mut out, &meta).expect("double metadata");
+        let mut want = 1u32.to_le_bytes().to_vec();
+        for s in ["dx", "double"] {
+            want.extend_from_slice(&(s.len() as u32).to_le_bytes());
+            want.extend_from_slice(s.as_bytes());
+        }
+        want.extend_from_slice(&8u32.to_le_bytes());
+        want.extend_from_slice(&0.5f64.to_le_bytes());
+        assert_eq!(out, want);
+
+        meta.insert("m".into(), MetaValue::Other("mat4d".into()));
+        let err = write_meta_map(&mut Vec::new(), &meta).expect_err("unknown type");
+        assert!(err.contains("\"m\"") && err.contains("mat4d"), "{err}");
+    }
+}

@@ -1,0 +1,339 @@
+//! The 5-4-3 tree, the writer's side of [`crate::vdb::tree`]: a grid's tiles and leaves are
+//! placed in the nodes OpenVDB would hold them in (root entries, 32³ upper and 16³ lower
+//! internal nodes, 8³ leaves), then written as topology (every node depth first, internal
+//! values included, leaves as their value masks) followed by the leaf buffers in the same
+//! order. Placing everything first is what catches overlapping or misaligned input before
+//! a byte is written.
+
+use std::collections::BTreeMap;
+
+use rayon::prelude::*;
+
+use super::values::write_values;
+use crate::grid::{Grid, Leaf, LEAF_VOXELS};
+use crate::vdb::codec::{CompressionFlags, VdbValue};
+
+/// Leaves, lower internal nodes (16³ children of 8³) and upper internal nodes (32³
+/// children of 128³), keyed by their index inside the parent, in the order OpenVDB visits
+/// them.
+struct Lower<'a, V> {
+    leaves: BTreeMap<usize, &'a Leaf<V>>,
+    tiles: BTreeMap<usize, V>,
+}
+
+struct Upper<'a, V> {
+    children: BTreeMap<usize, Lower<'a, V>>,
+    tiles: BTreeMap<usize, V>,
+}
+
+enum RootEntry<'a, V> {
+    Child(Upper<'a, V>),
+    Tile(V),
+}
+
+type Root<'a, V> = BTreeMap<[i32; 3], RootEntry<'a, V>>;
+
+/// A grid's tiles and leaves placed in their nodes; root entries sorted by origin, as
+/// OpenVDB's root table is.
+pub(super) struct Tree<'a, V> {
+    root: Root<'a, V>,
+    background: V,
+}
+
+fn upper_index(p: [i32; 3]) -> usize {
+    (((p[0] & 4095) >> 7) as usize) << 10
+        | (((p[1] & 4095) >> 7) as usize) << 5
+        | ((p[2] & 4095) >> 7) as usize
+}
+
+fn lower_index(p: [i32; 3]) -> usize {
+    (((p[0] & 127) >> 3) as usize) << 8
+        | (((p[1] & 127) >> 3) as usize) << 4
+        | ((p[2] & 127) >> 3) as usize
+}
+
+fn root_key(p: [i32; 3]) -> [i32; 3] {
+    p.map(|v| v & !4095)
+}
+
+/// Places every tile and leaf of `grid` in its node, refusing overlaps, misaligned origins
+/// and tile sizes a 5-4-3 tree does not have.
+pub(super) fn build_tree<V: VdbValue>(grid: &Grid<V>) -> Result<Tree<'_, V>, String> {
+    let mut root: Root<'_, V> = BTreeMap::new();
+    // Root tiles first, so that anything placed inside one is reported.
+    for t in grid.tiles.iter().filter(|t| t.size == 4096) {
+        check_aligned(t.origin, 4096, "tile")?;
+        if root.insert(t.origin, RootEntry::Tile(t.value)).is_some() {
+            return Err(format!("two tiles at {:?}", t.origin));
+        }
+    }
+    for t in grid.tiles.iter().filter(|t| t.size != 4096) {
+        match t.size {
+            128 => {
+                check_aligned(t.origin, 128, "tile")?;
+                let u = upper_of(&mut root, t.origin)?;
+                if u.tiles.insert(upper_index(t.origin), t.value).is_some() {
+                    return Err(format!("two tiles at {:?}", t.origin));
+                }
+            }
+            8 => {
+                check_aligned(t.origin, 8, "tile")?;
+                let u = upper_of(&mut root, t.origin)?;
+                let ui = upper_index(t.origin);
+                if u.tiles.contains_key(&ui) {
+                    return Err(format!("tile at {:?} lies inside a 128³ tile", t.origin));
+                }
+                let lower = u.children.entry(ui).or_insert_with(|| Lower {
+                    leaves: BTreeMap::new(),
+                    tiles: BTreeMap::new(),
+                });
+                if lower.tiles.insert(lower_index(t.origin), t.value).is_some() {
+                    return Err(format!("two tiles at {:?}", t.origin));
+                }
+            }
+            other => {
+                return Err(format!(
+                    "tile at {:?} has size {other}, expected 8, 128 or 4096",
+                    t.origin
+                ))
+            }
+        }
+    }
+    for leaf in &grid.leaves {
+        check_aligned(leaf.origin, 8, "leaf")?;
+        let u = upper_of(&mut root, leaf.origin)?;
+        let ui = upper_index(leaf.origin);
+        if u.tiles.contains_key(&ui) {
+            return Err(format!("leaf at {:?} lies inside a 128³ tile", leaf.origin));
+        }
+        let lower = u.children.entry(ui).or_insert_with(|| Lower {
+            leaves: BTreeMap::new(),
+            tiles: BTreeMap::new(),
+        });
+        let li = lower_index(leaf.origin);
+        if lower.tiles.contains_key(&li) {
+            return Err(format!("leaf at {:?} lies inside an 8³ tile", leaf.origin));
+        }
+        if lower.leaves.insert(li, leaf).is_some() {
+            return Err(format!("two leaves at {:?}", leaf.origin));
+        }
+    }
+    Ok(Tree {
+        root,
+        background: grid.background,
+    })
+}
+
+/// The upper internal node holding `origin`, created if missing.
+fn upper_of<'m, 'a, V>(
+    root: &'m mut Root<'a, V>,
+    origin: [i32; 3],
+) -> Result<&'m mut Upper<'a, V>, String> {
+    let entry = root.entry(root_key(origin)).or_insert_with(|| {
+        RootEntry::Child(Upper {
+            children: BTreeMap::new(),
+            tiles: BTreeMap::new(),
+        })
+    });
+    match entry {
+        RootEntry::Child(u) => Ok(u),
+        RootEntry::Tile(_) => Err(format!("{origin:?} lies inside a 4096³ tile")),
+    }
+}
+
+fn check_aligned(origin: [i32; 3], size: i32, what: &str) -> Result<(), String> {
+    if origin.iter().any(|v| v.rem_euclid(size) != 0) {
+        return Err(format!(
+            "{what} origin {origin:?} is not a multiple of {size}"
+        ));
+    }
+    Ok(())
+}
+
+/// Writes the topology of `tree` to `out` and returns the leaf buffers (value mask and
+/// compressed values) in the same order.
+pub(super) fn write_tree<V: VdbValue>(
+    out: &mut Vec<u8>,
+    tree: &Tree<'_, V>,
+    flags: CompressionFlags,
+) -> Vec<Vec<u8>> {
+    let leaves = write_topology(out, &tree.root, tree.background, flags);
+    write_leaf_buffers(&leaves, tree.background, flags)
+}
+
+/// Buffer count, background, root tiles, then each root child's internal nodes depth first
+/// down to the leaves' value masks. Returns the leaves in the order visited.
+fn write_topology<'a, V: VdbValue>(
+    out: &mut Vec<u8>,
+    root: &Root<'a, V>,
+    background: V,
+    flags: CompressionFlags,
+) -> Vec<&'a Leaf<V>> {
+    out.extend_from_slice(&1i32.to_le_bytes()); // buffer count
+    background.put(out);
+    let tiles = root
+        .values()
+        .filter(|e| matches!(e, RootEntry::Tile(_)))
+        .count() as u32;
+    let children = root.len() as u32 - tiles;
+    out.extend_from_slice(&tiles.to_le_bytes());
+    out.extend_from_slice(&children.to_le_bytes());
+    for (key, entry) in root {
+        if let RootEntry::Tile(v) = entry {
+            key.iter()
+                .for_each(|c| out.extend_from_slice(&c.to_le_bytes()));
+            v.put(out);
+            out.push(1); // active
+        }
+    }
+    let mut leaves = Vec::new();
+    for (key, entry) in root {
+        let RootEntry::Child(upper) = entry else {
+            continue;
+        };
+        key.iter()
+            .for_each(|c| out.extend_from_slice(&c.to_le_bytes()));
+        let children: Vec<usize> = upper.children.keys().copied().collect();
+        write_internal(
+            out,
+            32 * 32 * 32,
+            &children,
+            &upper.tiles,
+            background,
+            flags,
+        );
+        for lower in upper.children.values() {
+            let children: Vec<usize> = lower.leaves.keys().copied().collect();
+            write_internal(
+                out,
+                16 * 16 * 16,
+                &children,
+                &lower.tiles,
+                background,
+                flags,
+            );
+            for &leaf in lower.leaves.values() {
+                leaf.active
+                    .iter()
+                    .for_each(|w| out.extend_from_slice(&w.to_le_bytes()));
+                leaves.push(leaf);
+            }
+        }
+    }
+    leaves
+}
+
+/// One buffer per leaf (value mask again, then values), encoded in parallel, kept in order.
+fn write_leaf_buffers<V: VdbValue>(
+    leaves: &[&Leaf<V>],
+    background: V,
+    flags: CompressionFlags,
+) -> Vec<Vec<u8>> {
+    leaves
+        .par_iter()
+        .map(|leaf| {
+            let mut out = Vec::with_capacity(64 + 1 + LEAF_VOXELS * V::SIZE);
+            leaf.active
+                .iter()
+                .for_each(|w| out.extend_from_slice(&w.to_le_bytes()));
+            write_values(
+                &mut out,
+                &leaf.values[..],
+                &leaf.active[..],
+                None,
+                background,
+                flags,
+            );
+            out
+        })
+        .collect()
+}
+
+/// Child mask, value mask and compressed values of an internal node with `size` slots.
+fn write_internal<V: VdbValue>(
+    out: &mut Vec<u8>,
+    size: usize,
+    children: &[usize],
+    tiles: &BTreeMap<usize, V>,
+    background: V,
+    flags: CompressionFlags,
+) {
+    let words = size / 64;
+    let mut child_mask = vec![0u64; words];
+    let mut value_mask = vec![0u64; words];
+    for &c in children {
+        child_mask[c >> 6] |= 1 << (c & 63);
+    }
+    // Slots that are neither children nor tiles hold the background; child slots hold zero.
+    let mut values = vec![background; size];
+    for &c in children {
+        values[c] = V::default();
+    }
+    for (&i, &v) in tiles {
+        value_mask[i >> 6] |= 1 << (i & 63);
+        values[i] = v;
+    }
+    child_mask
+        .iter()
+        .for_each(|w| out.extend_from_slice(&w.to_le_bytes()));
+    value_mask
+        .iter()
+        .for_each(|w| out.extend_from_slice(&w.to_le_bytes()));
+    write_values(
+        out,
+        &values,
+        &value_mask,
+        Some(&child_mask),
+        background,
+        flags,
+    );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::grid::{Tile, Transform};
+
+    #[test]
+    fn node_indices_follow_openvdb_bit_layout() {
+        assert_eq!(upper_index([0, 0, 0]), 0);
+        assert_eq!(upper_index([128, 0, 0]), 1 << 10);
+        assert_eq!(upper_index([0, 128, 0]), 1 << 5);
+        assert_eq!(upper_index([0, 0, 128]), 1);
+        assert_eq!(upper_index([-128, -128, -128]), 31 << 10 | 31 << 5 | 31);
+        assert_eq!(lower_index([8, 16, 24]), 1 << 8 | 2 << 4 | 3);
+        assert_eq!(lower_index([-8, 0, 0]), 15 << 8);
+        assert_eq!(root_key([-1, 4095, 4096]), [-4096, 0, 4096]);
+    }
+
+    #[test]
+    fn overlapping_or_misaligned_nodes_are_refused() {
+        let leaf = |origin| Leaf {
+            origin,
+            active: [u64::MAX; 8],
+            values: Box::new([0.0f32; LEAF_VOXELS]),
+        };
+        let mut g = Grid {
+            name: "g".into(),
+            transform: Transform {
+                voxel_size: [1.0; 3],
+                translation: [0.0; 3],
+            },
+            background: 0.0f32,
+            leaves: vec![leaf([0, 0, 0]), leaf([0, 0, 0])],
+            tiles: Vec::new(),
+        };
+        assert!(build_tree(&g).is_err());
+        g.leaves = vec![leaf([4, 0, 0])];
+        assert!(build_tree(&g).is_err());
+        g.leaves = vec![leaf([8, 0, 0])];
+        g.tiles = vec![Tile {
+            origin: [0, 0, 0],
+            size: 128,
+            value: 1.0,
+        }];
+        assert!(build_tree(&g).is_err());
+        g.tiles[0].origin = [128, 0, 0];
+        assert!(build_tree(&g).is_ok());
+    }
+}
