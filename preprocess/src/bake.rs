@@ -1,5 +1,8 @@
-//! The bake pipeline: grids → cells → leaf cells → derived fields → bricks → regions →
-//! KD-tree → [`BrickFile`].
+//! The bake pipeline: grids → cells → leaf cells → bricks → field values → regions →
+//! KD-tree → [`BrickFile`]. [`bake`] runs the stages in that order, each a function of its
+//! own (`select_input`, `read_cells`, `classify`, `brick`, `derive_fields`, `build_regions`,
+//! `kd_tree`, `assemble`), so that what one stage hands the next is spelled out in their
+//! signatures.
 //!
 //! Every parallel stage maps items to results collected in item order, so the output is
 //! byte-identical whatever the thread count.
@@ -7,7 +10,9 @@
 use rayon::prelude::*;
 use serde::Serialize;
 
-use format::{Aabb, Brick, BrickFile, Field, Level, Provenance, Region, SourceGrid, ValueRange};
+use format::{
+    Aabb, Brick, BrickFile, Field, KdNode, Level, Provenance, Region, SourceGrid, ValueRange,
+};
 
 use crate::bricks::{make_bricks, BrickBox};
 use crate::cells::{classify_leaves, CellSet};
@@ -234,6 +239,20 @@ enum Input {
     Scalar(Vec<CellSet>, Vec<Vec<f64>>, String),
 }
 
+impl Input {
+    fn sets(&self) -> &[CellSet] {
+        match self {
+            Input::Vector(s, _, _) | Input::Scalar(s, _, _) => s,
+        }
+    }
+
+    fn sets_mut(&mut self) -> &mut [CellSet] {
+        match self {
+            Input::Vector(s, _, _) | Input::Scalar(s, _, _) => s,
+        }
+    }
+}
+
 /// Cell sets of the grids that `one` converts, in file order (rayon keeps the order, so
 /// the output does not depend on the thread count).
 fn to_sets<T: Send>(
@@ -250,6 +269,8 @@ fn to_sets<T: Send>(
         .unzip()
 }
 
+/// Replaces the non-finite values of every set by the average of their finite neighbours,
+/// with one warning per grid, or refuses them with `strict`. Returns how many there were.
 fn fix_nonfinite<T: CellValue>(
     sets: &[CellSet],
     values: &mut [Vec<T>],
@@ -280,6 +301,8 @@ fn fix_nonfinite<T: CellValue>(
     Ok(total)
 }
 
+/// The bake, stage after stage; `stage` hears each stage's name as it starts. Every stage
+/// is one function below, in pipeline order, taking what the ones before it made.
 fn run(
     grids: Vec<AnyGrid>,
     opts: &BakeOptions,
@@ -289,6 +312,79 @@ fn run(
         return Err(BakeError::BadMaxBrick(opts.max_brick));
     }
     stage("selecting grids");
+    let selection = select_input(grids, opts)?;
+
+    stage("reading cells");
+    let mut warnings = Vec::new();
+    let mut cells = read_cells(
+        selection.grids,
+        &selection.levels,
+        &selection.extra_names,
+        selection.extra_grids,
+        opts,
+        &mut warnings,
+    )?;
+
+    stage("classifying leaf cells");
+    let leaf_cells = classify(&mut cells.input);
+    let sets = cells.input.sets();
+
+    stage("bricking");
+    let bricks = brick(sets, opts.max_brick);
+
+    stage("deriving fields");
+    let mut fields = derive_fields(&cells, &bricks, opts);
+    let nonfinite_derived = clamp_fields(&mut fields, &bricks, sets, opts.strict, &mut warnings)?;
+
+    stage("building regions");
+    let (bounds, tree) = build_regions(sets, &bricks, selection.widths[0]);
+    let kd = kd_tree(&tree, &bricks, &fields.values);
+
+    stage("assembling");
+    let (file, field_summaries) = assemble(
+        opts,
+        selection.source_grids,
+        &selection.widths,
+        &bricks,
+        fields,
+        kd,
+        bounds,
+    );
+    let summary = BakeSummary {
+        input_cells: selection.input_cells,
+        leaf_cells,
+        dropped_cells: selection.input_cells - leaf_cells,
+        bricks: bricks.boxes.len() as u64,
+        regions: file.regions.len() as u64,
+        kd_nodes: file.kd_nodes.len() as u64,
+        nonfinite: cells.nonfinite,
+        nonfinite_derived,
+        fields: field_summaries,
+        warnings,
+    };
+    Ok((file, summary))
+}
+
+/// What [`select_input`] keeps for the later stages.
+struct Selection {
+    /// The grids to bake (all vec3 or all scalar).
+    grids: Vec<AnyGrid>,
+    /// Level of each grid (0 = finest) and cell width of each level.
+    levels: Vec<u32>,
+    widths: Vec<f64>,
+    /// Active voxels of `grids` (tiles counted as the voxels they cover).
+    input_cells: u64,
+    /// The grids as the provenance records them.
+    source_grids: Vec<SourceGrid>,
+    /// Names of the fields resampled from scalar grids, and those grids.
+    extra_names: Vec<String>,
+    extra_grids: Vec<AnyGrid>,
+}
+
+/// Read stage: checks the field list, takes the scalar grids baked as extra fields out of
+/// `grids`, selects the grids to bake and assigns their levels, refusing empty or too large
+/// input before any cell is made from it.
+fn select_input(grids: Vec<AnyGrid>, opts: &BakeOptions) -> Result<Selection, BakeError> {
     // Fields: no name twice; scalar-grid fields take their grids out of the selection.
     let mut extra_names: Vec<String> = Vec::new();
     if let Some(kinds) = &opts.fields {
@@ -355,46 +451,45 @@ fn run(
             level,
         })
         .collect();
+    Ok(Selection {
+        grids,
+        levels,
+        widths,
+        input_cells,
+        source_grids,
+        extra_names,
+        extra_grids,
+    })
+}
 
-    // Cells.
-    stage("reading cells");
-    let vector = grids[0].is_vector();
-    let mut input = if vector {
-        if let Some(f) = &opts.fields {
-            if f.is_empty() {
-                return Err(BakeError::NoFields);
-            }
-        }
-        let (sets, vals) = to_sets(&grids, &levels, |g, l| match g {
-            AnyGrid::Vec3s(g) => Some(CellSet::from_grid(g, l, |v: [f32; 3]| v.map(f64::from))),
-            AnyGrid::Vec3d(g) => Some(CellSet::from_grid(g, l, |v: [f64; 3]| v)),
-            _ => None,
-        });
-        Input::Vector(sets, vals, Vec::new())
-    } else {
-        let name = grids[0].name().to_string();
-        if opts.fields.is_some() {
-            return Err(BakeError::FieldsForScalar { grid: name });
-        }
-        let (sets, vals) = to_sets(&grids, &levels, |g, l| match g {
-            AnyGrid::Float(g) => Some(CellSet::from_grid(g, l, f64::from)),
-            AnyGrid::Double(g) => Some(CellSet::from_grid(g, l, |v: f64| v)),
-            _ => None,
-        });
-        Input::Scalar(sets, vals, name)
-    };
-    drop(grids);
+/// What [`read_cells`] makes of the selected grids.
+struct Cells {
+    input: Input,
+    /// The scalar grids resampled as extra fields.
+    extras: Vec<ExtraGrid>,
+    /// Non-finite input values replaced.
+    nonfinite: u64,
+}
 
-    // Non-finite values.
-    let mut warnings = Vec::new();
+/// Cells stage: the selected grids as cell sets with f64 values (the grids are dropped as
+/// soon as they are converted, so both are never held at once), non-finite values repaired
+/// (or refused with `strict`), the extra fields' grids likewise, and staggered velocities
+/// moved to cell centres.
+fn read_cells(
+    grids: Vec<AnyGrid>,
+    levels: &[u32],
+    extra_names: &[String],
+    extra_grids: Vec<AnyGrid>,
+    opts: &BakeOptions,
+    warnings: &mut Vec<String>,
+) -> Result<Cells, BakeError> {
+    let mut input = cell_sets(grids, levels, opts)?;
     let nonfinite = match &mut input {
-        Input::Vector(sets, vals, _) => fix_nonfinite(sets, vals, opts.strict, &mut warnings)?,
-        Input::Scalar(sets, vals, _) => fix_nonfinite(sets, vals, opts.strict, &mut warnings)?,
+        Input::Vector(sets, vals, _) => fix_nonfinite(sets, vals, opts.strict, warnings)?,
+        Input::Scalar(sets, vals, _) => fix_nonfinite(sets, vals, opts.strict, warnings)?,
     };
-
-    let extras = extra_fields(&extra_names, &extra_grids, opts.strict, &mut warnings)?;
+    let extras = extra_fields(extra_names, &extra_grids, opts.strict, warnings)?;
     drop(extra_grids);
-
     // Staggered grids: keep the (repaired) face values, bake from cell-centred ones.
     if let Input::Vector(sets, vals, faces) = &mut input {
         *faces = sets
@@ -408,30 +503,93 @@ fn run(
             })
             .collect();
     }
+    Ok(Cells {
+        input,
+        extras,
+        nonfinite,
+    })
+}
 
-    // Leaf cells.
-    stage("classifying leaf cells");
-    match &mut input {
-        Input::Vector(s, _, _) | Input::Scalar(s, _, _) => classify_leaves(s),
-    };
-    let sets: &[CellSet] = match &input {
-        Input::Vector(s, _, _) | Input::Scalar(s, _, _) => s,
-    };
-    let leaf_cells: u64 = sets.iter().map(|s| s.leaf_count()).sum();
+/// Converts the grids (consumed) to cell sets; a field list is refused for scalar grids,
+/// and an empty one for vec3 grids.
+fn cell_sets(grids: Vec<AnyGrid>, levels: &[u32], opts: &BakeOptions) -> Result<Input, BakeError> {
+    if grids[0].is_vector() {
+        if let Some(f) = &opts.fields {
+            if f.is_empty() {
+                return Err(BakeError::NoFields);
+            }
+        }
+        let (sets, vals) = to_sets(&grids, levels, |g, l| match g {
+            AnyGrid::Vec3s(g) => Some(CellSet::from_grid(g, l, |v: [f32; 3]| v.map(f64::from))),
+            AnyGrid::Vec3d(g) => Some(CellSet::from_grid(g, l, |v: [f64; 3]| v)),
+            _ => None,
+        });
+        Ok(Input::Vector(sets, vals, Vec::new()))
+    } else {
+        let name = grids[0].name().to_string();
+        if opts.fields.is_some() {
+            return Err(BakeError::FieldsForScalar { grid: name });
+        }
+        let (sets, vals) = to_sets(&grids, levels, |g, l| match g {
+            AnyGrid::Float(g) => Some(CellSet::from_grid(g, l, f64::from)),
+            AnyGrid::Double(g) => Some(CellSet::from_grid(g, l, |v: f64| v)),
+            _ => None,
+        });
+        Ok(Input::Scalar(sets, vals, name))
+    }
+}
 
-    // Bricks.
-    stage("bricking");
-    let bricks = make_bricks(sets, opts.max_brick);
-    let mut first = Vec::with_capacity(bricks.len());
+/// Leaf-cell stage: keeps, in every set, the cells no finer level covers (see
+/// [`classify_leaves`]). Returns how many there are.
+fn classify(input: &mut Input) -> u64 {
+    classify_leaves(input.sets_mut());
+    input.sets().iter().map(|s| s.leaf_count()).sum()
+}
+
+/// The bricks, and where each one's values and cells are.
+struct Bricks {
+    boxes: Vec<BrickBox>,
+    /// Index of each brick's first value in the field arrays (bricks are stored one after
+    /// the other, x fastest).
+    first: Vec<u64>,
+    /// World position of each brick's first cell centre.
+    origins: Vec<[f64; 3]>,
+    /// Cell width of each brick (its grid's).
+    widths: Vec<f64>,
+}
+
+/// Brick stage: covers the leaf cells with boxes of at most `max_brick` cells a side (see
+/// [`make_bricks`]) and lays their values out one brick after the other.
+fn brick(sets: &[CellSet], max_brick: u32) -> Bricks {
+    let boxes = make_bricks(sets, max_brick);
+    let mut first = Vec::with_capacity(boxes.len());
     let mut acc = 0u64;
-    for b in &bricks {
+    for b in &boxes {
         first.push(acc);
         acc += b.cells();
     }
+    let origins = boxes.iter().map(|b| sets[b.set].centre(b.lo)).collect();
+    let widths = boxes.iter().map(|b| sets[b.set].width).collect();
+    Bricks {
+        boxes,
+        first,
+        origins,
+        widths,
+    }
+}
 
-    // Field values, brick after brick.
-    stage("deriving fields");
-    let (names, values) = match &input {
+/// Baked fields: names, and the values of each (brick after brick, x fastest).
+struct FieldValues {
+    names: Vec<String>,
+    values: Vec<Vec<f32>>,
+}
+
+/// Field stage: the value of every field at every cell of every brick, derived from the
+/// velocity (Q, speed, velocity components) or resampled from an extra scalar grid; a
+/// scalar grid baked on its own is its only field. Cells of a brick that are not leaf
+/// cells read as zero.
+fn derive_fields(cells: &Cells, bricks: &Bricks, opts: &BakeOptions) -> FieldValues {
+    match &cells.input {
         Input::Vector(sets, vals, faces) => {
             let kinds = opts
                 .fields
@@ -443,7 +601,7 @@ fn run(
                 values: vals,
                 faces,
             };
-            let values = per_brick(&bricks, names.len(), |b, out| {
+            let values = per_brick(&bricks.boxes, names.len(), |b, out| {
                 let set = &sets[b.set];
                 let v = &vals[b.set];
                 for ijk in b.cell_coords() {
@@ -457,7 +615,7 @@ fn run(
                             FieldKind::Speed => out.push(speed(&u) as f32),
                             FieldKind::Velocity => out.extend(u.map(|c| c as f32)),
                             FieldKind::Scalar(n) => {
-                                let e = extras.iter().find(|e| &e.name == n);
+                                let e = cells.extras.iter().find(|e| &e.name == n);
                                 let p = set.centre(ijk);
                                 out.push(e.map_or(0.0, |e| e.sample(p)) as f32);
                             }
@@ -465,35 +623,48 @@ fn run(
                     }
                 }
             });
-            (names, values)
+            FieldValues { names, values }
         }
         Input::Scalar(sets, vals, name) => {
-            let values = per_brick(&bricks, 1, |b, out| {
+            let values = per_brick(&bricks.boxes, 1, |b, out| {
                 let set = &sets[b.set];
                 let v = &vals[b.set];
                 for ijk in b.cell_coords() {
                     out.push(set.slot(ijk).map(|s| v[s]).unwrap_or_default() as f32);
                 }
             });
-            (vec![name.clone()], values)
+            FieldValues {
+                names: vec![name.clone()],
+                values,
+            }
         }
-    };
+    }
+}
 
-    // Values that overflowed f32 (or were NaN): counted, refused with --strict, clamped.
-    let mut values = values;
+/// Values that overflowed f32 (or were NaN): counted, refused with `strict`, otherwise
+/// clamped (see [`clamp_nonfinite`]) with one warning per field naming the first cell.
+/// Returns how many there were.
+fn clamp_fields(
+    fields: &mut FieldValues,
+    bricks: &Bricks,
+    sets: &[CellSet],
+    strict: bool,
+    warnings: &mut Vec<String>,
+) -> Result<u64, BakeError> {
     let mut nonfinite_derived = 0;
-    for (name, vals) in names.iter().zip(values.iter_mut()) {
+    for (name, vals) in fields.names.iter().zip(fields.values.iter_mut()) {
         let Some((count, at)) = clamp_nonfinite(vals) else {
             continue;
         };
+        let first = &bricks.first;
         let b = first.partition_point(|&f| f <= at as u64) - 1;
-        let bx = &bricks[b];
+        let bx = &bricks.boxes[b];
         let local = at as u64 - first[b];
         let (nx, ny) = (u64::from(bx.dims[0]), u64::from(bx.dims[1]));
         let off = [local % nx, (local / nx) % ny, local / (nx * ny)];
         let first_cell = [0, 1, 2].map(|a| bx.lo[a] + off[a] as i32);
         let grid = sets[bx.set].name.clone();
-        if opts.strict {
+        if strict {
             return Err(BakeError::NonFiniteDerived {
                 grid,
                 field: name.clone(),
@@ -507,37 +678,74 @@ fn run(
         ));
         nonfinite_derived += count;
     }
+    Ok(nonfinite_derived)
+}
 
-    // Supports, regions, KD-tree.
-    stage("building regions");
-    let origins: Vec<[f64; 3]> = bricks.iter().map(|b| sets[b.set].centre(b.lo)).collect();
-    let bwidths: Vec<f64> = bricks.iter().map(|b| sets[b.set].width).collect();
-    let supports = snapped_supports(sets, &bricks, widths[0]);
-    let (bounds, tree) = regions::build(&supports);
-    let (kd_nodes, region_list) = crate::kdtree::flatten(&tree);
+/// Region stage: the bricks' supports, snapped so that neighbouring lattices agree (see
+/// [`snapped_supports`]), split into regions (see [`regions::build`]). Returns the union of
+/// the supports and the region tree.
+fn build_regions(
+    sets: &[CellSet],
+    bricks: &Bricks,
+    finest: f64,
+) -> (Option<Bbox>, regions::RegionTree) {
+    let supports = snapped_supports(sets, &bricks.boxes, finest);
+    regions::build(&supports)
+}
+
+/// The region tree as the file stores it.
+struct Kd {
+    nodes: Vec<KdNode>,
+    /// Bounds and brick ids of each region, in the order the nodes number them.
+    regions: Vec<(Bbox, Vec<u32>)>,
+    /// `(min, max)` of each field over each region (see [`region_ranges`]).
+    ranges: Vec<[f32; 2]>,
+}
+
+/// KD-tree stage: flattens the region tree (see [`crate::kdtree::flatten`]) and computes
+/// each region's value range per field, which lets the viewer skip regions an iso-value
+/// cannot cross.
+fn kd_tree(tree: &regions::RegionTree, bricks: &Bricks, values: &[Vec<f32>]) -> Kd {
+    let (nodes, regions) = crate::kdtree::flatten(tree);
     let ranges = region_ranges(
         &RangeInput {
-            bricks: &bricks,
-            origins: &origins,
-            widths: &bwidths,
-            first: &first,
-            values: &values,
+            bricks: &bricks.boxes,
+            origins: &bricks.origins,
+            widths: &bricks.widths,
+            first: &bricks.first,
+            values,
         },
-        &region_list,
+        &regions,
     );
+    Kd {
+        nodes,
+        regions,
+        ranges,
+    }
+}
 
-    // Assemble.
-    stage("assembling");
-    let mut fields = Vec::with_capacity(names.len());
-    let mut field_summaries = Vec::with_capacity(names.len());
-    for (name, vals) in names.into_iter().zip(values) {
+/// Assembly stage: the [`BrickFile`] (fields with their ranges and histograms, levels,
+/// bricks, regions, KD-tree and its per-subtree tables, provenance) ready to be written, and
+/// the field ranges for the summary.
+fn assemble(
+    opts: &BakeOptions,
+    source_grids: Vec<SourceGrid>,
+    level_widths: &[f64],
+    bricks: &Bricks,
+    fields: FieldValues,
+    kd: Kd,
+    bounds: Option<Bbox>,
+) -> (BrickFile, Vec<FieldSummary>) {
+    let mut file_fields = Vec::with_capacity(fields.names.len());
+    let mut field_summaries = Vec::with_capacity(fields.names.len());
+    for (name, vals) in fields.names.into_iter().zip(fields.values) {
         let (min, max, histogram) = range_and_histogram(&vals);
         field_summaries.push(FieldSummary {
             name: name.clone(),
             min,
             max,
         });
-        fields.push(Field {
+        file_fields.push(Field {
             name,
             min,
             max,
@@ -545,7 +753,7 @@ fn run(
             values: vals,
         });
     }
-    let mut file_levels: Vec<Level> = widths
+    let mut file_levels: Vec<Level> = level_widths
         .iter()
         .map(|&w| Level {
             cell_width: w,
@@ -553,30 +761,32 @@ fn run(
             bricks: 0,
         })
         .collect();
-    for b in &bricks {
+    for b in &bricks.boxes {
         let l = &mut file_levels[b.level as usize];
         l.cells += b.cells();
         l.bricks += 1;
     }
     let file_bricks: Vec<Brick> = bricks
+        .boxes
         .iter()
-        .zip(&origins)
-        .zip(&first)
-        .map(|((b, o), f)| Brick {
+        .zip(&bricks.origins)
+        .zip(&bricks.first)
+        .zip(&bricks.widths)
+        .map(|(((b, o), f), &w)| Brick {
             level: b.level,
             origin: *o,
-            cell_width: sets[b.set].width,
-            inv_cell_width: 1.0 / sets[b.set].width,
+            cell_width: w,
+            inv_cell_width: 1.0 / w,
             dims: b.dims,
             first_value: *f,
         })
         .collect();
     let mut region_bricks = Vec::new();
-    let mut file_regions = Vec::with_capacity(region_list.len());
-    for (rb, ids) in &region_list {
+    let mut file_regions = Vec::with_capacity(kd.regions.len());
+    for (rb, ids) in &kd.regions {
         let finest_level = ids
             .iter()
-            .map(|&i| bricks[i as usize].level)
+            .map(|&i| bricks.boxes[i as usize].level)
             .min()
             .unwrap_or(0);
         file_regions.push(Region {
@@ -594,19 +804,7 @@ fn run(
         min: [0.0; 3],
         max: [0.0; 3],
     });
-    let summary = BakeSummary {
-        input_cells,
-        leaf_cells,
-        dropped_cells: input_cells - leaf_cells,
-        bricks: bricks.len() as u64,
-        regions: file_regions.len() as u64,
-        kd_nodes: kd_nodes.len() as u64,
-        nonfinite,
-        nonfinite_derived,
-        fields: field_summaries,
-        warnings,
-    };
-    let file = BrickFile {
+    let mut file = BrickFile {
         provenance: Provenance {
             source: opts.source.clone(),
             grids: source_grids,
@@ -618,21 +816,21 @@ fn run(
             max: bounds.max,
         },
         levels: file_levels,
-        fields,
+        fields: file_fields,
         bricks: file_bricks,
         regions: file_regions,
         region_bricks,
-        region_ranges: ranges
+        region_ranges: kd
+            .ranges
             .into_iter()
             .map(|[min, max]| ValueRange { min, max })
             .collect(),
-        kd_nodes,
+        kd_nodes: kd.nodes,
         kd_ranges: Vec::new(),
         kd_full: Vec::new(),
     };
-    let mut file = file;
     file.derive_kd_tables();
-    Ok((file, summary))
+    (file, field_summaries)
 }
 
 /// Computes `nf` values per cell for every brick (in parallel, collected in brick order)
