@@ -77,6 +77,58 @@ fn reference_scan_finds_paths_in_prose_and_links() {
     );
 }
 
+/// Targets of Markdown image links, `![alt](path)`.
+fn image_links(text: &str) -> Vec<String> {
+    text.split("](")
+        .skip(1)
+        .zip(text.split("](").map(|before| {
+            before
+                .rfind('[')
+                .is_some_and(|i| before[..i].ends_with('!'))
+        }))
+        .filter(|(_, is_image)| *is_image)
+        .filter_map(|(after, _)| after.split(')').next())
+        .filter(|p| !p.starts_with("http"))
+        .map(str::to_string)
+        .collect()
+}
+
+/// A picture in the README that is not in the repository shows as a broken link on the
+/// project page.
+#[test]
+fn every_image_in_the_documents_exists() {
+    let root = util::root();
+    let mut missing = Vec::new();
+    let mut seen = 0;
+    for file in sources(&root)
+        .iter()
+        .filter(|p| p.extension().is_some_and(|x| x == "md"))
+    {
+        let text = std::fs::read_to_string(file).expect("read document");
+        let here = file.parent().unwrap_or(&root);
+        for link in image_links(&text) {
+            seen += 1;
+            if !here.join(&link).exists() {
+                missing.push(format!("{}: {link}", file.display()));
+            }
+        }
+    }
+    assert!(seen > 0, "no image links found: the scan is broken");
+    assert!(
+        missing.is_empty(),
+        "missing images:\n{}",
+        missing.join("\n")
+    );
+}
+
+#[test]
+fn image_scan_finds_image_links_only() {
+    assert_eq!(
+        image_links("![a](x.png) [doc](a.md), ![pic](docs/p.png) ![q](http://x/y.png)"),
+        vec!["x.png", "docs/p.png"]
+    );
+}
+
 /// Long flags (`--name`) in a `--help` text, except the ones clap adds to every command.
 fn long_flags(help: &str) -> Vec<String> {
     let mut flags: Vec<String> = help
