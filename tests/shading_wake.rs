@@ -26,6 +26,26 @@ fn pct(v: &[f64], q: f64) -> f64 {
     v[((v.len() - 1) as f64 * q) as usize]
 }
 
+/// CPU time of this process in ms (user + system, all threads), from `/proc/self/stat`;
+/// NaN where that is not available. Less sensitive than wall time to other jobs on the
+/// machine, which is where these measurements are usually taken.
+fn cpu_ms() -> f64 {
+    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
+        return f64::NAN;
+    };
+    // Fields after the parenthesised command name; utime and stime are the 14th and 15th.
+    let Some(rest) = stat.rsplit(')').next() else {
+        return f64::NAN;
+    };
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks = |i: usize| f.get(i).and_then(|v| v.parse::<f64>().ok());
+    match (ticks(11), ticks(12)) {
+        // Linux reports them in USER_HZ, which is 100 on every platform it runs on.
+        (Some(u), Some(s)) => (u + s) * 10.0,
+        _ => f64::NAN,
+    }
+}
+
 #[test]
 #[ignore = "measurement: prints normal errors and render times on the n0 = 64 wake"]
 fn measure_shading_normals_on_the_wake() {
@@ -115,22 +135,42 @@ fn measure_shading_normals_on_the_wake() {
                 }
             }
         }
-        // Render time of the whole frame with this shading (median of 5, one pool).
-        let mut times = Vec::new();
-        for _ in 0..5 {
-            let t = Instant::now();
-            let _ = render(&scene);
-            times.push(t.elapsed().as_secs_f64() * 1e3);
-        }
-        times.sort_by(f64::total_cmp);
         println!(
-            "{shading:?}: {} hits, angle to exact ∇Q mean {:.2}° p90 {:.2}°; neighbour angle p99 {:.2}° (exact normals' own p99 {:.2}°); render {:.1} ms (median of 5)",
+            "{shading:?}: {} hits, angle to exact ∇Q mean {:.2}° p90 {:.2}°; neighbour angle p99 {:.2}° (exact normals' own p99 {:.2}°); ",
             errs.len(),
             errs.iter().sum::<f64>() / errs.len().max(1) as f64,
             pct(&errs, 0.9),
             pct(&nb, 0.99),
             pct(&nb_exact, 0.99),
-            times[2],
+        );
+    }
+    // Render times of the whole frame, the two shadings interleaved (A, S, A, S, …) so a
+    // change in machine load hits both alike; median of 7 each.
+    let scenes: Vec<Scene> = [Shading::Analytic, Shading::Smooth]
+        .into_iter()
+        .map(|shading| {
+            let mut scene = Scene::new(vol, &st, &meshes).expect("scene");
+            scene.shading = shading;
+            scene
+        })
+        .collect();
+    let mut times = vec![Vec::new(); scenes.len()];
+    let mut cpu = vec![Vec::new(); scenes.len()];
+    for _ in 0..7 {
+        for ((scene, t), c) in scenes.iter().zip(&mut times).zip(&mut cpu) {
+            let (start, cpu_start) = (Instant::now(), cpu_ms());
+            let _ = render(scene);
+            t.push(start.elapsed().as_secs_f64() * 1e3);
+            c.push(cpu_ms() - cpu_start);
+        }
+    }
+    for ((scene, t), c) in scenes.iter().zip(&mut times).zip(&mut cpu) {
+        t.sort_by(f64::total_cmp);
+        c.sort_by(f64::total_cmp);
+        println!(
+            "{:?}: render {:.1} ms wall (median of 7, interleaved; min {:.1}, max {:.1}), \
+             {:.0} ms CPU (median; min {:.0})",
+            scene.shading, t[3], t[0], t[6], c[3], c[0]
         );
     }
 }

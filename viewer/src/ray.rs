@@ -164,7 +164,7 @@ impl<'s> RayCaster<'s> {
         let e = eval.unwrap_or_default();
         let gradient = match self.scene.shading {
             Shading::Smooth => vol
-                .shading_gradient(hit.p, self.scene.params.field)
+                .shading_gradient_near(hit.region, hit.p, self.scene.params.field)
                 .unwrap_or(e.grad),
             Shading::Analytic => e.grad,
         };

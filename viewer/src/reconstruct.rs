@@ -204,18 +204,37 @@ impl Volume<'_> {
     /// A side that leaves the data falls back to a one-sided difference; `None` when
     /// neither side of any axis is inside.
     pub fn shading_gradient(&self, p: [f64; 3], f: usize) -> Option<[f64; 3]> {
-        let r0 = self.region_at(p)? as usize;
+        self.shading_gradient_near(None, p, f)
+    }
+
+    /// [`Self::shading_gradient`] with the region the caller found `p` in (a ray hit knows
+    /// it), which saves a KD descent when it holds `p`; any other hint is ignored.
+    pub fn shading_gradient_near(
+        &self,
+        region: Option<u32>,
+        p: [f64; 3],
+        f: usize,
+    ) -> Option<[f64; 3]> {
+        let holds = |r: usize, q: &[f64; 3]| {
+            let reg = self.region(r);
+            (0..3).all(|a| q[a] >= reg.min[a] && q[a] < reg.max[a])
+        };
+        let r0 = match region {
+            Some(r) if (r as usize) < self.region_count() && holds(r as usize, &p) => r as usize,
+            _ => self.region_at(p)? as usize,
+        };
         let h = self.finest_w;
         let at = |q: [f64; 3]| -> Option<f64> {
-            let reg = self.region(r0);
-            let r = if (0..3).all(|a| q[a] >= reg.min[a] && q[a] < reg.max[a]) {
+            let r = if holds(r0, &q) {
                 r0
             } else {
                 self.region_at(q)? as usize
             };
             self.eval_value(r, q, f)
         };
-        let centre = at(p);
+        // The centre value only serves the one-sided fallback, which is rare: it is
+        // evaluated on first need (one reconstruction less per shaded point).
+        let mut centre = None;
         let mut g = [0.0; 3];
         let mut any = false;
         for a in 0..3 {
@@ -224,11 +243,19 @@ impl Volume<'_> {
             let hi = at(q);
             q[a] = p[a] - h;
             let lo = at(q);
-            g[a] = match (lo, hi, centre) {
-                (Some(l), Some(u), _) => (u - l) / (2.0 * h),
-                (None, Some(u), Some(c)) => (u - c) / h,
-                (Some(l), None, Some(c)) => (c - l) / h,
-                _ => continue,
+            g[a] = match (lo, hi) {
+                (Some(l), Some(u)) => (u - l) / (2.0 * h),
+                (None, None) => continue,
+                (lo, hi) => {
+                    let Some(c) = *centre.get_or_insert_with(|| at(p)) else {
+                        continue;
+                    };
+                    match (lo, hi) {
+                        (None, Some(u)) => (u - c) / h,
+                        (Some(l), _) => (c - l) / h,
+                        _ => continue,
+                    }
+                }
             };
             any = true;
         }

@@ -34,13 +34,18 @@ impl Tracer<'_> {
         }?;
         let p = at(&o, &d, t);
         let vol = self.vol;
+        let mut region = region.or_else(|| vol.region_at(p));
         let eval = region
-            .or_else(|| vol.region_at(p))
             .and_then(|r| vol.eval(r as usize, p, self.params.field, self.params.colour_field))
             .or_else(|| {
                 // The hit may lie on the region's far face (round-off): look it up.
-                let r = vol.region_at(p)?;
-                vol.eval(r as usize, p, self.params.field, self.params.colour_field)
+                region = vol.region_at(p);
+                vol.eval(
+                    region? as usize,
+                    p,
+                    self.params.field,
+                    self.params.colour_field,
+                )
             });
         self.stats.samples += 1;
         self.record(Event::Hit {
@@ -48,7 +53,7 @@ impl Tracer<'_> {
             value: eval.map(|e| e.value),
             normal: None,
         });
-        Some(IsoHit { t, p, eval })
+        Some(IsoHit { t, p, eval, region })
     }
 
     /// Whether anything opaque (iso mode) lies on `o + t d`, `t ∈ (t0, t1)`.

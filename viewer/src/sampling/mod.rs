@@ -217,6 +217,8 @@ pub struct IsoHit {
     pub p: [f64; 3],
     /// Reconstruction at the hit (`None` only where the weights vanish).
     pub eval: Option<Eval>,
+    /// The region the hit was evaluated in (a hint for shading lookups near it).
+    pub region: Option<u32>,
 }
 
 #[inline]
