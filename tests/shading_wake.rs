@@ -145,7 +145,7 @@ fn measure_shading_normals_on_the_wake() {
         );
     }
     // Render times of the whole frame, the two shadings interleaved (A, S, A, S, …) so a
-    // change in machine load hits both alike; median of 7 each.
+    // change in machine load hits both alike; median of 15 each.
     let scenes: Vec<Scene> = [Shading::Analytic, Shading::Smooth]
         .into_iter()
         .map(|shading| {
@@ -156,7 +156,7 @@ fn measure_shading_normals_on_the_wake() {
         .collect();
     let mut times = vec![Vec::new(); scenes.len()];
     let mut cpu = vec![Vec::new(); scenes.len()];
-    for _ in 0..7 {
+    for _ in 0..15 {
         for ((scene, t), c) in scenes.iter().zip(&mut times).zip(&mut cpu) {
             let (start, cpu_start) = (Instant::now(), cpu_ms());
             let _ = render(scene);
@@ -168,9 +168,9 @@ fn measure_shading_normals_on_the_wake() {
         t.sort_by(f64::total_cmp);
         c.sort_by(f64::total_cmp);
         println!(
-            "{:?}: render {:.1} ms wall (median of 7, interleaved; min {:.1}, max {:.1}), \
+            "{:?}: render {:.1} ms wall (median of 15, interleaved; min {:.1}, max {:.1}), \
              {:.0} ms CPU (median; min {:.0})",
-            scene.shading, t[3], t[0], t[6], c[3], c[0]
+            scene.shading, t[7], t[0], t[14], c[7], c[0]
         );
     }
 }
