@@ -430,7 +430,7 @@ fn measure(
                         q: f64::from(file.fields[fq].values[i]),
                         q_exact: flow.q(p),
                         s: f64::from(file.fields[fs].values[i]),
-                        s_exact: analytic::speed(flow.velocity(p)),
+                        s_exact: analytic::speed(&flow.velocity(p)),
                     });
                 }
             }

@@ -1,7 +1,7 @@
 //! Opaque triangle meshes from OBJ files (tobj), placed by translation and uniform scale.
 
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use format::input::{read_whole, InputErrorKind, Limits};
 pub use glam::{DVec3, Vec3};
@@ -450,15 +450,6 @@ impl Meshes {
     }
 }
 
-/// Reads a mesh file path relative to `base` unless it is absolute.
-pub fn resolve(base: &Path, path: &Path) -> PathBuf {
-    if path.is_absolute() {
-        path.to_path_buf()
-    } else {
-        base.join(path)
-    }
-}
-
 #[derive(Debug, thiserror::Error)]
 #[error("{}: {message}", path.display())]
 pub struct MeshError {
@@ -470,6 +461,7 @@ pub struct MeshError {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+    use std::path::Path;
 
     fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
         let p = dir.join(name);

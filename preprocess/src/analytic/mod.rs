@@ -47,26 +47,9 @@ pub trait Flow: Send + Sync {
     }
 }
 
-/// Q = ½(‖Ω‖² − ‖S‖²) with S and Ω the symmetric and antisymmetric parts of the gradient
-/// (Frobenius norms). Positive where rotation dominates strain.
-pub fn q_from_gradient(g: &Gradient) -> f64 {
-    let mut omega2 = 0.0;
-    let mut strain2 = 0.0;
-    for i in 0..3 {
-        for j in 0..3 {
-            let s = 0.5 * (g[i][j] + g[j][i]);
-            let w = 0.5 * (g[i][j] - g[j][i]);
-            strain2 += s * s;
-            omega2 += w * w;
-        }
-    }
-    0.5 * (omega2 - strain2)
-}
-
-/// Speed `|u|`.
-pub fn speed(u: [f64; 3]) -> f64 {
-    (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt()
-}
+/// The exact Q and speed of a flow use the same formulas as the baked fields, so a
+/// difference between them is the discretisation's, never a second formula's.
+pub use crate::derive::{q_from_gradient, speed};
 
 /// Names accepted by [`scene`], in documentation order.
 pub const SCENE_NAMES: [&str; 6] = [

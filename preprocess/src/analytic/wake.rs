@@ -369,7 +369,7 @@ mod tests {
         }
         check_flow(&w, [-2.0; 3], [2.0; 3], 100, 23);
         // Stagnation point upstream, 1.5 U at the equator, U far away.
-        assert!(speed(w.velocity([-0.5 - 1e-9, 0.0, 0.0])) < 1e-8);
+        assert!(speed(&w.velocity([-0.5 - 1e-9, 0.0, 0.0])) < 1e-8);
         assert!((w.velocity([0.0, 0.5 + 1e-12, 0.0])[0] - 0.09).abs() < 1e-9);
         assert!((w.velocity([-1e4, 3.0, 0.0])[0] - 0.06).abs() < 1e-9);
         // Inside: 1.5 U along x, the surface's tangential velocity continued.
@@ -411,7 +411,7 @@ mod tests {
         for n in 0..200 {
             let d = normalize(rng.point([-1.0; 3], [1.0; 3]));
             // No slip on the surface, and at rest inside.
-            assert!(speed(w.velocity(scale(d, 0.5 + 1e-12))) < 1e-9);
+            assert!(speed(&w.velocity(scale(d, 0.5 + 1e-12))) < 1e-9);
             assert_eq!(w.velocity(scale(d, 0.3)), [0.0; 3]);
             // Exact potential flow beyond the layer.
             let p = scale(d, 0.6 + rng.next_f64());
@@ -452,7 +452,7 @@ mod tests {
             let q0 = ring.core_omega().powi(2);
             assert!(q > 0.7 * q0 && q < 1.3 * q0, "core Q {q} vs ω₀² {q0}");
             assert!((0.25..0.65).contains(&q), "{q}");
-            let s = speed(w.velocity(ring.centre));
+            let s = speed(&w.velocity(ring.centre));
             assert!(s > 0.005 && s < 0.06, "ring-centre speed {s}");
         }
     }

@@ -183,24 +183,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let mut out = QuietStdout::new();
     if args.json {
-        let fields: Vec<serde_json::Value> = summary
-            .fields
-            .iter()
-            .map(|f| serde_json::json!({"name": f.name, "min": f.min, "max": f.max}))
-            .collect();
-        let v = serde_json::json!({
-            "input_cells": summary.input_cells,
-            "leaf_cells": summary.leaf_cells,
-            "dropped_cells": summary.dropped_cells,
-            "bricks": summary.bricks,
-            "regions": summary.regions,
-            "kd_nodes": summary.kd_nodes,
-            "nonfinite": summary.nonfinite,
-            "nonfinite_derived": summary.nonfinite_derived,
-            "fields": fields,
-            "seconds": seconds,
-            "output": output.display().to_string(),
-        });
+        /// The summary with the run's own facts; through a `Value` so keys print sorted.
+        #[derive(serde::Serialize)]
+        struct Report<'a> {
+            #[serde(flatten)]
+            summary: &'a BakeSummary,
+            seconds: f64,
+            output: String,
+        }
+        let v = serde_json::to_value(Report {
+            summary: &summary,
+            seconds,
+            output: output.display().to_string(),
+        })?;
         writeln!(out, "{}", serde_json::to_string_pretty(&v)?)?;
     } else if !args.quiet {
         writeln!(
