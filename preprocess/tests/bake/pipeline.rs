@@ -1,13 +1,12 @@
 //! Bake pipeline on in-memory grids sampled from closed-form flows.
 
-mod bake_common;
-
-use bake_common::{cells, field, locate, reconstruct, Rng};
+use crate::common::bake::{cells, field, locate, reconstruct};
+use crate::common::Rng;
 use format::BrickFile;
-use preprocess::bake::{bake, BakeError, BakeOptions};
-use preprocess::derive::Stencil;
-use preprocess::fields::FieldKind;
-use preprocess::grid::{leaf_offset, AnyGrid, Grid, Leaf, Transform, LEAF_VOXELS};
+use qbricks_preprocess::bake::{bake, BakeError, BakeOptions};
+use qbricks_preprocess::derive::Stencil;
+use qbricks_preprocess::fields::FieldKind;
+use qbricks_preprocess::grid::{leaf_offset, AnyGrid, Grid, Leaf, Transform, LEAF_VOXELS};
 
 /// ABC flow `u = (A sin z + C cos y, B sin x + A cos z, C sin y + B cos x)`.
 const A: f64 = 1.0;
@@ -316,7 +315,7 @@ fn scalar_grid_is_its_own_field_and_bad_inputs_are_refused() {
 
     // A 4096³ root tile is refused before anything is expanded.
     let mut huge = scalar;
-    huge.tiles.push(preprocess::grid::Tile {
+    huge.tiles.push(qbricks_preprocess::grid::Tile {
         origin: [0, 0, 4096],
         size: 4096,
         value: 1.0,

@@ -2,14 +2,9 @@
 //! make_fixtures.py): every active voxel, tile and (for the mask-compression fixtures)
 //! inactive leaf value must equal what OpenVDB itself read from the same file.
 
-#[path = "vdb_common.rs"]
-mod common;
-mod util;
-
-use std::process::Command;
-
-use common::*;
-use preprocess::vdb::{MetaValue, ValueType, VdbFile};
+use crate::common::vdb::*;
+use crate::common::{fixtures, qbricks_bake};
+use qbricks_preprocess::vdb::{MetaValue, ValueType, VdbFile};
 use serde_json::Value;
 
 fn expected() -> serde_json::Map<String, Value> {
@@ -243,7 +238,7 @@ fn inspect_json_matches_openvdb() {
         "half_zip.vdb",
         "float_none.vdb",
     ] {
-        let out = Command::new(util::bin("qbricks-bake"))
+        let out = qbricks_bake()
             .args(["inspect", "--json"])
             .arg(fixtures().join(name))
             .output()
@@ -325,7 +320,7 @@ fn inspect_json_matches_openvdb() {
         }
     }
     // Metadata of a known grid.
-    let out = Command::new(util::bin("qbricks-bake"))
+    let out = qbricks_bake()
         .args(["inspect", "--json"])
         .arg(fixtures().join("double_zip.vdb"))
         .output()
@@ -340,7 +335,7 @@ fn inspect_json_matches_openvdb() {
 
 #[test]
 fn inspect_table_names_every_grid() {
-    let out = Command::new(util::bin("qbricks-bake"))
+    let out = qbricks_bake()
         .arg("inspect")
         .arg(fixtures().join("multi_blosc.vdb"))
         .output()

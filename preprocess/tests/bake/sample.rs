@@ -2,17 +2,15 @@
 //! `data/wake_small.vdb` gives today, so the README's main command and the viewer's default
 //! file can never drift apart from the code.
 
-mod util;
-
-use std::process::Command;
+use crate::common::{qbricks_bake, root};
 
 #[test]
 fn bundled_qbk_matches_what_bake_writes_today() {
     let dir = tempfile::tempdir().expect("tempdir");
     let vdb = dir.path().join("wake_small.vdb");
-    std::fs::copy(util::root().join("data/wake_small.vdb"), &vdb).expect("copy sample");
+    std::fs::copy(root().join("data/wake_small.vdb"), &vdb).expect("copy sample");
     let out = dir.path().join("wake_small.qbk");
-    let run = Command::new(util::bin("qbricks-bake"))
+    let run = qbricks_bake()
         .arg("bake")
         .arg(&vdb)
         .arg("--quiet")
@@ -23,7 +21,7 @@ fn bundled_qbk_matches_what_bake_writes_today() {
         "{}",
         String::from_utf8_lossy(&run.stderr)
     );
-    let want = std::fs::read(util::root().join("data/wake_small.qbk")).expect("bundled .qbk");
+    let want = std::fs::read(root().join("data/wake_small.qbk")).expect("bundled .qbk");
     let got = std::fs::read(&out).expect("baked .qbk");
     assert!(
         want == got,

@@ -2,15 +2,14 @@
 //! baked exactly like the vec3 grid they split; mismatched components and ambiguous
 //! candidates are one-line exit-2 errors naming the grids.
 
-mod util;
-
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
+use crate::common::qbricks_bake;
 use format::BrickFileView;
-use preprocess::grid::{AnyGrid, Grid, Leaf};
-use preprocess::synth::scene_grids;
-use preprocess::vdb::write::{write_vdb, Compression};
+use qbricks_preprocess::grid::{AnyGrid, Grid, Leaf};
+use qbricks_preprocess::synth::scene_grids;
+use qbricks_preprocess::vdb::write::{write_vdb, Compression};
 
 /// The `lamb-oseen` velocity at n0 = 16 and its three components named `base{sep}{c}`.
 fn components(base: &str, sep: &str) -> (Grid<[f32; 3]>, Vec<Grid<f32>>) {
@@ -40,7 +39,7 @@ fn write(path: &Path, grids: Vec<AnyGrid>) {
 }
 
 fn bake(args: &[&str], input: &Path, output: &Path) -> Output {
-    Command::new(util::bin("qbricks-bake"))
+    qbricks_bake()
         .arg("bake")
         .arg(input)
         .arg("-o")

@@ -1,6 +1,5 @@
-//! Helpers shared by the bake tests: reading cells back from a baked file and a reference
-//! reconstruction (basis method) written independently of the baker and the viewer.
-#![allow(dead_code)]
+//! Reading cells back from a baked file and a reference reconstruction (basis method)
+//! written independently of the baker and the viewer.
 
 use format::BrickFile;
 
@@ -95,15 +94,4 @@ pub fn reconstruct(file: &BrickFile, bricks: &[u32], f: usize, p: [f64; 3]) -> O
 pub fn sample(file: &BrickFile, f: usize, p: [f64; 3]) -> Option<f64> {
     let r = locate(file, p)?;
     reconstruct(file, region_bricks(file, r), f, p)
-}
-
-/// Small deterministic random numbers (xorshift64*), uniform in [0, 1).
-pub struct Rng(pub u64);
-impl Rng {
-    pub fn next(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        (self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
-    }
 }

@@ -2,18 +2,14 @@
 //! cell-centred one and converges at the same (second) order, while reading the same file as
 //! cell-centred is first order; the CLI takes the layout from the grid class.
 //!
-//! Measure: `cargo test --release --test bake_staggered -- --nocapture`
+//! Measure: `cargo test --release -p qbricks-preprocess --test bake staggered:: -- --nocapture`
 
-mod bake_common;
-mod util;
-
-use std::process::Command;
-
-use bake_common::{cells, field};
-use preprocess::analytic;
-use preprocess::bake::{bake, BakeOptions};
-use preprocess::grid::AnyGrid;
-use preprocess::synth::scene_grids_with;
+use crate::common::bake::{cells, field};
+use crate::common::qbricks_bake;
+use qbricks_preprocess::analytic;
+use qbricks_preprocess::bake::{bake, BakeOptions};
+use qbricks_preprocess::grid::AnyGrid;
+use qbricks_preprocess::synth::scene_grids_with;
 
 /// RMS and largest |Q − exact Q| over all leaf cells, relative to the largest |exact Q|.
 fn q_error(scene: &str, n0: u32, staggered_file: bool, staggered_bake: bool) -> (f64, f64) {
@@ -108,8 +104,7 @@ fn staggered_q_is_second_order_and_reading_it_as_centred_is_not() {
 fn cli_reads_the_class_and_layout_overrides_it() {
     let dir = tempfile::tempdir().unwrap();
     let vdb = dir.path().join("mac.vdb");
-    let bake_bin = util::bin("qbricks-bake");
-    let out = Command::new(&bake_bin)
+    let out = qbricks_bake()
         .args(["synth", "lamb-oseen", "--n0", "24", "--staggered", "-o"])
         .arg(&vdb)
         .output()
@@ -120,7 +115,7 @@ fn cli_reads_the_class_and_layout_overrides_it() {
         String::from_utf8_lossy(&out.stderr)
     );
 
-    let out = Command::new(&bake_bin)
+    let out = qbricks_bake()
         .args(["inspect", "--json"])
         .arg(&vdb)
         .output()
@@ -129,18 +124,14 @@ fn cli_reads_the_class_and_layout_overrides_it() {
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["grids"][0]["class"], "staggered");
     assert_eq!(v["grids"][0]["metadata"]["class"], "staggered");
-    let out = Command::new(&bake_bin)
-        .arg("inspect")
-        .arg(&vdb)
-        .output()
-        .unwrap();
+    let out = qbricks_bake().arg("inspect").arg(&vdb).output().unwrap();
     let text = String::from_utf8(out.stdout).unwrap();
     assert!(text.contains("class        staggered"), "{text}");
 
     // The CLI's default (class) equals the library with the grid marked staggered; the
     // --layout centred override equals the library without.
     let grids = || {
-        preprocess::vdb::VdbFile::open(&vdb)
+        qbricks_preprocess::vdb::VdbFile::open(&vdb)
             .unwrap()
             .read_all()
             .unwrap()
@@ -157,7 +148,7 @@ fn cli_reads_the_class_and_layout_overrides_it() {
     };
     for (layout, staggered) in [("auto", true), ("centred", false)] {
         let qbk = dir.path().join(format!("{layout}.qbk"));
-        let out = Command::new(&bake_bin)
+        let out = qbricks_bake()
             .args(["bake", "--quiet", "--layout", layout, "-o"])
             .arg(&qbk)
             .arg(&vdb)

@@ -2,7 +2,7 @@
 //! the default choice and of `--grid`, with the indices (file order) it returns or the
 //! error it gives.
 
-use preprocess::bake::{select_grids, BakeError, GridKind};
+use qbricks_preprocess::bake::{select_grids, BakeError, GridKind};
 use GridKind::{Other, Scalar, Vector};
 
 fn names(v: &[&str]) -> Vec<String> {

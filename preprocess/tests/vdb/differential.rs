@@ -5,14 +5,12 @@
 //! half of the files are also re-encoded with zip and with no compression. Skipped (with a
 //! message) when python3-openvdb is not installed.
 
-#[path = "vdb_common.rs"]
-mod common;
-
 use std::collections::BTreeMap;
 use std::process::Command;
 
-use common::*;
-use preprocess::vdb::VdbFile;
+use crate::common::have_pyopenvdb;
+use crate::common::vdb::*;
+use qbricks_preprocess::vdb::VdbFile;
 use serde_json::Value;
 
 const SCRIPT: &str = r#"

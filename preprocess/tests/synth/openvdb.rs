@@ -1,4 +1,4 @@
-//! Files written by `preprocess::vdb::write` (and `synth`) load in real OpenVDB.
+//! Files written by `qbricks_preprocess::vdb::write` (and `synth`) load in real OpenVDB.
 //!
 //! Reads them back with Debian's `pyopenvdb` (every active value, every value of every
 //! leaf, tiles, transforms, metadata) and `vdb_print -l` (including the double-precision
@@ -9,9 +9,11 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::Command;
 
-use preprocess::grid::{AnyGrid, Grid, Leaf, Tile, Transform, LEAF_VOXELS};
-use preprocess::synth::{scene_grids, speed_grid, write_scene, SynthOptions};
-use preprocess::vdb::write::{write_vdb, write_vdb_with, Compression, MetaValue, WriteOptions};
+use qbricks_preprocess::grid::{AnyGrid, Grid, Leaf, Tile, Transform, LEAF_VOXELS};
+use qbricks_preprocess::synth::{scene_grids, speed_grid, write_scene, SynthOptions};
+use qbricks_preprocess::vdb::write::{
+    write_vdb, write_vdb_with, Compression, MetaValue, WriteOptions,
+};
 use serde_json::Value;
 
 const PYTHON: &str = "/usr/bin/python3";
@@ -20,10 +22,7 @@ const COMPRESSIONS: [Compression; 3] =
     [Compression::None, Compression::ActiveMask, Compression::Zip];
 
 fn have_pyopenvdb() -> bool {
-    let ok = Command::new(PYTHON)
-        .args(["-c", "import pyopenvdb"])
-        .output()
-        .is_ok_and(|o| o.status.success());
+    let ok = crate::common::have_pyopenvdb();
     if !ok {
         eprintln!("SKIPPED: pyopenvdb not available (apt-get install python3-openvdb)");
     }

@@ -2,10 +2,9 @@
 //! writes today, so it cannot go stale. If this fails after an intended change to the
 //! analytic flows, the layout or the writer, regenerate the file with that command.
 
-use preprocess::synth::{write_scene, SynthOptions};
-use preprocess::vdb::write::Compression;
-
-mod util;
+use crate::common::root;
+use qbricks_preprocess::synth::{write_scene, SynthOptions};
+use qbricks_preprocess::vdb::write::Compression;
 
 /// The command in the README's synth section, and the options it stands for.
 const COMMAND: &str =
@@ -25,7 +24,7 @@ fn options() -> SynthOptions {
 
 #[test]
 fn bundled_sample_matches_what_synth_writes_today() {
-    let bundled = util::root().join("data/wake_small.vdb");
+    let bundled = root().join("data/wake_small.vdb");
     let want = std::fs::read(&bundled).expect("data/wake_small.vdb is bundled");
     let dir = tempfile::tempdir().expect("tempdir");
     let path = dir.path().join("wake_small.vdb");
@@ -43,7 +42,7 @@ fn bundled_sample_matches_what_synth_writes_today() {
 
 #[test]
 fn readme_documents_the_sample_command() {
-    let readme = std::fs::read_to_string(util::root().join("README.md")).expect("README");
+    let readme = std::fs::read_to_string(root().join("README.md")).expect("README");
     assert!(
         readme.contains(COMMAND),
         "README.md should give the command that makes data/wake_small.vdb: {COMMAND}"

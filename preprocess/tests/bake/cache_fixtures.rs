@@ -1,24 +1,22 @@
-//! OpenVDB-written simulation-cache layouts (`tests/fixtures/make_fixtures.py`): a
+//! OpenVDB-written simulation-cache layouts (`preprocess/tests/fixtures/make_fixtures.py`): a
 //! Mantaflow-like staggered velocity grid with half floats and blosc, and velocity split
 //! into three float grids (`vel.x`, `vel.y`, `vel.z`) as Houdini exports it.
 
-mod util;
-
 use std::path::PathBuf;
-use std::process::Command;
 
+use crate::common::{fixtures, qbricks_bake};
 use format::BrickFileView;
-use preprocess::bake::{bake, BakeOptions};
-use preprocess::grid::{AnyGrid, Grid};
-use preprocess::vdb::VdbFile;
+use qbricks_preprocess::bake::{bake, BakeOptions};
+use qbricks_preprocess::grid::{AnyGrid, Grid};
+use qbricks_preprocess::vdb::VdbFile;
 use serde_json::Value;
 
 fn fixture(name: &str) -> PathBuf {
-    util::root().join("tests/fixtures").join(name)
+    fixtures().join(name)
 }
 
 fn inspect(name: &str) -> Value {
-    let out = Command::new(util::bin("qbricks-bake"))
+    let out = qbricks_bake()
         .args(["inspect", "--json"])
         .arg(fixture(name))
         .output()
@@ -42,7 +40,7 @@ fn inspect_shows_the_cache_layouts() {
         .contains(&"blosc".into()));
     assert_eq!(g[1]["name"], "density");
     assert_eq!(g[1]["class"], "fog volume");
-    let out = Command::new(util::bin("qbricks-bake"))
+    let out = qbricks_bake()
         .arg("inspect")
         .arg(fixture("cache_staggered_blosc.vdb"))
         .output()
@@ -88,7 +86,7 @@ fn q_and_density(path: &std::path::Path) -> (Vec<f32>, Vec<f32>) {
 fn the_staggered_cache_bakes_as_a_mac_grid_with_density() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("c.qbk");
-    let o = Command::new(util::bin("qbricks-bake"))
+    let o = qbricks_bake()
         .arg("bake")
         .arg(fixture("cache_staggered_blosc.vdb"))
         .arg("-o")
@@ -140,7 +138,7 @@ fn the_staggered_cache_bakes_as_a_mac_grid_with_density() {
 fn split_components_from_openvdb_bake_as_one_velocity() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("s.qbk");
-    let o = Command::new(util::bin("qbricks-bake"))
+    let o = qbricks_bake()
         .arg("bake")
         .arg(fixture("split_zip.vdb"))
         .arg("-o")
@@ -163,14 +161,17 @@ fn split_components_from_openvdb_bake_as_one_velocity() {
             _ => panic!("float components"),
         })
         .collect();
-    let merged =
-        preprocess::inputs::merge_components("vel", [&parts[0], &parts[1], &parts[2]], 1 << 20)
-            .unwrap();
+    let merged = qbricks_preprocess::inputs::merge_components(
+        "vel",
+        [&parts[0], &parts[1], &parts[2]],
+        1 << 20,
+    )
+    .unwrap();
     assert_eq!(merged.active_voxel_count(), 16 * 12 * 7 + 512);
     let opts = BakeOptions {
         fields: Some(vec![
-            preprocess::fields::FieldKind::Q,
-            preprocess::fields::FieldKind::Velocity,
+            qbricks_preprocess::fields::FieldKind::Q,
+            qbricks_preprocess::fields::FieldKind::Velocity,
         ]),
         ..BakeOptions::default()
     };

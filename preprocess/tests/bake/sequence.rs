@@ -2,20 +2,14 @@
 //! (a missing and a corrupt frame in the middle), names the failure, exits 2, writes the
 //! same bytes as single-file bakes, and a manifest with global field ranges.
 
-mod util;
-
 use std::path::Path;
-use std::process::Command;
 
+use crate::common::qbricks_bake;
 use format::BrickFileView;
 use serde_json::Value;
 
 fn run(args: &[&str], dir: &Path) -> std::process::Output {
-    Command::new(util::bin("qbricks-bake"))
-        .current_dir(dir)
-        .args(args)
-        .output()
-        .unwrap()
+    qbricks_bake().current_dir(dir).args(args).output().unwrap()
 }
 
 fn synth(dir: &Path, scene: &str, out: &str) {

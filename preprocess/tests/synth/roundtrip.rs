@@ -4,10 +4,12 @@
 
 use std::collections::BTreeMap;
 
-use preprocess::grid::{AnyGrid, Grid, Leaf, Tile, Transform, LEAF_VOXELS};
-use preprocess::synth::{scene_grids, speed_grid, write_scene, SynthOptions};
-use preprocess::vdb::write::{write_vdb, Compression};
-use preprocess::vdb::VdbFile;
+use crate::common::Rng;
+
+use qbricks_preprocess::grid::{AnyGrid, Grid, Leaf, Tile, Transform, LEAF_VOXELS};
+use qbricks_preprocess::synth::{scene_grids, speed_grid, write_scene, SynthOptions};
+use qbricks_preprocess::vdb::write::{write_vdb, Compression};
+use qbricks_preprocess::vdb::VdbFile;
 
 const COMPRESSIONS: [Compression; 3] =
     [Compression::None, Compression::ActiveMask, Compression::Zip];
@@ -93,21 +95,6 @@ fn write_scene_metadata_reads_back() {
     }
 }
 
-/// Deterministic pseudo-random numbers (xorshift64*).
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-    fn below(&mut self, n: u64) -> u64 {
-        self.next() % n
-    }
-}
-
 /// A random sparse grid: leaves with random masks whose inactive voxels hold a random
 /// mix of background, −background and up to three other values (so every node-compression
 /// case occurs), plus random active tiles at each level; negative coordinates included.
@@ -127,7 +114,9 @@ fn random_grid<V: Copy>(
         match rng.below(4) {
             0 => active = [u64::MAX; 8],
             1 => {}
-            _ => active.iter_mut().for_each(|w| *w = rng.next() & rng.next()),
+            _ => active
+                .iter_mut()
+                .for_each(|w| *w = rng.next_u64() & rng.next_u64()),
         }
         let others: Vec<V> = (0..rng.below(4)).map(|_| value(rng)).collect();
         let mode = rng.below(6);

@@ -2,16 +2,15 @@
 //! velocity's leaf cells; and the field-list and overflow cases of issue 12 (duplicate
 //! fields, several scalar `--grid`s, velocities whose Q or speed overflow f32).
 
-mod util;
-
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
-use preprocess::bake::{bake, BakeError, BakeOptions};
-use preprocess::fields::FieldKind;
-use preprocess::grid::{AnyGrid, Grid, Leaf, Transform};
-use preprocess::synth::{sample_grid, scene_layout, GridLayout};
-use preprocess::vdb::write::{write_vdb, Compression};
+use crate::common::qbricks_bake;
+use qbricks_preprocess::bake::{bake, BakeError, BakeOptions};
+use qbricks_preprocess::fields::FieldKind;
+use qbricks_preprocess::grid::{AnyGrid, Grid, Leaf, Transform};
+use qbricks_preprocess::synth::{sample_grid, scene_layout, GridLayout};
+use qbricks_preprocess::vdb::write::{write_vdb, Compression};
 
 /// A scalar grid over the index box `lo..hi` with values `f(world centre)`.
 fn scalar(
@@ -67,7 +66,7 @@ fn linear(p: [f64; 3]) -> f64 {
 
 fn velocity() -> (GridLayout, Grid<[f32; 3]>) {
     let layout = scene_layout("lamb-oseen", 16, 1).unwrap().remove(0);
-    let flow = preprocess::analytic::scene("lamb-oseen").unwrap();
+    let flow = qbricks_preprocess::analytic::scene("lamb-oseen").unwrap();
     let g = sample_grid(flow.as_ref(), &layout);
     (layout, g)
 }
@@ -152,7 +151,7 @@ fn write(path: &Path, grids: Vec<AnyGrid>) {
 }
 
 fn bake_cli(input: &Path, args: &[&str]) -> Output {
-    Command::new(util::bin("qbricks-bake"))
+    qbricks_bake()
         .arg("bake")
         .arg(input)
         .args(["--quiet", "-o"])

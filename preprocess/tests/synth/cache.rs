@@ -2,16 +2,12 @@
 //! synth command writes today, and it bakes as a sequence with the smoke as an extra field,
 //! its staggered velocity read as a MAC grid.
 
-mod bake_common;
-mod util;
-
-use std::process::Command;
-
-use bake_common::{cells, field};
+use crate::common::bake::{cells, field};
+use crate::common::{qbricks_bake, root};
 use format::BrickFile;
-use preprocess::analytic::{Flow, RingPlume};
-use preprocess::bake::{bake, BakeOptions};
-use preprocess::vdb::VdbFile;
+use qbricks_preprocess::analytic::{Flow, RingPlume};
+use qbricks_preprocess::bake::{bake, BakeOptions};
+use qbricks_preprocess::vdb::VdbFile;
 
 /// The command in the README, run from the repository root.
 const COMMAND: &str =
@@ -20,7 +16,7 @@ const FRAMES: [&str; 4] = ["0001", "0002", "0003", "0004"];
 
 #[test]
 fn bundled_cache_matches_what_synth_writes_today() {
-    let readme = std::fs::read_to_string(util::root().join("README.md")).unwrap();
+    let readme = std::fs::read_to_string(root().join("README.md")).unwrap();
     assert!(readme.contains(COMMAND), "README.md should give {COMMAND}");
     let dir = tempfile::tempdir().unwrap();
     std::fs::create_dir(dir.path().join("data")).unwrap();
@@ -30,7 +26,7 @@ fn bundled_cache_matches_what_synth_writes_today() {
         .skip(1)
         .map(|a| a.trim_matches('\''))
         .collect();
-    let out = Command::new(util::bin("qbricks-bake"))
+    let out = qbricks_bake()
         .current_dir(dir.path())
         .args(&args)
         .output()
@@ -39,7 +35,7 @@ fn bundled_cache_matches_what_synth_writes_today() {
     let mut total = 0;
     for f in FRAMES {
         let rel = format!("data/cache/fluid_data_{f}.vdb");
-        let want = std::fs::read(util::root().join(&rel)).expect("bundled frame");
+        let want = std::fs::read(root().join(&rel)).expect("bundled frame");
         let got = std::fs::read(dir.path().join(&rel)).unwrap();
         total += want.len();
         assert!(
@@ -67,9 +63,9 @@ fn q_rms(file: &BrickFile, frame: u64) -> f64 {
 #[test]
 fn bundled_cache_bakes_as_a_sequence_with_density() {
     let dir = tempfile::tempdir().unwrap();
-    let input = util::root().join("data/cache/fluid_data_####.vdb");
+    let input = root().join("data/cache/fluid_data_####.vdb");
     let output = dir.path().join("frame_####.qbk");
-    let out = Command::new(util::bin("qbricks-bake"))
+    let out = qbricks_bake()
         .arg("bake")
         .arg(&input)
         .arg("-o")
@@ -87,7 +83,7 @@ fn bundled_cache_bakes_as_a_sequence_with_density() {
     // the faces as centres, on every frame (by ≈ 5 %: at n0 32 the ring core, σ = 2 cells,
     // is barely resolved, so the discretisation error dominates both).
     for (i, f) in FRAMES.iter().enumerate() {
-        let path = util::root().join(format!("data/cache/fluid_data_{f}.vdb"));
+        let path = root().join(format!("data/cache/fluid_data_{f}.vdb"));
         let file = VdbFile::open(&path).unwrap();
         assert!(file.grids()[0].is_staggered());
         let grids = vec![file.read_grid(0).unwrap()];

@@ -2,14 +2,8 @@
 //! garbage, empty files, unsupported grid types and transforms, absurd sizes. The CLI exits
 //! with code 2 and prints one line.
 
-#[path = "vdb_common.rs"]
-mod common;
-mod util;
-
-use std::process::Command;
-
-use common::*;
-use preprocess::vdb::{ErrorKind, VdbError, VdbFile};
+use crate::common::{fixtures, qbricks_bake};
+use qbricks_preprocess::vdb::{ErrorKind, VdbError, VdbFile};
 
 fn read(name: &str, bytes: Vec<u8>) -> Result<usize, VdbError> {
     let file = VdbFile::from_bytes(name, bytes)?;
@@ -277,11 +271,7 @@ fn absurd_compressed_chunk_sizes_are_refused() {
 }
 
 fn run_cli(path: &std::path::Path) -> (i32, String) {
-    let out = Command::new(util::bin("qbricks-bake"))
-        .arg("inspect")
-        .arg(path)
-        .output()
-        .unwrap();
+    let out = qbricks_bake().arg("inspect").arg(path).output().unwrap();
     (
         out.status.code().unwrap_or(-1),
         String::from_utf8_lossy(&out.stderr).into_owned(),

@@ -1,23 +1,6 @@
-//! Helpers shared by the `vdb_*` tests (included with `#[path]`; also built as an empty test).
-#![allow(dead_code)]
+//! Comparing grids with what OpenVDB read: grids flattened to values, `expected.json` parsed.
 
-use std::path::PathBuf;
-use std::process::Command;
-
-use preprocess::grid::AnyGrid;
-
-pub fn fixtures() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures")
-}
-
-/// Is `/usr/bin/python3 -c 'import pyopenvdb'` available?
-pub fn have_pyopenvdb() -> bool {
-    Command::new("/usr/bin/python3")
-        .args(["-c", "import pyopenvdb"])
-        .output()
-        .map(|o| o.status.success())
-        .unwrap_or(false)
-}
+use qbricks_preprocess::grid::AnyGrid;
 
 /// Components of a value as f64.
 pub trait Comps {
@@ -60,7 +43,10 @@ pub struct Flat {
     pub inactive: Vec<([i32; 3], Vec<f64>)>,
 }
 
-fn flat_of<V: Copy + Comps>(g: &preprocess::grid::Grid<V>, value_type: &'static str) -> Flat {
+fn flat_of<V: Copy + Comps>(
+    g: &qbricks_preprocess::grid::Grid<V>,
+    value_type: &'static str,
+) -> Flat {
     let mut f = Flat {
         name: g.name.clone(),
         value_type,

@@ -1,0 +1,13 @@
+//! Writing VDB files, one test binary: `synth` scenes and `vdb::write` read back by our
+//! reader and by real OpenVDB, and the bundled samples they made.
+
+// As in `#[test]` functions (clippy.toml), `unwrap` is fine in their helpers too.
+#![allow(clippy::unwrap_used)]
+
+#[path = "../common/mod.rs"]
+mod common;
+
+mod cache;
+mod openvdb;
+mod roundtrip;
+mod sample;
