@@ -1,6 +1,6 @@
 //! `qbricks-view render` on frame sequences and with `--colour-field` / `--iso-field`, on
 //! small closed-form frames written with `testvol` (the end-to-end test through
-//! `qbricks-bake` is `tests/render_sequence.rs`).
+//! `qbricks-bake` is `tests/cross_crate/render_sequence.rs`).
 
 use std::path::Path;
 use std::process::{Command, Output};

@@ -1,9 +1,8 @@
 //! `qbricks-view info` on a written file: JSON keys and values, text, bad files.
 
-mod util;
-
 use std::path::Path;
-use std::process::Command;
+
+use crate::common::qbricks_view;
 
 use format::{Aabb, Brick, BrickFile, Field, KdNode, Level, Provenance, Region, ValueRange};
 
@@ -85,7 +84,7 @@ fn sample() -> BrickFile {
 }
 
 fn view(args: &[&str]) -> std::process::Output {
-    Command::new(util::bin("qbricks-view"))
+    qbricks_view()
         .args(args)
         .output()
         .expect("run qbricks-view")
@@ -98,7 +97,7 @@ fn write_sample(dir: &Path) -> (std::path::PathBuf, u64) {
 }
 
 #[test]
-fn json_has_the_documented_keys_and_values() {
+fn info_json_has_the_documented_keys_and_values() {
     let dir = tempfile::tempdir().expect("tempdir");
     let (path, bytes) = write_sample(dir.path());
     let out = view(&["info", path.to_str().expect("utf8"), "--json"]);
@@ -160,7 +159,7 @@ fn json_has_the_documented_keys_and_values() {
 }
 
 #[test]
-fn text_mentions_the_counts() {
+fn info_text_mentions_the_counts() {
     let dir = tempfile::tempdir().expect("tempdir");
     let (path, _) = write_sample(dir.path());
     let out = view(&["info", path.to_str().expect("utf8")]);
@@ -172,7 +171,7 @@ fn text_mentions_the_counts() {
 }
 
 #[test]
-fn bad_files_exit_2_with_one_line() {
+fn info_on_bad_or_missing_files_exits_2_with_one_line_naming_the_file() {
     let dir = tempfile::tempdir().expect("tempdir");
     let (path, _) = write_sample(dir.path());
     let good = std::fs::read(&path).expect("read");

@@ -1,12 +1,12 @@
 //! Whole-image rendering: determinism across thread counts, sensible statistics.
 
-use viewer::mesh::Meshes;
-use viewer::render::{render, render_with_threads, Scene};
-use viewer::sampling::Strategy;
-use viewer::testvol;
-use viewer::transfer::Mode;
-use viewer::view_state::ViewState;
-use viewer::volume::Volume;
+use qbricks_viewer::mesh::Meshes;
+use qbricks_viewer::render::{render, render_with_threads, Scene};
+use qbricks_viewer::sampling::Strategy;
+use qbricks_viewer::testvol;
+use qbricks_viewer::transfer::Mode;
+use qbricks_viewer::view_state::ViewState;
+use qbricks_viewer::volume::Volume;
 
 fn field(p: [f64; 3]) -> f64 {
     (p[0] / 4.0).sin() * (p[1] / 5.0).cos() + 0.3 * (p[2] / 3.0).sin()

@@ -1,16 +1,15 @@
 //! Golden images: a small two-level scene with a vortex ring around the bundled sphere
 //! mesh, rendered per mode, compared with `tests/golden/*.png` by PSNR so a change that
 //! alters pictures is seen. Regenerate with `QBRICKS_UPDATE_GOLDEN=1 cargo test --release
-//! --test render_golden` (then look at the PNGs before committing them).
+//! -p qbricks-viewer --test render golden` (then look at the PNGs before committing them).
 
-mod util;
-
-use viewer::film;
-use viewer::mesh::{MeshInstance, Meshes};
-use viewer::render::{render, Scene};
-use viewer::testvol;
-use viewer::view_state::{Mode, Strategy, ViewState};
-use viewer::volume::Volume;
+use crate::common;
+use qbricks_viewer::film;
+use qbricks_viewer::mesh::{MeshInstance, Meshes};
+use qbricks_viewer::render::{render, Scene};
+use qbricks_viewer::testvol;
+use qbricks_viewer::view_state::{Mode, Strategy, ViewState};
+use qbricks_viewer::volume::Volume;
 
 /// Centre of the scene: testvol::nested(16, ..) covers [0, 32]^3, fine grid [8, 24]^3.
 const C: [f64; 3] = [16.0, 16.0, 16.0];
@@ -52,7 +51,7 @@ fn state_for(vol: &Volume, mode: Mode, strategy: Strategy) -> ViewState {
     s.camera.eye = eye;
     s.camera.look_at = C;
     s.meshes = vec![MeshInstance {
-        path: util::root().join("data/sphere.obj"),
+        path: common::root().join("data/sphere.obj"),
         translation: C,
         scale: 6.0, // radius 3
         colour: [0.85, 0.85, 0.8],
@@ -85,25 +84,26 @@ fn render_at_step(mode: Mode, strategy: Strategy, step: Option<f64>) -> (u32, u3
 const MIN_PSNR: f64 = 45.0;
 
 #[test]
-fn golden_iso() {
+fn iso_exact_matches_its_golden_image() {
     let (w, h, rgb) = render_mode(Mode::Iso, Strategy::Exact);
-    util::check_golden("iso_exact", w, h, &rgb, MIN_PSNR);
+    common::check_golden("iso_exact", w, h, &rgb, MIN_PSNR);
 }
 
 #[test]
-fn golden_dvr() {
+fn dvr_bisect_matches_its_golden_image() {
     let (w, h, rgb) = render_mode(Mode::Dvr, Strategy::Bisect);
-    util::check_golden("dvr_bisect", w, h, &rgb, MIN_PSNR);
+    common::check_golden("dvr_bisect", w, h, &rgb, MIN_PSNR);
 }
 
 #[test]
-fn sampled_iso_strategies_agree_with_exact() {
-    // Not golden files: the other strategies must give nearly the exact picture at a
-    // fine step (0.05 cell; they differ only along silhouettes).
+fn sampled_iso_strategies_at_a_fine_step_agree_with_exact() {
+    // Not golden files: the sampled strategies, at a fine step (0.05 cell instead of the
+    // default 0.5), must give nearly the exact picture (PSNR > 30 dB; they differ only along
+    // silhouettes). `exact` walks the cell lattice and does not use the step.
     let (w, h, exact) = render_mode(Mode::Iso, Strategy::Exact);
     for s in [Strategy::Uniform, Strategy::Paper, Strategy::Bisect] {
         let (_, _, other) = render_at_step(Mode::Iso, s, Some(0.05));
-        let p = util::psnr(&exact, &other);
+        let p = common::psnr(&exact, &other);
         assert!(
             p > 30.0,
             "{s}: PSNR {p:.1} dB against exact ({w}x{h}) at step 0.05"

@@ -2,9 +2,7 @@
 //! with every key for every strategy × step, and the plot is a PNG. Timings are never
 //! asserted (the benchmark is not a test).
 
-mod util;
-
-use std::process::Command;
+use crate::common::{qbricks_view, root};
 
 const KEYS: [&str; 8] = [
     "strategy",
@@ -18,8 +16,8 @@ const KEYS: [&str; 8] = [
 ];
 
 fn bench(extra: &[&str], plot: &std::path::Path) -> Vec<serde_json::Value> {
-    let out = Command::new(util::bin("qbricks-view"))
-        .current_dir(util::root())
+    let out = qbricks_view()
+        .current_dir(root())
         .args(["bench", "data/wake_small.qbk", "--json", "--size", "24x16"])
         .args([
             "--repeat",
@@ -53,8 +51,8 @@ fn bench_prints_every_key_and_plots_a_png() {
     ] {
         let state = dir.path().join(format!("{mode}.json"));
         // A state in the wanted mode, saved by `render` (the bench reads states, not flags).
-        let st = Command::new(util::bin("qbricks-view"))
-            .current_dir(util::root())
+        let st = qbricks_view()
+            .current_dir(root())
             .args([
                 "render",
                 "data/wake_small.qbk",
@@ -112,8 +110,8 @@ fn bench_bad_arguments_exit_2_with_one_line() {
         vec!["bench", "data/wake_small.qbk", "--repeat", "0"],
         vec!["bench", "/nonexistent/x.qbk"],
     ] {
-        let out = Command::new(util::bin("qbricks-view"))
-            .current_dir(util::root())
+        let out = qbricks_view()
+            .current_dir(root())
             .args(&args)
             .output()
             .expect("run bench");

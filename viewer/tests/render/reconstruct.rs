@@ -1,9 +1,9 @@
 //! Reconstruction, gradient, traversal and `exact` iso search against analytic truth.
 
-use viewer::sampling::{Params, Strategy, Tracer};
-use viewer::testvol::{self, GridSpec};
-use viewer::transfer::{Mode, Transfer};
-use viewer::volume::Volume;
+use qbricks_viewer::sampling::{Params, Strategy, Tracer};
+use qbricks_viewer::testvol::{self, GridSpec};
+use qbricks_viewer::transfer::{Mode, Transfer};
+use qbricks_viewer::volume::Volume;
 
 /// Deterministic pseudo-random numbers in [0, 1).
 struct Rng(u64);
@@ -320,18 +320,18 @@ fn traversal_matches_brute_force() {
             true
         });
         // Brute force over all regions (half-open boxes, as the KD descent).
-        let inv = viewer::traverse::inverse(&d);
+        let inv = qbricks_viewer::traverse::inverse(&d);
         let mut want: Vec<format::query::RegionSegment> = vol
             .regions()
             .enumerate()
             .filter_map(|(i, r)| {
-                viewer::traverse::ray_box(&r.min, &r.max, &o, &inv, 0.0, 1e3).map(|(a, b)| {
-                    format::query::RegionSegment {
+                qbricks_viewer::traverse::ray_box(&r.min, &r.max, &o, &inv, 0.0, 1e3).map(
+                    |(a, b)| format::query::RegionSegment {
                         region: i as u32,
                         t_enter: a,
                         t_exit: b,
-                    }
-                })
+                    },
+                )
             })
             .filter(|s| s.t_exit - s.t_enter > 1e-9)
             .collect();
@@ -376,7 +376,7 @@ fn exact_covers_reference(vol: &Volume, iso: f64, rays: &[([f64; 3], [f64; 3])])
 }
 
 #[test]
-fn one_voxel_thick_grid() {
+fn one_voxel_thick_grid_is_constant_in_z_and_exact_misses_nothing() {
     let g = GridSpec {
         cell_width: 1.0,
         origin: [0.5, 0.5, 0.5],

@@ -1,12 +1,11 @@
 //! Golden images of the bundled sample scene (`data/wake_small.qbk` with the sphere mesh),
 //! one per mode, rendered through the `qbricks-view render` command exactly as a user runs
-//! it. The bundled file is checked against the baker elsewhere (`bake_sample`), so a change
+//! it. The bundled file is checked against the baker elsewhere
+//! (`preprocess/tests/bake/sample.rs`), so a change
 //! in baking, reconstruction, sampling, shading or camera shows up here as a PSNR drop.
 //! Regenerate with `QBRICKS_UPDATE_GOLDEN=1` after checking the new pictures by eye.
 
-mod util;
-
-use std::process::Command;
+use crate::common::{self, qbricks_view};
 
 /// Same threshold as the synthetic-scene goldens: round-off changes stay far above it,
 /// a 10 % change of the iso value (0.05 → 0.045) falls below it (43 dB, measured).
@@ -15,8 +14,8 @@ const MIN_PSNR: f64 = 45.0;
 fn render_sample(name: &str, extra: &[&str]) {
     let dir = tempfile::tempdir().expect("tempdir");
     let png = dir.path().join(format!("{name}.png"));
-    let out = Command::new(util::bin("qbricks-view"))
-        .current_dir(util::root())
+    let out = qbricks_view()
+        .current_dir(common::root())
         .args(["render", "data/wake_small.qbk", "-o"])
         .arg(&png)
         .args([
@@ -40,16 +39,16 @@ fn render_sample(name: &str, extra: &[&str]) {
         String::from_utf8_lossy(&out.stderr)
     );
     let img = image::open(&png).expect("rendered png").to_rgb8();
-    util::check_golden(name, img.width(), img.height(), img.as_raw(), MIN_PSNR);
+    common::check_golden(name, img.width(), img.height(), img.as_raw(), MIN_PSNR);
 }
 
 #[test]
-fn sample_iso_exact() {
+fn bundled_sample_iso_exact_matches_its_golden_image() {
     render_sample("sample_iso_exact", &["--mode", "iso", "--iso", "0.05"]);
 }
 
 #[test]
-fn sample_dvr_default_with_shadows() {
+fn bundled_sample_default_dvr_with_shadows_matches_its_golden_image() {
     // The default dvr: `uniform` with pre-integrated opacity (see BENCHMARKS.md).
     render_sample(
         "sample_dvr_default",

@@ -1,19 +1,13 @@
 //! `qbricks-view render` and `probe` from the command line: exit codes, JSON keys, files.
 
-mod util;
-
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
-use viewer::testvol;
-
-fn view_bin() -> PathBuf {
-    util::bin("qbricks-view")
-}
+use crate::common::{qbricks_view, root};
+use qbricks_viewer::testvol;
 
 /// The bundled sample if present, else a small test volume in `dir`.
 fn sample(dir: &Path) -> PathBuf {
-    let bundled = util::root().join("data/wake_small.qbk");
+    let bundled = root().join("data/wake_small.qbk");
     if bundled.exists() {
         return bundled;
     }
@@ -26,7 +20,7 @@ fn sample(dir: &Path) -> PathBuf {
 }
 
 fn run(args: &[&str], cwd: &Path) -> (i32, String, String) {
-    let out = Command::new(view_bin())
+    let out = qbricks_view()
         .args(args)
         .current_dir(cwd)
         .output()
@@ -256,7 +250,7 @@ fn probe_prints_fields_and_gradients() {
 /// dvr mode says what it does instead; a negative step is refused by the view-state check
 /// (not mistaken for a flag).
 #[test]
-fn dvr_default_strategy_and_negative_step() {
+fn render_dvr_picks_its_default_strategy_and_refuses_a_negative_step() {
     let dir = tempfile::tempdir().expect("tempdir");
     let file = sample(dir.path());
     let f = file.to_str().expect("utf-8 path");
