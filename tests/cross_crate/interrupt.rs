@@ -7,8 +7,7 @@
 //! that the process died of that signal and the temporary file is gone.
 #![cfg(unix)]
 
-mod util;
-
+use crate::common;
 use std::os::unix::process::ExitStatusExt;
 use std::path::Path;
 use std::process::{Command, Stdio};
@@ -29,12 +28,12 @@ fn temp_files(dir: &Path) -> Vec<String> {
 fn interrupt(program: &str, args: &[&str], signal: (&str, i32)) {
     let dir = tempfile::tempdir().expect("tempdir");
     std::fs::copy(
-        util::root().join("data/wake_small.vdb"),
+        common::root().join("data/wake_small.vdb"),
         dir.path().join("w.vdb"),
     )
     .expect("copy vdb");
     std::fs::copy(
-        util::root().join("data/wake_small.qbk"),
+        common::root().join("data/wake_small.qbk"),
         dir.path().join("w.qbk"),
     )
     .expect("copy qbk");
@@ -42,7 +41,7 @@ fn interrupt(program: &str, args: &[&str], signal: (&str, i32)) {
     let st = Command::new("mkfifo").arg(&fifo).status().expect("mkfifo");
     assert!(st.success(), "mkfifo failed");
 
-    let mut child = Command::new(util::bin(program))
+    let mut child = Command::new(common::bin(program))
         .args(args)
         .current_dir(dir.path())
         .stdout(Stdio::null())
@@ -119,7 +118,7 @@ fn fifo_output_is_written_into() {
     use std::os::unix::fs::FileTypeExt;
     let dir = tempfile::tempdir().expect("tempdir");
     let vdb = dir.path().join("wake_small.vdb");
-    std::fs::copy(util::root().join("data/wake_small.vdb"), &vdb).expect("copy vdb");
+    std::fs::copy(common::root().join("data/wake_small.vdb"), &vdb).expect("copy vdb");
     let fifo = dir.path().join("out.fifo");
     let st = Command::new("mkfifo").arg(&fifo).status().expect("mkfifo");
     assert!(st.success(), "mkfifo failed");
@@ -134,7 +133,7 @@ fn fifo_output_is_written_into() {
             bytes
         })
     };
-    let out = Command::new(util::bin("qbricks-bake"))
+    let out = Command::new(common::bin("qbricks-bake"))
         .args(["bake", "wake_small.vdb", "-o", "out.fifo", "--quiet"])
         .current_dir(dir.path())
         .output()
@@ -145,7 +144,7 @@ fn fifo_output_is_written_into() {
         String::from_utf8_lossy(&out.stderr)
     );
     let bytes = reader.join().expect("reader");
-    let want = std::fs::read(util::root().join("data/wake_small.qbk")).expect("sample");
+    let want = std::fs::read(common::root().join("data/wake_small.qbk")).expect("sample");
     assert!(
         bytes == want,
         "the FIFO carried {} bytes, not the sample's {}",

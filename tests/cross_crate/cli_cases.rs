@@ -8,8 +8,7 @@
 //! killed). Messages are compared from their start, so a case pins the program, the file
 //! named and what is said about it.
 
-mod util;
-
+use crate::common;
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -276,7 +275,7 @@ fn populate(dir: &Path, case: &Case) {
         .chain(case.made.iter().map(|(_, r)| r))
         .copied()
         .collect();
-    let data = util::root().join("data");
+    let data = common::root().join("data");
     let wanted = |n: &str| names.contains(&n);
     if wanted("w.qbk") {
         std::fs::copy(data.join("wake_small.qbk"), dir.join("w.qbk")).expect("copy qbk");
@@ -321,7 +320,7 @@ fn populate(dir: &Path, case: &Case) {
 /// lacks, no colour points, and one mesh entry too many.
 fn write_states(dir: &Path) {
     use viewer::view_state::ViewState;
-    let view = format::BrickFileView::open(&util::root().join("data/wake_small.qbk"))
+    let view = format::BrickFileView::open(&common::root().join("data/wake_small.qbk"))
         .expect("open sample");
     let vol = viewer::volume::Volume::new(&view).expect("volume");
     let mut st = ViewState::default_for_volume(&vol);
@@ -351,7 +350,7 @@ struct Outcome {
 
 /// Runs `program args` in `dir` under the memory limit, killing it after [`TIMEOUT`].
 fn run(program: &str, args: &[&str], dir: &Path, out: Out) -> Outcome {
-    let bin = util::bin(program);
+    let bin = common::bin(program);
     let mut cmd = Command::new("sh");
     cmd.arg("-c")
         .arg(format!(

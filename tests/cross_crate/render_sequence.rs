@@ -3,15 +3,14 @@
 //! with a missing and a corrupt frame in the middle — the others finish, the failures are
 //! named, the exit code is 2, and no partial image is left.
 
-mod util;
-
+use crate::common;
 use std::path::Path;
 use std::process::{Command, Output};
 
 use serde_json::Value;
 
 fn run(bin: &str, args: &[&str], dir: &Path) -> Output {
-    Command::new(util::bin(bin))
+    Command::new(common::bin(bin))
         .current_dir(dir)
         .args(args)
         .output()
@@ -33,7 +32,7 @@ fn names(dir: &Path) -> Vec<String> {
 fn bundled_cache_with_a_missing_and_a_corrupt_frame() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let dir = tmp.path();
-    let cache = util::root().join("data/cache/fluid_data_####.vdb");
+    let cache = common::root().join("data/cache/fluid_data_####.vdb");
     let o = run(
         "qbricks-bake",
         &[

@@ -2,8 +2,7 @@
 //! in a source comment exists (relative to the repository root, or to the referring
 //! document's folder), and the README names every command-line flag the programs accept.
 
-mod util;
-
+use crate::common;
 use std::path::{Path, PathBuf};
 
 /// Text files to scan: the top-level Markdown, `docs/`, and every Rust source of the crates
@@ -25,7 +24,7 @@ fn sources(root: &Path) -> Vec<PathBuf> {
                     stack.push(p);
                 }
             } else if p.extension().is_some_and(|x| x == "rs" || x == "md")
-                && !p.ends_with("tests/docs_exist.rs")
+                && !p.ends_with("tests/cross_crate/docs_exist.rs")
             {
                 out.push(p);
             }
@@ -46,7 +45,7 @@ fn md_references(text: &str) -> Vec<String> {
 
 #[test]
 fn every_referenced_document_exists() {
-    let root = util::root();
+    let root = common::root();
     let mut missing = Vec::new();
     let mut seen = 0;
     for file in sources(&root) {
@@ -156,7 +155,7 @@ fn names_flag(text: &str, flag: &str) -> bool {
 /// a feature nobody finds. `-o`/`--output` may be written in its short form.
 #[test]
 fn readme_names_every_flag_of_every_command() {
-    let readme = std::fs::read_to_string(util::root().join("README.md")).expect("README.md");
+    let readme = std::fs::read_to_string(common::root().join("README.md")).expect("README.md");
     let commands: [(&str, &[&str]); 9] = [
         ("qbricks-bake", &["bake"]),
         ("qbricks-bake", &["synth"]),
@@ -171,7 +170,7 @@ fn readme_names_every_flag_of_every_command() {
     let mut missing = Vec::new();
     let mut checked = 0;
     for (bin, sub) in commands {
-        let out = std::process::Command::new(util::bin(bin))
+        let out = std::process::Command::new(common::bin(bin))
             .args(sub)
             .arg("--help")
             .output()

@@ -2,10 +2,10 @@
 //! exact gradient of Q, smooth (central differences of the reconstruction) against the
 //! analytic gradient of the reconstruction, and the render time of both, in one run.
 //!
-//! `cargo test --release --test shading_wake -- --ignored --nocapture`
+//! `cargo build --release --workspace`, then
+//! `cargo test --release --test cross_crate shading_wake -- --ignored --nocapture`
 
-mod util;
-
+use crate::common;
 use std::time::Instant;
 
 use viewer::dataset::Dataset;
@@ -52,7 +52,7 @@ fn measure_shading_normals_on_the_wake() {
     let dir = tempfile::tempdir().expect("tempdir");
     let vdb = dir.path().join("wake64.vdb");
     let qbk = dir.path().join("wake64.qbk");
-    let bake = util::bin("qbricks-bake");
+    let bake = common::bin("qbricks-bake");
     let ok = std::process::Command::new(&bake)
         .args(["synth", "wake", "--n0", "64", "-o"])
         .arg(&vdb)
