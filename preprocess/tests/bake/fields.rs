@@ -169,7 +169,7 @@ fn error_line(out: &Output) -> String {
 }
 
 #[test]
-fn cli_field_lists() {
+fn cli_fields_list_sets_the_order_and_refuses_duplicates_and_unknown_grids() {
     let dir = tempfile::tempdir().unwrap();
     let (layout, vel) = velocity();
     let lo = layout.lo.map(|v| v as i32);

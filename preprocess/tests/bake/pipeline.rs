@@ -144,7 +144,7 @@ fn q_converges_at_second_order() {
 }
 
 #[test]
-fn leaf_cells_bricks_and_counts() {
+fn summary_counts_match_the_stored_cells_and_covered_cells_are_dropped() {
     let n = 16;
     let (file, s) = bake(two_level(n, &abc), &opts(Stencil::Central)).expect("bake");
     let coarse = (n as u64).pow(3);

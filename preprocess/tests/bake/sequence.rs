@@ -131,7 +131,7 @@ fn sequence_with_a_gap_and_a_corrupt_frame() {
 }
 
 #[test]
-fn sequence_errors() {
+fn sequence_pattern_errors_exit_2_and_default_outputs_go_next_to_the_inputs() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     let o = run(&["bake", "none_####.vdb"], dir);

@@ -149,7 +149,7 @@ fn fixtures_cover_codecs_types_half_and_tiles() {
 }
 
 #[test]
-fn metadata_duplicates_and_instances() {
+fn metadata_duplicate_names_and_instances_read_as_openvdb_wrote_them() {
     let file = VdbFile::open(fixtures().join("multi_zip.vdb")).unwrap();
     let names: Vec<&str> = file.grids().iter().map(|g| g.name.as_str()).collect();
     assert_eq!(
