@@ -96,7 +96,7 @@ fn image_links(text: &str) -> Vec<String> {
 /// project page.
 #[test]
 fn every_image_in_the_documents_exists() {
-    let root = util::root();
+    let root = common::root();
     let mut missing = Vec::new();
     let mut seen = 0;
     for file in sources(&root)
