@@ -308,8 +308,42 @@ pub fn stdout_closed() -> bool {
     STDOUT_CLOSED.load(Ordering::Relaxed)
 }
 
+/// Whether an error, or any error in its `source` chain, is a vanished stdout reader
+/// (`BrokenPipe`, also when wrapped in a JSON serialisation error). Output through
+/// [`QuietStdout`] never fails that way; this catches every other path, so both programs
+/// can end such a run quietly with status 0 instead of reporting a failure.
+pub fn is_broken_pipe(err: &(dyn std::error::Error + 'static)) -> bool {
+    let broken = Some(io::ErrorKind::BrokenPipe);
+    std::iter::successors(Some(err), |e| e.source()).any(|e| {
+        e.downcast_ref::<io::Error>().map(io::Error::kind) == broken
+            || e.downcast_ref::<serde_json::Error>()
+                .and_then(serde_json::Error::io_error_kind)
+                == broken
+    })
+}
+
 #[cfg(test)]
 mod tests {
+    #[derive(Debug, thiserror::Error)]
+    #[error("writing the report")]
+    struct Wrapped(#[source] std::io::Error);
+
+    #[test]
+    fn a_broken_pipe_is_found_anywhere_in_the_chain() {
+        use std::io::{Error, ErrorKind};
+        let pipe = || Error::new(ErrorKind::BrokenPipe, "reader gone");
+        assert!(super::is_broken_pipe(&pipe()));
+        assert!(super::is_broken_pipe(&Wrapped(pipe())));
+        let json = serde_json::Error::io(pipe());
+        assert!(super::is_broken_pipe(&json));
+        assert!(!super::is_broken_pipe(&Wrapped(Error::new(
+            ErrorKind::StorageFull,
+            "disk full"
+        ))));
+        let syntax = serde_json::from_str::<u32>("x").expect_err("not a number");
+        assert!(!super::is_broken_pipe(&syntax));
+    }
+
     use super::*;
 
     fn leftovers(dir: &Path) -> Vec<String> {

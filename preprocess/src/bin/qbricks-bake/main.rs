@@ -44,24 +44,11 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
-            if is_broken_pipe(&err) {
+            if format::output::is_broken_pipe(err.as_ref()) {
                 return ExitCode::SUCCESS;
             }
             eprintln!("qbricks-bake: {err:#}");
             ExitCode::from(2)
         }
     }
-}
-
-/// Whether the run failed because its stdout reader went away (output through
-/// `QuietStdout` never fails that way; this catches any other path, including a broken pipe
-/// wrapped in a JSON serialisation error). Such a run ends quietly with status 0.
-fn is_broken_pipe(err: &anyhow::Error) -> bool {
-    let broken = Some(std::io::ErrorKind::BrokenPipe);
-    err.chain().any(|e| {
-        e.downcast_ref::<std::io::Error>().map(std::io::Error::kind) == broken
-            || e.downcast_ref::<serde_json::Error>()
-                .and_then(serde_json::Error::io_error_kind)
-                == broken
-    })
 }
