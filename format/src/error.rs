@@ -28,10 +28,13 @@ pub enum FormatErrorKind {
     #[error("{0}")]
     Input(crate::input::InputErrorKind),
     /// The archive passed rkyv's structural validation but breaks an invariant of the
-    /// schema (the message names the element, e.g. `regions[12].bricks[3]`), or rkyv's
-    /// validation (bytecheck) itself failed.
+    /// schema (the error names the element, e.g. `regions[12].bricks[3]`).
     #[error("archive is invalid: {0}")]
-    Invalid(String),
+    Invalid(#[from] crate::validate::ValidationError),
+    /// rkyv's structural validation (bytecheck) or deserialisation failed; the message is
+    /// rkyv's trace, flattened onto one line.
+    #[error("archive is invalid: {0}")]
+    Structure(String),
     #[error("file too short for a .qbk header: expected at least {expected} bytes, found {found}")]
     TooShort { expected: u64, found: u64 },
     #[error(

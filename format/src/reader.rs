@@ -185,10 +185,10 @@ impl BrickFileView {
                     let e = rkyv::access::<ArchivedBrickFile, CheckError>(b.payload())
                         .err()
                         .map_or_else(|| "validation failed".to_string(), one_line);
-                    return Err(FormatErrorKind::Invalid(e));
+                    return Err(FormatErrorKind::Structure(e));
                 }
             };
-            crate::validate::check(file).map_err(FormatErrorKind::Invalid)?;
+            crate::validate::check(file)?;
             Ok::<_, FormatErrorKind>(file)
         })
         .map_err(|k| FormatError::new(path, k))?;
@@ -237,7 +237,7 @@ impl BrickFileView {
     /// Deserialises the whole file into owned memory.
     pub fn to_brick_file(&self) -> Result<BrickFile, FormatError> {
         rkyv::deserialize::<BrickFile, CheckError>(self.file())
-            .map_err(|e| FormatError::new(&self.path, FormatErrorKind::Invalid(one_line(e))))
+            .map_err(|e| FormatError::new(&self.path, FormatErrorKind::Structure(one_line(e))))
     }
 }
 

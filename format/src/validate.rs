@@ -9,26 +9,185 @@
 //! (they still use checked access, returning nothing rather than panicking, so that an
 //! archive obtained without this check cannot crash them either).
 //!
-//! Errors name the element, e.g. `regions[12].bricks[3]: brick 9001 out of range (512 bricks)`.
+//! Errors are [`ValidationError`]s, one variant per check, whose messages name the
+//! element, e.g. `regions[12].bricks[3]: brick 9001 out of range (512 bricks)`.
 
 use crate::schema::{ArchivedBrickFile, ArchivedKdNode};
 
+/// A broken schema invariant, naming the element (`regions[12].bricks[3]`) and holding
+/// what was expected and found. One variant per check, so callers and tests can match by
+/// kind; the message is one line.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum ValidationError {
+    /// A box (`bounds`, or `regions[i].bounds` when `region` is set) with `min > max` or
+    /// NaN on an axis.
+    #[error("{}: expected min <= max on axis {axis}, found {min} > {max}", box_name(*.region))]
+    BadBox {
+        region: Option<usize>,
+        axis: usize,
+        min: f64,
+        max: f64,
+    },
+    #[error("levels[{level}].cell_width: expected > 0, found {width}")]
+    LevelCellWidth { level: usize, width: f64 },
+    /// Every field holds as many values as `fields[0]`.
+    #[error("fields[{field}].values: expected {expected} values (as fields[0]), found {found}")]
+    FieldLength {
+        field: usize,
+        expected: u64,
+        found: u64,
+    },
+    #[error("bricks[{brick}].level: level {level} out of range ({levels} levels)")]
+    BrickLevelOutOfRange {
+        brick: usize,
+        level: u32,
+        levels: usize,
+    },
+    #[error("bricks[{brick}].dims: expected >= 1 cells per axis, found {dims:?}")]
+    BrickEmptyDims { brick: usize, dims: [u32; 3] },
+    /// The brick's cell count does not fit in a `u64`.
+    #[error("bricks[{brick}].dims: {dims:?} is more cells than a file can hold")]
+    BrickTooManyCells { brick: usize, dims: [u32; 3] },
+    #[error("bricks[{brick}].cell_width: expected > 0, found {width}")]
+    BrickCellWidth { brick: usize, width: f64 },
+    #[error("bricks[{brick}].inv_cell_width: expected 1 / {width} = {}, found {found}", 1.0 / .width)]
+    BrickInvCellWidth {
+        brick: usize,
+        width: f64,
+        found: f64,
+    },
+    /// The brick's cell width is not its level's.
+    #[error("bricks[{brick}].cell_width: {width:?} differs from its level {level}'s cell width {level_width:?}")]
+    BrickWidthNotLevels {
+        brick: usize,
+        width: f64,
+        level: u32,
+        level_width: f64,
+    },
+    #[error("bricks[{brick}].origin: not finite")]
+    BrickOriginNotFinite { brick: usize },
+    /// The brick's values `first..first + len` are not all in the value arrays.
+    #[error(
+        "bricks[{brick}]: values {first}..{first}+{len} out of range ({values} values per field)"
+    )]
+    BrickOutOfRange {
+        brick: usize,
+        first: u64,
+        len: u64,
+        values: u64,
+    },
+    /// The region's slice of `region_bricks` is not all in it.
+    #[error("regions[{region}]: bricks {start}..{start}+{len} out of range ({entries} region_bricks entries)")]
+    RegionBricksOutOfRange {
+        region: usize,
+        start: u64,
+        len: u64,
+        entries: u64,
+    },
+    #[error("regions[{region}].finest_level: level {level} out of range ({levels} levels)")]
+    RegionFinestLevelOutOfRange {
+        region: usize,
+        level: u32,
+        levels: usize,
+    },
+    /// `region_bricks[entry]` names no brick; `in_region` is `(region, index in its list)`
+    /// when a region's list holds the entry.
+    #[error("{}: brick {id} out of range ({bricks} bricks)", entry_name(*.entry, *.in_region))]
+    BrickIdOutOfRange {
+        entry: usize,
+        in_region: Option<(usize, usize)>,
+        id: u32,
+        bricks: usize,
+    },
+    /// The region's `finest_level` is not the finest level of its bricks.
+    #[error("regions[{region}].finest_level: {stored}, but its finest brick is on level {finest}")]
+    FinestLevelMismatch {
+        region: usize,
+        stored: u32,
+        finest: u32,
+    },
+    #[error("region_ranges: expected {expected} entries ({regions} regions x {fields} fields), found {found}")]
+    RegionRangesLength {
+        expected: u64,
+        regions: usize,
+        fields: usize,
+        found: usize,
+    },
+    #[error("kd_nodes: empty, but there are {regions} regions")]
+    KdNodesEmpty { regions: usize },
+    #[error(
+        "kd_ranges: expected {expected} entries ({nodes} nodes x {fields} fields), found {found}"
+    )]
+    KdRangesLength {
+        expected: u64,
+        nodes: usize,
+        fields: usize,
+        found: usize,
+    },
+    #[error("kd_full: expected {expected} entries (one per node), found {found}")]
+    KdFullLength { expected: usize, found: usize },
+    #[error("kd_nodes[{node}].axis: expected 0, 1 or 2, found {axis}")]
+    KdAxis { node: u32, axis: u8 },
+    #[error("kd_nodes[{node}].split: NaN")]
+    KdSplitNan { node: u32 },
+    #[error("kd_nodes[{node}]: child {child} out of range ({nodes} nodes)")]
+    KdChildOutOfRange { node: u32, child: u32, nodes: usize },
+    /// A node reached twice from the root: a cycle or a node with two parents.
+    #[error("kd_nodes[{node}]: child {child} is reached twice (not a tree)")]
+    KdNotATree { node: u32, child: u32 },
+    #[error("kd_nodes[{node}]: region {region} out of range ({regions} regions)")]
+    KdRegionOutOfRange {
+        node: u32,
+        region: u32,
+        regions: usize,
+    },
+    /// An inner node's value ranges do not hold its child's.
+    #[error("kd_ranges of node {node}: do not hold those of its child {child}")]
+    KdRangeNotHeld { node: u32, child: u32 },
+    /// A leaf's range of `field` does not hold its region's.
+    #[error("kd_ranges of leaf {node}: field {field} does not hold region {region}'s range")]
+    KdLeafRangeNotHeld {
+        node: u32,
+        field: usize,
+        region: u32,
+    },
+    /// A node flagged full above a child that is not.
+    #[error("kd_full of node {node}: set, but its child {child} is not full")]
+    KdFullChildNotFull { node: u32, child: u32 },
+    #[error("kd_full of node {node}: set on an empty leaf")]
+    KdFullEmptyLeaf { node: u32 },
+    #[error("regions[{region}]: in no KD-tree leaf")]
+    RegionNotInTree { region: usize },
+}
+
+fn box_name(region: Option<usize>) -> String {
+    region.map_or_else(|| "bounds".to_owned(), |i| format!("regions[{i}].bounds"))
+}
+
+fn entry_name(entry: usize, in_region: Option<(usize, usize)>) -> String {
+    match in_region {
+        Some((i, j)) => format!("regions[{i}].bricks[{j}]"),
+        None => format!("region_bricks[{entry}]"),
+    }
+}
+
 /// Checks the invariants of a structurally valid archive. Cost is linear in the number
 /// of bricks, regions, region brick entries and KD nodes; the value arrays are not read.
-pub fn check(file: &ArchivedBrickFile) -> Result<(), String> {
+pub fn check(file: &ArchivedBrickFile) -> Result<(), ValidationError> {
     let n_levels = file.levels.len();
     let n_bricks = file.bricks.len();
     let n_regions = file.regions.len();
     let n_fields = file.fields.len();
 
     // Bounds.
-    check_box(|| "bounds".to_owned(), &file.bounds.min, &file.bounds.max)?;
+    check_box(None, &file.bounds.min, &file.bounds.max)?;
 
     // Levels.
     for (i, level) in file.levels.iter().enumerate() {
         let w = level.cell_width.to_native();
         if !(w.is_finite() && w > 0.0) {
-            return Err(format!("levels[{i}].cell_width: expected > 0, found {w}"));
+            return Err(ValidationError::LevelCellWidth { level: i, width: w });
         }
     }
 
@@ -36,10 +195,11 @@ pub fn check(file: &ArchivedBrickFile) -> Result<(), String> {
     let n_values = file.fields.first().map_or(0, |f| f.values.len() as u64);
     for (i, field) in file.fields.iter().enumerate() {
         if field.values.len() as u64 != n_values {
-            return Err(format!(
-                "fields[{i}].values: expected {n_values} values (as fields[0]), found {}",
-                field.values.len()
-            ));
+            return Err(ValidationError::FieldLength {
+                field: i,
+                expected: n_values,
+                found: field.values.len() as u64,
+            });
         }
     }
 
@@ -47,26 +207,27 @@ pub fn check(file: &ArchivedBrickFile) -> Result<(), String> {
     for (i, brick) in file.bricks.iter().enumerate() {
         let level = brick.level.to_native();
         if level as usize >= n_levels {
-            return Err(format!(
-                "bricks[{i}].level: level {level} out of range ({n_levels} levels)"
-            ));
+            return Err(ValidationError::BrickLevelOutOfRange {
+                brick: i,
+                level,
+                levels: n_levels,
+            });
         }
         let dims = brick.dims.map(|d| d.to_native());
         if dims.contains(&0) {
-            return Err(format!(
-                "bricks[{i}].dims: expected >= 1 cells per axis, found {dims:?}"
-            ));
+            return Err(ValidationError::BrickEmptyDims { brick: i, dims });
         }
         let w = brick.cell_width.to_native();
         if !(w.is_finite() && w > 0.0) {
-            return Err(format!("bricks[{i}].cell_width: expected > 0, found {w}"));
+            return Err(ValidationError::BrickCellWidth { brick: i, width: w });
         }
         let inv = brick.inv_cell_width.to_native();
         if inv != 1.0 / w {
-            return Err(format!(
-                "bricks[{i}].inv_cell_width: expected 1 / {w} = {}, found {inv}",
-                1.0 / w
-            ));
+            return Err(ValidationError::BrickInvCellWidth {
+                brick: i,
+                width: w,
+                found: inv,
+            });
         }
         // The viewer steps through a region in units of its finest *level's* width and
         // reconstructs with the *bricks'* widths: a level far finer than its bricks made
@@ -74,12 +235,15 @@ pub fn check(file: &ArchivedBrickFile) -> Result<(), String> {
         // target). The baker merges widths equal to 1e-6, so 1e-3 is loose enough.
         let lw = file.levels[level as usize].cell_width.to_native();
         if (w - lw).abs() > 1e-3 * lw {
-            return Err(format!(
-                "bricks[{i}].cell_width: {w:?} differs from its level {level}'s cell width {lw:?}"
-            ));
+            return Err(ValidationError::BrickWidthNotLevels {
+                brick: i,
+                width: w,
+                level,
+                level_width: lw,
+            });
         }
         if brick.origin.iter().any(|c| !c.to_native().is_finite()) {
-            return Err(format!("bricks[{i}].origin: not finite"));
+            return Err(ValidationError::BrickOriginNotFinite { brick: i });
         }
         // Three u32 dims can hold up to 2^96 cells. Unchecked, the product wraps in
         // release builds (found by the `qbk_open` fuzz target): a brick of 2^22 x 2^21 x
@@ -89,17 +253,18 @@ pub fn check(file: &ArchivedBrickFile) -> Result<(), String> {
             .iter()
             .try_fold(1u64, |n, &d| n.checked_mul(u64::from(d)))
         else {
-            return Err(format!(
-                "bricks[{i}].dims: {dims:?} is more cells than a file can hold"
-            ));
+            return Err(ValidationError::BrickTooManyCells { brick: i, dims });
         };
         if n_fields > 0 {
             let first = brick.first_value.to_native();
             let end = first.checked_add(cells);
             if end.is_none_or(|e| e > n_values) {
-                return Err(format!(
-                    "bricks[{i}]: values {first}..{first}+{cells} out of range ({n_values} values per field)"
-                ));
+                return Err(ValidationError::BrickOutOfRange {
+                    brick: i,
+                    first,
+                    len: cells,
+                    values: n_values,
+                });
             }
         }
     }
@@ -107,24 +272,25 @@ pub fn check(file: &ArchivedBrickFile) -> Result<(), String> {
     // Regions and their brick lists.
     let n_entries = file.region_bricks.len() as u64;
     for (i, region) in file.regions.iter().enumerate() {
-        check_box(
-            || format!("regions[{i}].bounds"),
-            &region.bounds.min,
-            &region.bounds.max,
-        )?;
+        check_box(Some(i), &region.bounds.min, &region.bounds.max)?;
         let start = u64::from(region.bricks_start.to_native());
         let len = u64::from(region.bricks_len.to_native());
         if start + len > n_entries {
-            return Err(format!(
-                "regions[{i}]: bricks {start}..{start}+{len} out of range ({n_entries} region_bricks entries)"
-            ));
+            return Err(ValidationError::RegionBricksOutOfRange {
+                region: i,
+                start,
+                len,
+                entries: n_entries,
+            });
         }
         if len > 0 {
             let finest = region.finest_level.to_native();
             if finest as usize >= n_levels {
-                return Err(format!(
-                    "regions[{i}].finest_level: level {finest} out of range ({n_levels} levels)"
-                ));
+                return Err(ValidationError::RegionFinestLevelOutOfRange {
+                    region: i,
+                    level: finest,
+                    levels: n_levels,
+                });
             }
         }
     }
@@ -136,24 +302,17 @@ pub fn check(file: &ArchivedBrickFile) -> Result<(), String> {
         .position(|id| id.to_native() as usize >= n_bricks)
     {
         let id = file.region_bricks[at].to_native();
-        let (i, j) = file
-            .regions
-            .iter()
-            .enumerate()
-            .find_map(|(i, r)| {
-                let start = r.bricks_start.to_native() as usize;
-                let len = r.bricks_len.to_native() as usize;
-                (start..start + len).contains(&at).then(|| (i, at - start))
-            })
-            .unwrap_or((usize::MAX, at));
-        if i != usize::MAX {
-            return Err(format!(
-                "regions[{i}].bricks[{j}]: brick {id} out of range ({n_bricks} bricks)"
-            ));
-        }
-        return Err(format!(
-            "region_bricks[{at}]: brick {id} out of range ({n_bricks} bricks)"
-        ));
+        let in_region = file.regions.iter().enumerate().find_map(|(i, r)| {
+            let start = r.bricks_start.to_native() as usize;
+            let len = r.bricks_len.to_native() as usize;
+            (start..start + len).contains(&at).then(|| (i, at - start))
+        });
+        return Err(ValidationError::BrickIdOutOfRange {
+            entry: at,
+            in_region,
+            id,
+            bricks: n_bricks,
+        });
     }
     // The region's step width is its finest level's: it must be the finest level of its
     // bricks, as the schema says (a finer one makes rays crawl, a coarser one misses
@@ -168,36 +327,42 @@ pub fn check(file: &ArchivedBrickFile) -> Result<(), String> {
         if let Some(finest) = finest {
             let stored = region.finest_level.to_native();
             if stored != finest {
-                return Err(format!(
-                    "regions[{i}].finest_level: {stored}, but its finest brick is on level {finest}"
-                ));
+                return Err(ValidationError::FinestLevelMismatch {
+                    region: i,
+                    stored,
+                    finest,
+                });
             }
         }
     }
     let expected_ranges = n_regions as u64 * n_fields as u64;
     if file.region_ranges.len() as u64 != expected_ranges {
-        return Err(format!(
-            "region_ranges: expected {expected_ranges} entries ({n_regions} regions x {n_fields} fields), found {}",
-            file.region_ranges.len()
-        ));
+        return Err(ValidationError::RegionRangesLength {
+            expected: expected_ranges,
+            regions: n_regions,
+            fields: n_fields,
+            found: file.region_ranges.len(),
+        });
     }
 
     check_kd(file)
 }
 
-/// `what` names the box in the error; built only on error (this runs once per region).
+/// `region` names the box in the error: the file's bounds when `None`.
 fn check_box(
-    what: impl Fn() -> String,
+    region: Option<usize>,
     min: &[rkyv::Archived<f64>; 3],
     max: &[rkyv::Archived<f64>; 3],
-) -> Result<(), String> {
+) -> Result<(), ValidationError> {
     for a in 0..3 {
         let (lo, hi) = (min[a].to_native(), max[a].to_native());
         if lo.is_nan() || hi.is_nan() || lo > hi {
-            return Err(format!(
-                "{}: expected min <= max on axis {a}, found {lo} > {hi}",
-                what()
-            ));
+            return Err(ValidationError::BadBox {
+                region,
+                axis: a,
+                min: lo,
+                max: hi,
+            });
         }
     }
     Ok(())
@@ -208,7 +373,7 @@ fn check_box(
 /// ranges and fullness flags can be trusted for skipping: a node's range holds its
 /// children's (a leaf's its region's) and a node is full only if its children are (a leaf
 /// only if it holds a region). Wider ranges than needed are allowed (they skip less).
-fn check_kd(file: &ArchivedBrickFile) -> Result<(), String> {
+fn check_kd(file: &ArchivedBrickFile) -> Result<(), ValidationError> {
     let nodes = &file.kd_nodes;
     let n_regions = file.regions.len();
     let nf = file.fields.len();
@@ -219,24 +384,22 @@ fn check_kd(file: &ArchivedBrickFile) -> Result<(), String> {
     // `outer` holds `inner` (NaN holds nothing and is held by nothing).
     let holds = |outer: (f32, f32), inner: (f32, f32)| outer.0 <= inner.0 && outer.1 >= inner.1;
     if nodes.is_empty() && n_regions > 0 {
-        return Err(format!(
-            "kd_nodes: empty, but there are {n_regions} regions"
-        ));
+        return Err(ValidationError::KdNodesEmpty { regions: n_regions });
     }
     let expected = nodes.len() as u64 * nf as u64;
     if file.kd_ranges.len() as u64 != expected {
-        return Err(format!(
-            "kd_ranges: expected {expected} entries ({} nodes x {nf} fields), found {}",
-            nodes.len(),
-            file.kd_ranges.len()
-        ));
+        return Err(ValidationError::KdRangesLength {
+            expected,
+            nodes: nodes.len(),
+            fields: nf,
+            found: file.kd_ranges.len(),
+        });
     }
     if file.kd_full.len() != nodes.len() {
-        return Err(format!(
-            "kd_full: expected {} entries (one per node), found {}",
-            nodes.len(),
-            file.kd_full.len()
-        ));
+        return Err(ValidationError::KdFullLength {
+            expected: nodes.len(),
+            found: file.kd_full.len(),
+        });
     }
     if nodes.is_empty() {
         return Ok(());
@@ -258,35 +421,31 @@ fn check_kd(file: &ArchivedBrickFile) -> Result<(), String> {
                 right,
             } => {
                 if *axis > 2 {
-                    return Err(format!(
-                        "kd_nodes[{i}].axis: expected 0, 1 or 2, found {axis}"
-                    ));
+                    return Err(ValidationError::KdAxis {
+                        node: i,
+                        axis: *axis,
+                    });
                 }
                 if split.to_native().is_nan() {
-                    return Err(format!("kd_nodes[{i}].split: NaN"));
+                    return Err(ValidationError::KdSplitNan { node: i });
                 }
                 for child in [left.to_native(), right.to_native()] {
                     let Some(flag) = seen.get_mut(child as usize) else {
-                        return Err(format!(
-                            "kd_nodes[{i}]: child {child} out of range ({} nodes)",
-                            nodes.len()
-                        ));
+                        return Err(ValidationError::KdChildOutOfRange {
+                            node: i,
+                            child,
+                            nodes: nodes.len(),
+                        });
                     };
                     let (n, c) = (i as usize, child as usize);
                     if (0..nf).any(|f| !holds(range(n, f), range(c, f))) {
-                        return Err(format!(
-                            "kd_ranges of node {i}: do not hold those of its child {child}"
-                        ));
+                        return Err(ValidationError::KdRangeNotHeld { node: i, child });
                     }
                     if file.kd_full[n] && !file.kd_full[c] {
-                        return Err(format!(
-                            "kd_full of node {i}: set, but its child {child} is not full"
-                        ));
+                        return Err(ValidationError::KdFullChildNotFull { node: i, child });
                     }
                     if *flag {
-                        return Err(format!(
-                            "kd_nodes[{i}]: child {child} is reached twice (not a tree)"
-                        ));
+                        return Err(ValidationError::KdNotATree { node: i, child });
                     }
                     *flag = true;
                     stack.push(child);
@@ -298,31 +457,35 @@ fn check_kd(file: &ArchivedBrickFile) -> Result<(), String> {
                     match region_in_leaf.get_mut(r as usize) {
                         Some(flag) => *flag = true,
                         None => {
-                            return Err(format!(
-                                "kd_nodes[{i}]: region {r} out of range ({n_regions} regions)"
-                            ))
+                            return Err(ValidationError::KdRegionOutOfRange {
+                                node: i,
+                                region: r,
+                                regions: n_regions,
+                            })
                         }
                     }
                     for f in 0..nf {
                         let reg = &file.region_ranges[r as usize * nf + f];
                         let reg = (reg.min.to_native(), reg.max.to_native());
                         if !holds(range(i as usize, f), reg) {
-                            return Err(format!(
-                                "kd_ranges of leaf {i}: field {f} does not hold region {r}'s range"
-                            ));
+                            return Err(ValidationError::KdLeafRangeNotHeld {
+                                node: i,
+                                field: f,
+                                region: r,
+                            });
                         }
                     }
                 }
                 None => {
                     if file.kd_full[i as usize] {
-                        return Err(format!("kd_full of node {i}: set on an empty leaf"));
+                        return Err(ValidationError::KdFullEmptyLeaf { node: i });
                     }
                 }
             },
         }
     }
     if let Some(r) = region_in_leaf.iter().position(|&s| !s) {
-        return Err(format!("regions[{r}]: in no KD-tree leaf"));
+        return Err(ValidationError::RegionNotInTree { region: r });
     }
     Ok(())
 }

@@ -7,6 +7,7 @@ use std::path::Path;
 
 use proptest::prelude::*;
 use qbricks_format::header::{checksum, Header, HEADER_LEN};
+use qbricks_format::validate::ValidationError;
 use qbricks_format::{query, writer, BrickFileView, FormatErrorKind, OpenOptions};
 
 const NO_CHECKSUM: OpenOptions = OpenOptions {
@@ -161,8 +162,11 @@ fn brick_cell_count_overflowing_u64_is_an_error() {
             .expect_err("a brick with more than 2^64 cells must not open");
         let msg = err.to_string();
         assert!(
-            matches!(err.kind, FormatErrorKind::Invalid(_))
-                && msg.contains("huge_brick.qbk")
+            matches!(
+                err.kind,
+                FormatErrorKind::Invalid(ValidationError::BrickTooManyCells { brick, .. })
+                    if brick == last
+            ) && msg.contains("huge_brick.qbk")
                 && msg.contains(&format!("bricks[{last}].dims")),
             "{dims:?} (no fields: {no_fields}): {msg}"
         );
@@ -196,18 +200,30 @@ fn level_widths_and_finest_levels_must_match_the_bricks() {
 
     let mut tiny_level = base.clone();
     tiny_level.levels[level].cell_width = 1.1368683772161603e-12;
-    let msg = open(&tiny_level).expect_err("level width").to_string();
+    let err = open(&tiny_level).expect_err("level width");
+    let msg = err.to_string();
     assert!(
-        msg.contains("levels.qbk") && msg.contains(".cell_width") && msg.contains("differs"),
+        matches!(
+            err.kind,
+            FormatErrorKind::Invalid(ValidationError::BrickWidthNotLevels { .. })
+        ) && msg.contains("levels.qbk")
+            && msg.contains(".cell_width")
+            && msg.contains("differs"),
         "{msg}"
     );
 
     let mut wrong_finest = base.clone();
     let finest = wrong_finest.regions[r].finest_level;
     wrong_finest.regions[r].finest_level = if finest == 0 { 1 } else { 0 };
-    let msg = open(&wrong_finest).expect_err("finest level").to_string();
+    let err = open(&wrong_finest).expect_err("finest level");
+    let msg = err.to_string();
     assert!(
-        msg.contains("levels.qbk") && msg.contains(&format!("regions[{r}].finest_level")),
+        matches!(
+            err.kind,
+            FormatErrorKind::Invalid(ValidationError::FinestLevelMismatch { region, .. })
+                if region == r
+        ) && msg.contains("levels.qbk")
+            && msg.contains(&format!("regions[{r}].finest_level")),
         "{msg}"
     );
 }

@@ -1,10 +1,11 @@
 //! Archives that pass rkyv's validation but break a schema invariant are refused with a
-//! message naming the element.
+//! typed error of the right kind, whose message names the element.
 
 mod common;
 
 use std::path::Path;
 
+use qbricks_format::validate::ValidationError as V;
 use qbricks_format::{writer, BrickFile, BrickFileView, FormatErrorKind, KdNode};
 
 /// A valid base with at least two bricks, two regions and an inner KD node.
@@ -20,13 +21,26 @@ fn base() -> BrickFile {
         .expect("some seed fits")
 }
 
-fn refused(f: &BrickFile, needle: &str) {
+/// Opens `f`, expects a schema error whose one-line message names the file and contains
+/// `needle`, and returns the error for the caller to match by kind.
+fn refused(f: &BrickFile, needle: &str) -> V {
     let bytes = writer::to_bytes(f).expect("serialisable");
     let err = BrickFileView::from_bytes(Path::new("bad.qbk"), &bytes).expect_err(needle);
-    assert!(matches!(err.kind, FormatErrorKind::Invalid(_)), "{err}");
     let msg = err.to_string();
     assert!(msg.contains(needle), "expected {needle:?} in {msg}");
     assert!(msg.starts_with("bad.qbk: ") && !msg.contains('\n'), "{msg}");
+    match err.kind {
+        FormatErrorKind::Invalid(e) => e,
+        other => panic!("expected a schema error, found {other:?}"),
+    }
+}
+
+/// Asserts that `refused(f, needle)` is of the given kind.
+macro_rules! refused {
+    ($f:expr, $needle:expr, $pat:pat) => {{
+        let e = refused(&$f, $needle);
+        assert!(matches!(e, $pat), "{e:?}");
+    }};
 }
 
 #[test]
@@ -39,40 +53,73 @@ fn base_is_valid() {
 fn each_broken_invariant_is_named() {
     let mut f = base();
     f.bricks[1].first_value = f.fields[0].values.len() as u64;
-    refused(&f, "bricks[1]: values");
+    refused!(f, "bricks[1]: values", V::BrickOutOfRange { brick: 1, .. });
 
     let mut f = base();
     f.bricks[0].level = f.levels.len() as u32;
-    refused(&f, "bricks[0].level");
+    refused!(
+        f,
+        "bricks[0].level",
+        V::BrickLevelOutOfRange { brick: 0, .. }
+    );
 
     let mut f = base();
     f.bricks[0].dims[2] = 0;
-    refused(&f, "bricks[0].dims");
+    refused!(f, "bricks[0].dims", V::BrickEmptyDims { brick: 0, .. });
 
     let mut f = base();
     f.fields[0].values.pop();
-    refused(&f, "values");
+    // With one field, the last brick's values run past the shortened array; with more,
+    // the fields differ in length.
+    refused!(
+        f,
+        "values",
+        V::FieldLength { .. } | V::BrickOutOfRange { .. }
+    );
 
     let mut f = base();
     let start = f.regions[1].bricks_start as usize;
     f.region_bricks[start] = f.bricks.len() as u32 + 7;
-    refused(&f, "regions[1].bricks[0]: brick");
+    refused!(
+        f,
+        "regions[1].bricks[0]: brick",
+        V::BrickIdOutOfRange {
+            in_region: Some((1, 0)),
+            ..
+        }
+    );
 
     let mut f = base();
     f.regions[0].bricks_len = f.region_bricks.len() as u32 + 1;
-    refused(&f, "regions[0]: bricks");
+    refused!(
+        f,
+        "regions[0]: bricks",
+        V::RegionBricksOutOfRange { region: 0, .. }
+    );
 
     let mut f = base();
     f.regions[1].bounds.min[2] = f64::NAN;
-    refused(&f, "regions[1].bounds");
+    refused!(
+        f,
+        "regions[1].bounds",
+        V::BadBox {
+            region: Some(1),
+            axis: 2,
+            ..
+        }
+    );
 
     let mut f = base();
     f.region_ranges.pop();
-    refused(&f, "region_ranges");
+    refused!(f, "region_ranges", V::RegionRangesLength { .. });
 
     let mut f = base();
     f.levels[0].cell_width = 0.0;
-    refused(&f, "levels[0].cell_width");
+    refused!(
+        f,
+        "levels[0].cell_width",
+        V::LevelCellWidth { level: 0, .. }
+    );
 
     // KD-tree: child out of range, a cycle back to the root, a bad axis, a lost region.
     let n = f.kd_nodes.len() as u32;
@@ -91,13 +138,17 @@ fn each_broken_invariant_is_named() {
     };
     let mut f = base();
     set_root(&mut f, Some(n + 3), None);
-    refused(&f, "kd_nodes[0]: child");
+    refused!(
+        f,
+        "kd_nodes[0]: child",
+        V::KdChildOutOfRange { node: 0, .. }
+    );
     let mut f = base();
     set_root(&mut f, Some(0), None);
-    refused(&f, "reached twice");
+    refused!(f, "reached twice", V::KdNotATree { child: 0, .. });
     let mut f = base();
     set_root(&mut f, None, Some(3));
-    refused(&f, "kd_nodes[0].axis");
+    refused!(f, "kd_nodes[0].axis", V::KdAxis { node: 0, axis: 3 });
     let mut f = base();
     for node in &mut f.kd_nodes {
         if let KdNode::Leaf { region: Some(0) } = node {
@@ -105,7 +156,11 @@ fn each_broken_invariant_is_named() {
         }
     }
     f.derive_kd_tables();
-    refused(&f, "regions[0]: in no KD-tree leaf");
+    refused!(
+        f,
+        "regions[0]: in no KD-tree leaf",
+        V::RegionNotInTree { region: 0 }
+    );
 
     // The skipping tables: a node whose range misses its child's, a full flag on a node
     // with an empty leaf below, an empty leaf flagged full, missing entries.
@@ -113,7 +168,7 @@ fn each_broken_invariant_is_named() {
     let nf = f.fields.len();
     f.kd_ranges[0].max = f.kd_ranges[0].min - 1.0;
     assert!(nf > 0);
-    refused(&f, "kd_ranges of node 0");
+    refused!(f, "kd_ranges of node 0", V::KdRangeNotHeld { node: 0, .. });
     let mut f = base();
     if let Some(empty) = f
         .kd_nodes
@@ -121,9 +176,13 @@ fn each_broken_invariant_is_named() {
         .position(|n| matches!(n, KdNode::Leaf { region: None }))
     {
         f.kd_full[empty] = true;
-        refused(
+        let e = refused(
             &f,
             &format!("kd_full of node {empty}: set on an empty leaf"),
+        );
+        assert!(
+            matches!(e, V::KdFullEmptyLeaf { node } if node as usize == empty),
+            "{e:?}"
         );
     }
     let mut f = base();
@@ -133,15 +192,20 @@ fn each_broken_invariant_is_named() {
         .position(|n| matches!(n, KdNode::Leaf { region: Some(_) }))
     {
         f.kd_ranges[leaf * nf].min = f32::NAN;
-        refused(&f, "kd_ranges of");
+        // Caught at the leaf, or first at its parent (whose range holds no NaN).
+        refused!(
+            f,
+            "kd_ranges of",
+            V::KdLeafRangeNotHeld { .. } | V::KdRangeNotHeld { .. }
+        );
     }
     let mut f = base();
     f.kd_full.pop();
-    refused(&f, "kd_full: expected");
+    refused!(f, "kd_full: expected", V::KdFullLength { .. });
     let mut f = base();
     f.kd_ranges.pop();
-    refused(&f, "kd_ranges: expected");
+    refused!(f, "kd_ranges: expected", V::KdRangesLength { .. });
     let mut f = base();
     f.kd_nodes.clear();
-    refused(&f, "kd_nodes: empty");
+    refused!(f, "kd_nodes: empty", V::KdNodesEmpty { .. });
 }

@@ -6,6 +6,7 @@
 
 use std::path::Path;
 
+use format::validate::ValidationError;
 use format::{BrickFile, BrickFileView, FormatErrorKind};
 use qbricks_viewer::sampling::{Params, Strategy, Tracer};
 use qbricks_viewer::testvol::{self, GridSpec};
@@ -109,8 +110,11 @@ fn brick_dims_overflowing_the_cell_count_are_refused() {
             Err(e) => {
                 let msg = e.to_string();
                 assert!(
-                    matches!(e.kind, FormatErrorKind::Invalid(_))
-                        && msg.contains("overflow.qbk")
+                    matches!(
+                        e.kind,
+                        FormatErrorKind::Invalid(ValidationError::BrickTooManyCells { brick, .. })
+                            if brick == b
+                    ) && msg.contains("overflow.qbk")
                         && msg.contains(&format!("bricks[{b}]")),
                     "{dims:?}: {msg}"
                 );
@@ -132,11 +136,15 @@ fn level_width_far_from_its_bricks_is_refused() {
     let level = base.bricks[b].level as usize;
     let mut file = base.clone();
     file.levels[level].cell_width = 1.1368683772161603e-12;
-    let msg = open(&file, "tiny_level.qbk")
-        .expect_err("a level width far from its bricks' must not open")
-        .to_string();
+    let err = open(&file, "tiny_level.qbk")
+        .expect_err("a level width far from its bricks' must not open");
+    let msg = err.to_string();
     assert!(
-        msg.contains("tiny_level.qbk") && msg.contains("cell_width"),
+        matches!(
+            err.kind,
+            FormatErrorKind::Invalid(ValidationError::BrickWidthNotLevels { .. })
+        ) && msg.contains("tiny_level.qbk")
+            && msg.contains("cell_width"),
         "{msg}"
     );
 
@@ -149,11 +157,15 @@ fn level_width_far_from_its_bricks_is_refused() {
         bricks: 0,
     });
     file.regions[0].finest_level = (file.levels.len() - 1) as u32;
-    let msg = open(&file, "finest.qbk")
-        .expect_err("a region's finest level must be its bricks' finest")
-        .to_string();
+    let err =
+        open(&file, "finest.qbk").expect_err("a region's finest level must be its bricks' finest");
+    let msg = err.to_string();
     assert!(
-        msg.contains("finest.qbk") && msg.contains("regions[0].finest_level"),
+        matches!(
+            err.kind,
+            FormatErrorKind::Invalid(ValidationError::FinestLevelMismatch { region: 0, .. })
+        ) && msg.contains("finest.qbk")
+            && msg.contains("regions[0].finest_level"),
         "{msg}"
     );
 }
