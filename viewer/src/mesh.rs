@@ -56,32 +56,25 @@ impl MeshInstance {
             scale,
             ..MeshInstance::at_origin(path)
         };
-        m.validate()?;
+        m.validate().map_err(|e| e.to_string())?;
         Ok(m)
     }
 
     /// Finite translation, finite positive scale, colour components in 0..=1.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), MeshError> {
+        let err = |kind| Err(MeshError::new(&self.path, kind));
         if self.translation.iter().any(|x| !x.is_finite()) {
-            return Err(format!(
-                "{}: translation: not finite ({:?})",
-                self.path.display(),
-                self.translation
-            ));
+            return err(MeshErrorKind::Translation {
+                translation: self.translation,
+            });
         }
         if !(self.scale.is_finite() && self.scale > 0.0) {
-            return Err(format!(
-                "{}: scale: expected a finite number > 0, found {}",
-                self.path.display(),
-                self.scale
-            ));
+            return err(MeshErrorKind::Scale { scale: self.scale });
         }
         if self.colour.iter().any(|c| !(0.0..=1.0).contains(c)) {
-            return Err(format!(
-                "{}: colour: expected components in 0..=1, found {:?}",
-                self.path.display(),
-                self.colour
-            ));
+            return err(MeshErrorKind::Colour {
+                colour: self.colour,
+            });
         }
         Ok(())
     }
@@ -110,21 +103,14 @@ impl TriangleMesh {
     /// Loads an OBJ file (all its models, triangulated) and places it.
     pub fn load_obj(instance: &MeshInstance) -> Result<TriangleMesh, MeshError> {
         let path = &instance.path;
-        let err = |message: String| MeshError {
-            path: path.clone(),
-            message,
-        };
-        instance.validate().map_err(|m| {
-            // validate() already names the path; keep only the message part.
-            let prefix = format!("{}: ", path.display());
-            err(m.strip_prefix(&prefix).unwrap_or(&m).to_string())
-        })?;
+        let err = |kind| MeshError::new(path, kind);
+        instance.validate()?;
         // Read the file ourselves (tobj's "open failed"/"read error" do not say why, and it
         // would read `/dev/zero` until memory runs out); materials are not used.
         let text = read_whole(path, Limits::memory()).map_err(|e| match e.kind {
-            InputErrorKind::IsDirectory => err("is a directory, expected an OBJ file".to_string()),
-            InputErrorKind::Io(e) => err(format!("cannot read OBJ file: {e}")),
-            kind => err(kind.to_string()),
+            InputErrorKind::IsDirectory => err(MeshErrorKind::IsDirectory),
+            InputErrorKind::Io(e) => err(MeshErrorKind::Read(e)),
+            kind => err(MeshErrorKind::Input(kind)),
         })?;
         let (models, _materials) = tobj::load_obj_buf(
             &mut text.as_slice(),
@@ -136,7 +122,7 @@ impl TriangleMesh {
             },
             |_| Err(tobj::LoadError::OpenFileFailed),
         )
-        .map_err(|e| err(format!("not a valid OBJ file: {e}")))?;
+        .map_err(|e| err(MeshErrorKind::NotObj(e)))?;
 
         let mut mesh = TriangleMesh {
             positions: Vec::new(),
@@ -152,11 +138,11 @@ impl TriangleMesh {
             for (i, p) in m.positions.chunks_exact(3).enumerate() {
                 let v = DVec3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
                 if !v.is_finite() {
-                    return Err(err(format!(
-                        "object `{}`: vertex {} is not finite ({v:?})",
-                        model.name,
-                        i + 1
-                    )));
+                    return Err(err(MeshErrorKind::VertexNotFinite {
+                        object: model.name.clone(),
+                        vertex: i + 1,
+                        position: v.to_array(),
+                    }));
                 }
                 mesh.positions.push(t + instance.scale * v);
             }
@@ -176,12 +162,12 @@ impl TriangleMesh {
                 let mut idx = [0u32; 3];
                 for (k, &vi) in tri.iter().enumerate() {
                     if vi as usize >= count {
-                        return Err(err(format!(
-                            "object `{}`: face {} refers to vertex {}, but there are {count} vertices",
-                            model.name,
-                            f + 1,
-                            u64::from(vi) + 1
-                        )));
+                        return Err(err(MeshErrorKind::VertexOutOfRange {
+                            object: model.name.clone(),
+                            face: f + 1,
+                            vertex: u64::from(vi) + 1,
+                            vertices: count,
+                        }));
                     }
                     idx[k] = (base + vi as usize) as u32;
                 }
@@ -189,7 +175,7 @@ impl TriangleMesh {
             }
         }
         if mesh.triangles.is_empty() {
-            return Err(err("expected at least one triangle, found none".to_string()));
+            return Err(err(MeshErrorKind::NoTriangles));
         }
         Ok(mesh)
     }
@@ -450,11 +436,58 @@ impl Meshes {
     }
 }
 
+/// A mesh that cannot be placed or loaded: the file and what is wrong with it.
 #[derive(Debug, thiserror::Error)]
-#[error("{}: {message}", path.display())]
+#[error("{}: {kind}", path.display())]
 pub struct MeshError {
     pub path: PathBuf,
-    pub message: String,
+    pub kind: MeshErrorKind,
+}
+
+impl MeshError {
+    pub fn new(path: impl Into<PathBuf>, kind: MeshErrorKind) -> Self {
+        Self {
+            path: path.into(),
+            kind,
+        }
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum MeshErrorKind {
+    #[error("translation: not finite ({translation:?})")]
+    Translation { translation: [f64; 3] },
+    #[error("scale: expected a finite number > 0, found {scale}")]
+    Scale { scale: f64 },
+    #[error("colour: expected components in 0..=1, found {colour:?}")]
+    Colour { colour: [f32; 3] },
+    #[error("is a directory, expected an OBJ file")]
+    IsDirectory,
+    #[error("cannot read OBJ file: {0}")]
+    Read(std::io::Error),
+    /// Reading the file whole failed otherwise (a device, over the size limit...).
+    #[error("{0}")]
+    Input(InputErrorKind),
+    #[error("not a valid OBJ file: {0}")]
+    NotObj(tobj::LoadError),
+    /// Vertex numbers are 1-based, as in the file.
+    #[error("object `{object}`: vertex {vertex} is not finite ({:?})", DVec3::from_array(*.position))]
+    VertexNotFinite {
+        object: String,
+        vertex: usize,
+        position: [f64; 3],
+    },
+    /// Face and vertex numbers are 1-based, as in the file.
+    #[error("object `{object}`: face {face} refers to vertex {vertex}, but there are {vertices} vertices")]
+    VertexOutOfRange {
+        object: String,
+        face: usize,
+        vertex: u64,
+        vertices: usize,
+    },
+    #[error("expected at least one triangle, found none")]
+    NoTriangles,
 }
 
 #[cfg(test)]
@@ -544,15 +577,17 @@ mod tests {
         assert!(e.to_string().contains("nope.obj"), "{e}");
         let empty = write(dir.path(), "empty.obj", "# nothing\nv 0 0 0\n");
         let e = Meshes::load(&[MeshInstance::at_origin(&empty)]).expect_err("empty");
-        assert!(e.message.contains("triangle"), "{e}");
+        assert!(matches!(e.kind, MeshErrorKind::NoTriangles), "{e}");
+        assert!(e.to_string().contains("triangle"), "{e}");
         let bad = write(dir.path(), "bad.obj", "v 0 0 0\nv 1 0 0\nf 1 2 7\n");
         let e = Meshes::load(&[MeshInstance::at_origin(&bad)]).expect_err("bad index");
+        assert!(matches!(e.kind, MeshErrorKind::NotObj(_)), "{e}");
         assert!(e.to_string().contains("bad.obj"), "{e}");
         let garbage = write(dir.path(), "garbage.obj", "v 0 zero 0\nf 1 1 1\n");
         let e = Meshes::load(&[MeshInstance::at_origin(&garbage)]).expect_err("garbage");
         assert!(e.to_string().contains("garbage.obj"), "{e}");
         let e = Meshes::load(&[MeshInstance::at_origin(dir.path())]).expect_err("directory");
-        assert!(e.message.starts_with("is a directory"), "{e}");
+        assert!(matches!(e.kind, MeshErrorKind::IsDirectory), "{e}");
         let ok = write(
             dir.path(),
             "tri.obj",
@@ -561,7 +596,8 @@ mod tests {
         let mut inst = MeshInstance::at_origin(&ok);
         inst.scale = 0.0;
         let e = Meshes::load(&[inst]).expect_err("scale");
-        assert!(e.message.starts_with("scale"), "{e}");
+        assert!(matches!(e.kind, MeshErrorKind::Scale { .. }), "{e}");
+        assert!(e.kind.to_string().starts_with("scale"), "{e}");
         assert!(Meshes::load(&[MeshInstance::at_origin(&ok)]).is_ok());
     }
 

@@ -16,8 +16,9 @@ pub type StoredF32 = rkyv::Archived<f32>;
 
 #[derive(Debug, thiserror::Error)]
 pub enum VolumeError {
-    #[error("field {0:?} is not in the file (fields: {1})")]
-    NoSuchField(String, String),
+    /// `available` lists the file's fields, comma-separated.
+    #[error("field {name:?} is not in the file (fields: {available})")]
+    NoSuchField { name: String, available: String },
     /// A view setting names a field the file does not have.
     #[error("{setting}: {source}")]
     Setting {
@@ -131,7 +132,10 @@ impl<'a> Volume<'a> {
             .position(|f| f.name == name)
             .ok_or_else(|| {
                 let names: Vec<&str> = self.fields.iter().map(|f| f.name.as_str()).collect();
-                VolumeError::NoSuchField(name.to_string(), names.join(", "))
+                VolumeError::NoSuchField {
+                    name: name.to_string(),
+                    available: names.join(", "),
+                }
             })
     }
 
