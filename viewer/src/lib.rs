@@ -24,6 +24,7 @@ pub mod render;
 pub mod sampling;
 pub mod sequence;
 pub mod shading;
+#[cfg(any(test, feature = "testkit"))]
 pub mod testvol;
 pub mod transfer;
 pub mod traverse;

@@ -1,6 +1,5 @@
 //! Opaque triangle meshes from OBJ files (tobj), placed by translation and uniform scale.
 
-use std::collections::HashMap;
 use std::path::PathBuf;
 
 use format::input::{read_whole, InputErrorKind, Limits};
@@ -221,6 +220,7 @@ fn fmt6(x: f64) -> String {
 /// A sphere of `radius` around `centre` from a subdivided icosahedron
 /// (`20·4^subdivisions` triangles, counter-clockwise seen from outside), with exact
 /// radial normals.
+#[cfg(any(test, feature = "testkit"))]
 pub fn icosphere(centre: DVec3, radius: f64, subdivisions: u32) -> TriangleMesh {
     let g = (1.0 + 5f64.sqrt()) / 2.0;
     let mut unit: Vec<DVec3> = [
@@ -263,7 +263,7 @@ pub fn icosphere(centre: DVec3, radius: f64, subdivisions: u32) -> TriangleMesh 
         [9, 8, 1],
     ];
     for _ in 0..subdivisions {
-        let mut cache: HashMap<(u32, u32), u32> = HashMap::new();
+        let mut cache: std::collections::HashMap<(u32, u32), u32> = Default::default();
         let mut mid = |a: u32, b: u32, unit: &mut Vec<DVec3>| -> u32 {
             let key = (a.min(b), a.max(b));
             *cache.entry(key).or_insert_with(|| {
@@ -511,7 +511,7 @@ mod tests {
             assert!(((*p - DVec3::new(1.0, 2.0, 3.0)).length() - 0.5).abs() < 1e-12);
         }
         // Closed, consistently oriented: each directed edge appears once, its reverse once.
-        let mut edges = HashMap::new();
+        let mut edges = std::collections::HashMap::new();
         for t in &s.triangles {
             for k in 0..3 {
                 *edges.entry((t[k], t[(k + 1) % 3])).or_insert(0) += 1;
