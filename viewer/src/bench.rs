@@ -24,7 +24,7 @@ use crate::view_state::ViewState;
 use crate::volume::{Volume, VolumeError};
 
 /// Step sizes (in local cell widths) every strategy is run at.
-pub const STEPS: [f64; 5] = [2.0, 1.0, 0.5, 0.25, 0.1];
+pub(crate) const STEPS: [f64; 5] = [2.0, 1.0, 0.5, 0.25, 0.1];
 
 /// How the benchmark is run.
 #[derive(Debug, Clone)]
@@ -251,7 +251,7 @@ pub fn run(
 }
 
 /// Marks the runs no other run beats on both time and error (ties count as not beaten).
-pub fn mark_pareto(runs: &mut [Run]) {
+pub(crate) fn mark_pareto(runs: &mut [Run]) {
     let key: Vec<(f64, f64)> = runs.iter().map(|r| (r.ms, r.rmse)).collect();
     for (i, r) in runs.iter_mut().enumerate() {
         let (t, e) = key[i];

@@ -18,12 +18,12 @@ pub struct Aabb {
 }
 
 impl Aabb {
-    pub const EMPTY: Aabb = Aabb {
+    pub(crate) const EMPTY: Aabb = Aabb {
         min: DVec3::splat(f64::INFINITY),
         max: DVec3::splat(f64::NEG_INFINITY),
     };
 
-    pub fn from_points(points: &[DVec3]) -> Aabb {
+    pub(crate) fn from_points(points: &[DVec3]) -> Aabb {
         points.iter().fold(Aabb::EMPTY, |b, p| b.grow(*p))
     }
 
@@ -45,12 +45,12 @@ impl Aabb {
         self.min.cmpgt(self.max).any()
     }
 
-    pub fn centroid(&self) -> DVec3 {
+    pub(crate) fn centroid(&self) -> DVec3 {
         0.5 * (self.min + self.max)
     }
 
     /// Half the surface area (the SAH only needs ratios). 0 for an empty box.
-    pub fn half_area(&self) -> f64 {
+    pub(crate) fn half_area(&self) -> f64 {
         if self.is_empty() {
             return 0.0;
         }
@@ -111,7 +111,7 @@ struct Node {
 
 /// A BVH over primitives given by their bounding boxes.
 #[derive(Debug, Clone)]
-pub struct Bvh {
+pub(crate) struct Bvh {
     nodes: Vec<Node>,
     prims: Vec<u32>,
 }
@@ -149,12 +149,9 @@ impl Bvh {
     }
 
     /// Number of primitives in the tree.
-    pub fn len(&self) -> usize {
+    #[cfg(test)]
+    pub(crate) fn len(&self) -> usize {
         self.prims.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.prims.is_empty()
     }
 
     /// Bounds of everything in the tree (empty box for an empty tree).
@@ -397,7 +394,7 @@ fn bin_of(c: f64, lo: f64, scale: f64) -> usize {
 /// shared edge or vertex give edge functions of exactly opposite sign in the two
 /// triangles, so a ray can never slip through a closed mesh.
 #[derive(Debug, Clone, Copy)]
-pub struct RayShear {
+pub(crate) struct RayShear {
     origin: DVec3,
     k: [usize; 3],
     s: DVec3,
@@ -430,13 +427,13 @@ impl RayShear {
 
 /// Hit of [`intersect_triangle`]: distance and barycentric weights of `v0`, `v1`, `v2`.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TriHit {
+pub(crate) struct TriHit {
     pub t: f64,
-    pub bary: [f64; 3],
+    pub(crate) bary: [f64; 3],
 }
 
 /// Watertight ray/triangle test (both faces), hits with `t` in `(t_min, t_max)`.
-pub fn intersect_triangle(
+pub(crate) fn intersect_triangle(
     sh: &RayShear,
     v0: DVec3,
     v1: DVec3,

@@ -41,13 +41,13 @@ pub struct Camera {
 }
 
 /// Default vertical field of view of [`Camera::frame`], degrees.
-pub const DEFAULT_FOV_DEG: f64 = 35.0;
+pub(crate) const DEFAULT_FOV_DEG: f64 = 35.0;
 
 /// Orthonormal camera basis: `forward` points from the eye into the scene, `right` and
 /// `up` span the image plane (x to the right, y up on screen).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Basis {
-    pub forward: DVec3,
+    pub(crate) forward: DVec3,
     pub right: DVec3,
     pub up: DVec3,
 }
@@ -137,7 +137,7 @@ impl Camera {
     }
 
     /// Per-frame constants of [`Camera::ray`] for a `width`×`height` image.
-    pub fn ray_generator(&self, width: u32, height: u32) -> RayGen {
+    pub(crate) fn ray_generator(&self, width: u32, height: u32) -> RayGen {
         let b = self.basis();
         let w = f64::from(width.max(1));
         let h = f64::from(height.max(1));

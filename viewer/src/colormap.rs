@@ -21,11 +21,11 @@ pub struct ColorMap {
     pub band: f32,
 }
 
-pub const BLUE: [f32; 3] = [0.1, 0.25, 0.95];
-pub const GREEN: [f32; 3] = [0.1, 0.8, 0.2];
-pub const RED: [f32; 3] = [0.95, 0.15, 0.1];
+pub(crate) const BLUE: [f32; 3] = [0.1, 0.25, 0.95];
+pub(crate) const GREEN: [f32; 3] = [0.1, 0.8, 0.2];
+pub(crate) const RED: [f32; 3] = [0.95, 0.15, 0.1];
 /// Colour of a map without control points, and of NaN values.
-pub const NEUTRAL: [f32; 3] = [0.75, 0.75, 0.75];
+pub(crate) const NEUTRAL: [f32; 3] = [0.75, 0.75, 0.75];
 
 fn lerp(a: [f32; 3], b: [f32; 3], t: f32) -> [f32; 3] {
     [
@@ -80,7 +80,7 @@ impl ColorMap {
     ///
     /// Control points at the minimum, the middle and the maximum; the band is 2 % of the
     /// range. Swapped or non-finite limits are repaired (non-finite → 0..1).
-    pub fn default_for_range(field: &str, min: f32, max: f32) -> ColorMap {
+    pub(crate) fn default_for_range(field: &str, min: f32, max: f32) -> ColorMap {
         let (lo, hi) = if min.is_finite() && max.is_finite() {
             (min.min(max), min.max(max))
         } else {
@@ -108,7 +108,8 @@ impl ColorMap {
     }
 
     /// The seed report's speed colouring: 0.012 blue, 0.025 green, 0.072 red, ±0.0025.
-    pub fn seed_report() -> ColorMap {
+    #[cfg(test)]
+    pub(crate) fn seed_report() -> ColorMap {
         ColorMap {
             field: "speed".to_string(),
             points: vec![

@@ -12,7 +12,7 @@ use crate::render::{Tile, TileResult};
 
 /// Accumulated samples of a `width`×`height` image.
 #[derive(Debug, Clone)]
-pub struct Film {
+pub(crate) struct Film {
     pub width: u32,
     pub height: u32,
     sum: Vec<[f64; 3]>,
@@ -56,13 +56,8 @@ impl Film {
         }
     }
 
-    /// Samples added to pixel (`x`, `y`).
-    pub fn samples_at(&self, x: u32, y: u32) -> u32 {
-        self.samples[(y * self.width + x) as usize]
-    }
-
     /// Per pixel (row-major), how many of its samples hit.
-    pub fn hit_samples(&self) -> &[u32] {
+    pub(crate) fn hit_samples(&self) -> &[u32] {
         &self.hits
     }
 
@@ -74,7 +69,7 @@ impl Film {
     }
 
     /// The image: each pixel's mean over its samples (black where none yet).
-    pub fn resolve(&self) -> Vec<[f32; 3]> {
+    pub(crate) fn resolve(&self) -> Vec<[f32; 3]> {
         (0..self.sum.len())
             .map(|i| self.pixel(i).unwrap_or([0.0; 3]))
             .collect()

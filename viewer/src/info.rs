@@ -26,7 +26,7 @@ pub struct FieldInfo {
     pub name: String,
     pub min: f32,
     pub max: f32,
-    pub histogram_bins: u64,
+    pub(crate) histogram_bins: u64,
 }
 
 /// One source grid of the provenance.
@@ -58,10 +58,10 @@ pub struct Info {
     pub path: String,
     pub checksum_verified: bool,
     /// Depth of the KD-tree (a single leaf has depth 1; 0 without nodes).
-    pub kd_depth: u64,
-    pub kd_leaves: u64,
+    pub(crate) kd_depth: u64,
+    pub(crate) kd_leaves: u64,
     /// Total entries of all regions' brick lists (bricks counted once per region).
-    pub region_brick_refs: u64,
+    pub(crate) region_brick_refs: u64,
     pub grids: Vec<GridInfo>,
     /// The bake options as JSON (a string when they are not valid JSON).
     pub bake_options: serde_json::Value,

@@ -1,12 +1,12 @@
 //! Front-to-back compositing of one ray, with opacity correction and early termination.
 
 /// Stop marching once the remaining transmittance falls below this.
-pub const EARLY_TERMINATION: f64 = 1.0 / 512.0;
+pub(crate) const EARLY_TERMINATION: f64 = 1.0 / 512.0;
 
 /// `α' = 1 − (1 − α)^(Δ/Δ₀)`: opacity `alpha` defined per reference length `delta0`,
 /// corrected for a ray interval of length `delta`.
 #[inline]
-pub fn correct_opacity(alpha: f64, delta: f64, delta0: f64) -> f64 {
+pub(crate) fn correct_opacity(alpha: f64, delta: f64, delta0: f64) -> f64 {
     if alpha <= 0.0 || delta <= 0.0 {
         return 0.0;
     }

@@ -21,7 +21,7 @@ pub struct MeshInstance {
 }
 
 /// Default colour of meshes given on the command line: light grey.
-pub const DEFAULT_MESH_COLOUR: [f32; 3] = [0.8, 0.8, 0.8];
+pub(crate) const DEFAULT_MESH_COLOUR: [f32; 3] = [0.8, 0.8, 0.8];
 
 impl MeshInstance {
     /// A mesh at its file coordinates.
@@ -100,7 +100,7 @@ pub struct TriangleMesh {
 
 impl TriangleMesh {
     /// Loads an OBJ file (all its models, triangulated) and places it.
-    pub fn load_obj(instance: &MeshInstance) -> Result<TriangleMesh, MeshError> {
+    pub(crate) fn load_obj(instance: &MeshInstance) -> Result<TriangleMesh, MeshError> {
         let path = &instance.path;
         let err = |kind| MeshError::new(path, kind);
         instance.validate()?;

@@ -67,7 +67,7 @@ pub fn parse_points_csv(text: &str) -> Result<Vec<[f64; 3]>, String> {
 /// Whether `line` is a header: exactly three comma-separated column names, each starting
 /// with a letter or `_` and made of letters, digits, `_`, `-`, `.`, spaces or brackets
 /// (`x,y,z`, `X [m], Y [m], Z [m]`), none of them a number `f64` would parse (`nan`, `inf`).
-pub fn is_header(line: &str) -> bool {
+pub(crate) fn is_header(line: &str) -> bool {
     let names: Vec<&str> = line.split(',').map(str::trim).collect();
     names.len() == 3
         && names.iter().all(|n| {
@@ -79,7 +79,7 @@ pub fn is_header(line: &str) -> bool {
 }
 
 /// Parses `x,y,z`.
-pub fn parse_xyz(s: &str) -> Result<[f64; 3], String> {
+pub(crate) fn parse_xyz(s: &str) -> Result<[f64; 3], String> {
     let nums: Vec<&str> = s.split(',').map(str::trim).collect();
     if nums.len() != 3 {
         return Err(format!("expected x,y,z, found `{s}`"));
@@ -97,7 +97,7 @@ pub fn parse_xyz(s: &str) -> Result<[f64; 3], String> {
 }
 
 /// Largest number of points of a `--line`.
-pub const MAX_LINE_POINTS: usize = 10_000_000;
+pub(crate) const MAX_LINE_POINTS: usize = 10_000_000;
 
 /// Parses `x0,y0,z0:x1,y1,z1:N` into `N` evenly spaced points from start to end inclusive.
 pub fn parse_line(s: &str) -> Result<Vec<[f64; 3]>, String> {

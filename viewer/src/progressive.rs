@@ -63,8 +63,6 @@ pub struct Update {
     pub counts: Counts,
     /// Time spent rendering this level so far, ms.
     pub ms: f64,
-    /// Since the job was submitted, ms.
-    pub since_submit_ms: f64,
     /// The full-resolution image with every sample: nothing more will come for this job.
     pub complete: bool,
 }
@@ -99,7 +97,6 @@ struct Pending {
     generation: u64,
     job: Job,
     cancel: CancelToken,
-    submitted: Instant,
 }
 
 struct Inner {
@@ -226,7 +223,6 @@ impl Progressive {
             generation: g.generation,
             job,
             cancel: g.cancel.clone(),
-            submitted: Instant::now(),
         });
         let generation = g.generation;
         drop(g);
@@ -350,7 +346,6 @@ fn run_job(shared: &Shared, renderer: &Renderer, p: Pending) -> Result<(), Strin
         generation,
         job,
         cancel,
-        submitted,
     } = p;
     let opts = &shared.options;
     let state = &job.state;
@@ -410,7 +405,6 @@ fn run_job(shared: &Shared, renderer: &Renderer, p: Pending) -> Result<(), Strin
             spp: 1,
             counts,
             ms,
-            since_submit_ms: since(submitted),
             complete: false,
         });
         if superseded {
@@ -462,7 +456,6 @@ fn run_job(shared: &Shared, renderer: &Renderer, p: Pending) -> Result<(), Strin
                     spp,
                     counts: g.counts,
                     ms: since(t),
-                    since_submit_ms: since(submitted),
                     complete: false,
                 };
                 drop(g);
@@ -490,7 +483,6 @@ fn run_job(shared: &Shared, renderer: &Renderer, p: Pending) -> Result<(), Strin
             spp,
             counts: g.counts,
             ms: since(t),
-            since_submit_ms: since(submitted),
             complete,
         };
         drop(g);

@@ -184,7 +184,8 @@ impl<'s> RayCaster<'s> {
 
     /// The first surface along `ray`: the iso-surface (found with `exact` root finding,
     /// whatever the view's mode and strategy) or a mesh, as a distance along the ray.
-    pub fn first_surface(&mut self, ray: &Ray) -> Option<f64> {
+    #[cfg(feature = "gui")]
+    pub(crate) fn first_surface(&mut self, ray: &Ray) -> Option<f64> {
         let scene = self.scene;
         let mesh_t = if scene.meshes.is_empty() {
             None

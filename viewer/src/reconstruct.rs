@@ -87,8 +87,8 @@ pub struct Cubic {
     pub weight: [f64; 4],
     /// Some contributing cell has `v ≥ iso` / `v < iso` (if not both, no root inside and
     /// the coefficients are not computed: all zero).
-    pub any_above: bool,
-    pub any_below: bool,
+    pub(crate) any_above: bool,
+    pub(crate) any_below: bool,
 }
 
 impl Cubic {
@@ -104,7 +104,7 @@ impl Cubic {
     }
 
     #[inline]
-    pub fn weight_at(&self, x: f64) -> f64 {
+    pub(crate) fn weight_at(&self, x: f64) -> f64 {
         ((self.weight[3] * x + self.weight[2]) * x + self.weight[1]) * x + self.weight[0]
     }
 }
@@ -209,7 +209,7 @@ impl Volume<'_> {
 
     /// [`Self::shading_gradient`] with the region the caller found `p` in (a ray hit knows
     /// it), which saves a KD descent when it holds `p`; any other hint is ignored.
-    pub fn shading_gradient_near(
+    pub(crate) fn shading_gradient_near(
         &self,
         region: Option<u32>,
         p: [f64; 3],

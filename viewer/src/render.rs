@@ -27,7 +27,7 @@ use crate::volume::{Volume, VolumeError};
 pub use crate::ray::jitter;
 
 /// Tile edge in pixels.
-pub const TILE: u32 = 16;
+pub(crate) const TILE: u32 = 16;
 
 /// Everything a ray needs, resolved once per frame.
 pub struct Scene<'a> {
@@ -102,7 +102,7 @@ impl<'a> Scene<'a> {
 /// `bisect`'s search between samples repairs; pre-integration already counts the band
 /// between two samples, so plain `uniform` steps reach a lower error with fewer samples
 /// than either `bisect` variant (BENCHMARKS.md, "Direct volume rendering").
-pub fn effective_strategy(mode: Mode, strategy: Strategy, preintegrated: bool) -> Strategy {
+pub(crate) fn effective_strategy(mode: Mode, strategy: Strategy, preintegrated: bool) -> Strategy {
     match (mode, strategy) {
         (Mode::Dvr, Strategy::Exact) if preintegrated => Strategy::Uniform,
         (Mode::Dvr, Strategy::Exact) => Strategy::Bisect,
@@ -123,7 +123,7 @@ pub struct Frame {
     /// Per pixel (row-major), how many of its samples hit: what `bench` compares against
     /// a reference to count missed and false surfaces, which the colours alone cannot tell
     /// (a surface may be shaded like the background).
-    pub pixel_hits: Vec<u32>,
+    pub(crate) pixel_hits: Vec<u32>,
 }
 
 /// A rectangle of pixels `[x0, x1) × [y0, y1)`.
@@ -158,7 +158,7 @@ pub struct TileResult {
     pub samples: Range<u32>,
     pub sum: Vec<[f64; 3]>,
     /// Per pixel (row-major inside the tile), how many of `samples` hit.
-    pub hit_samples: Vec<u32>,
+    pub(crate) hit_samples: Vec<u32>,
     pub stats: Stats,
     pub rays: u64,
     pub hits: u64,
@@ -176,7 +176,7 @@ impl CancelToken {
     pub fn cancel(&self) {
         self.0 .0.store(true, Ordering::Relaxed);
     }
-    pub fn is_cancelled(&self) -> bool {
+    pub(crate) fn is_cancelled(&self) -> bool {
         self.0 .0.load(Ordering::Relaxed)
     }
     /// Pixel rows started so far by frames under this token.

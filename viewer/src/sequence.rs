@@ -18,7 +18,7 @@ use crate::view_state::ViewState;
 
 /// Most frames `--frames` may name (a typo like `1..1000000000` would otherwise report a
 /// billion missing files).
-pub const MAX_RANGE_FRAMES: u64 = 100_000;
+pub(crate) const MAX_RANGE_FRAMES: u64 = 100_000;
 
 /// `--frames`: `A..B` (both included), `A..`, `..B` or `A`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -89,7 +89,7 @@ impl Light {
     }
 
     /// Light colour times intensity.
-    pub fn radiance(&self) -> Vec3 {
+    pub(crate) fn radiance(&self) -> Vec3 {
         match *self {
             Light::Directional {
                 colour, intensity, ..
@@ -168,7 +168,7 @@ pub fn default_lights(camera: &Camera) -> Vec<Light> {
 ///
 /// `ambient·base + Σ visᵢ·Lᵢ·(diffuse·base·max(0, n·l) + specular·max(0, r·v)^shininess)`
 /// with `r` the reflection of `l` about `n`; lights behind the surface contribute nothing.
-pub fn phong(
+pub(crate) fn phong(
     base: Vec3,
     normal: DVec3,
     view: DVec3,

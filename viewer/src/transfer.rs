@@ -17,7 +17,7 @@ pub enum Mode {
 }
 
 impl Mode {
-    pub const ALL: [Mode; 2] = [Mode::Iso, Mode::Dvr];
+    pub(crate) const ALL: [Mode; 2] = [Mode::Iso, Mode::Dvr];
     pub fn as_str(self) -> &'static str {
         match self {
             Mode::Iso => "iso",
@@ -130,7 +130,7 @@ impl Transfer {
 
     /// Whether a region whose values lie in `[min, max]` can contribute (empty-space skip).
     #[inline]
-    pub fn may_contribute(&self, min: f32, max: f32) -> bool {
+    pub(crate) fn may_contribute(&self, min: f32, max: f32) -> bool {
         let (lo, hi) = self.band();
         (max as f64) >= lo && (min as f64) <= hi
     }
@@ -220,7 +220,7 @@ impl PreIntegrated {
     /// Opacity of a segment of `length` (world units) whose value runs linearly from
     /// `front` to `back`.
     #[inline]
-    pub fn segment_alpha(&self, front: f64, back: f64, length: f64) -> f64 {
+    pub(crate) fn segment_alpha(&self, front: f64, back: f64, length: f64) -> f64 {
         if length.is_nan() || length <= 0.0 {
             return 0.0;
         }

@@ -16,7 +16,7 @@ use crate::volume::Volume;
 
 /// A KD node with one field's range and fullness (one half cache line).
 #[derive(Debug, Clone, Copy)]
-pub struct PackedNode {
+pub(crate) struct PackedNode {
     /// Split plane as stored (world), inner nodes.
     split: f64,
     /// Inner: left child; leaf: region or `u32::MAX` for empty space.
@@ -31,7 +31,7 @@ pub struct PackedNode {
 }
 
 /// A field's packed tree.
-pub struct Packed(Vec<PackedNode>);
+pub(crate) struct Packed(Vec<PackedNode>);
 
 impl Packed {
     pub(crate) fn build(file: &format::ArchivedBrickFile, field: usize) -> Packed {
@@ -151,7 +151,7 @@ impl Volume<'_> {
     /// reported as one [`SKIPPED`] segment over the ray's part of the subtree's cell.
     #[allow(clippy::too_many_arguments)]
     #[inline]
-    pub fn segments_skipping<K: Fn(f32, f32) -> bool, F: FnMut(Segment) -> bool>(
+    pub(crate) fn segments_skipping<K: Fn(f32, f32) -> bool, F: FnMut(Segment) -> bool>(
         &self,
         o: [f64; 3],
         d: [f64; 3],

@@ -29,9 +29,9 @@ pub const MAX_SPP: u32 = 4096;
 /// Smallest `step` (in cell widths): a thousand samples per cell is twenty times finer than
 /// the reference renders (0.01) and far below any visible difference, while a step like
 /// `1e-30` made every ray march for ever (`t + dt == t`).
-pub const MIN_STEP: f64 = 1e-3;
+pub(crate) const MIN_STEP: f64 = 1e-3;
 /// Most `meshes` entries: each is loaded and placed separately (2,000 took 15 s and 3.3 GB).
-pub const MAX_MESHES: usize = 64;
+pub(crate) const MAX_MESHES: usize = 64;
 
 /// Camera and all render settings. JSON field names are the Rust field names.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -80,7 +80,7 @@ fn one() -> u32 {
 }
 
 /// Dark blue-grey, so both white-ish meshes and blue shells stand out.
-pub const DEFAULT_BACKGROUND: [f32; 3] = [0.08, 0.09, 0.11];
+pub(crate) const DEFAULT_BACKGROUND: [f32; 3] = [0.08, 0.09, 0.11];
 
 fn default_background() -> [f32; 3] {
     DEFAULT_BACKGROUND
@@ -218,13 +218,13 @@ impl ViewState {
     /// The strategy the rays use: `exact` finds iso-surface roots; a dvr band has no
     /// single root, so in dvr mode it samples as [`crate::render::effective_strategy`]
     /// says: `uniform` with pre-integration, `bisect` without.
-    pub fn effective_strategy(&self) -> Strategy {
+    pub(crate) fn effective_strategy(&self) -> Strategy {
         crate::render::effective_strategy(self.mode, self.strategy, self.preintegrated)
     }
 
     /// Puts the default lights back over the viewer's shoulder for the current camera
     /// (used whenever the camera moves and the lights were not chosen by hand).
-    pub fn lights_follow_camera(&mut self) {
+    pub(crate) fn lights_follow_camera(&mut self) {
         self.lights = default_lights(&self.camera);
     }
 
@@ -332,7 +332,7 @@ impl ViewState {
     }
 
     /// Parses and validates JSON text; `path` only names the source in errors.
-    pub fn from_json(path: &Path, text: &str) -> Result<ViewState, ViewStateError> {
+    pub(crate) fn from_json(path: &Path, text: &str) -> Result<ViewState, ViewStateError> {
         let state: ViewState =
             serde_json::from_str(text).map_err(|error| ViewStateError::Parse {
                 path: path.to_path_buf(),

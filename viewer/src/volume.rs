@@ -12,7 +12,7 @@ use format::{ArchivedBrickFile, BrickFileView};
 use rkyv::Archived;
 
 /// Archived `f32` as stored in the file.
-pub type StoredF32 = rkyv::Archived<f32>;
+pub(crate) type StoredF32 = rkyv::Archived<f32>;
 
 #[derive(Debug, thiserror::Error)]
 pub enum VolumeError {
@@ -33,7 +33,7 @@ pub struct BrickN {
     /// Centre of the first cell, local frame.
     pub origin: [f64; 3],
     pub w: f64,
-    pub inv_w: f64,
+    pub(crate) inv_w: f64,
     pub dims: [i64; 3],
     pub first: usize,
     pub level: u32,

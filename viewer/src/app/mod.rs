@@ -18,8 +18,7 @@ mod widgets;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 
-pub use navigation::{frame_box, orbit, pan, zoom};
-pub use player::{Player, FPS_RANGE};
+pub use navigation::{orbit, pan};
 pub use script::{OrbitReport, Script};
 pub use viewer::ViewerApp;
 

@@ -7,7 +7,7 @@ use glam::{DQuat, DVec3};
 use crate::camera::{Camera, Projection, DEFAULT_FOV_DEG};
 
 /// Radians of orbit per pixel of drag.
-pub const ORBIT_PER_PIXEL: f64 = 0.008;
+pub(crate) const ORBIT_PER_PIXEL: f64 = 0.008;
 
 /// Keeps the view direction this far (radians) from the up axis, so orbiting over the
 /// pole never flips the picture.
@@ -44,7 +44,7 @@ pub fn orbit(cam: &mut Camera, pivot: [f64; 3], yaw: f64, pitch: f64) {
 }
 
 /// World units per pixel at the distance of `pivot`, for an image `height_px` high.
-pub fn world_per_pixel(cam: &Camera, pivot: [f64; 3], width_px: f64, height_px: f64) -> f64 {
+pub(crate) fn world_per_pixel(cam: &Camera, pivot: [f64; 3], width_px: f64, height_px: f64) -> f64 {
     match cam.projection {
         Projection::Orthographic { width } => width / width_px.max(1.0),
         Projection::Perspective { fov_deg } => {
@@ -77,7 +77,7 @@ pub fn pan(
 
 /// Zooms by `factor` (< 1: closer) towards image position (`x`, `y`) in pixels of a
 /// `width_px`×`height_px` image: the point under the cursor stays under the cursor.
-pub fn zoom(
+pub(crate) fn zoom(
     cam: &mut Camera,
     pivot: [f64; 3],
     factor: f64,
@@ -116,7 +116,7 @@ pub fn zoom(
 }
 
 /// A camera that shows the box `min..max` whole, keeping `cam`'s projection kind.
-pub fn frame_box(cam: &Camera, min: [f64; 3], max: [f64; 3]) -> Camera {
+pub(crate) fn frame_box(cam: &Camera, min: [f64; 3], max: [f64; 3]) -> Camera {
     let mut framed = Camera::frame(min, max);
     if let Projection::Orthographic { .. } = cam.projection {
         let diag = (v(max) - v(min)).length();
@@ -133,7 +133,7 @@ pub fn frame_box(cam: &Camera, min: [f64; 3], max: [f64; 3]) -> Camera {
 
 /// Switches between perspective and orthographic keeping the size of the picture at
 /// the look-at point.
-pub fn set_orthographic(cam: &mut Camera, ortho: bool, aspect: f64) {
+pub(crate) fn set_orthographic(cam: &mut Camera, ortho: bool, aspect: f64) {
     let dist = (v(cam.look_at) - v(cam.eye)).length();
     match (cam.projection, ortho) {
         (Projection::Perspective { fov_deg }, true) => {

@@ -94,7 +94,7 @@ fn sequence(app: &mut ViewerApp, ui: &mut egui::Ui) {
         }
         ui.add(
             egui::DragValue::new(&mut player.fps)
-                .range(super::FPS_RANGE)
+                .range(super::player::FPS_RANGE)
                 .speed(0.1)
                 .suffix(" fps"),
         );

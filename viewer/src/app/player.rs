@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 /// Slowest and fastest playback, frames per second.
-pub const FPS_RANGE: std::ops::RangeInclusive<f32> = 0.5..=60.0;
+pub(crate) const FPS_RANGE: std::ops::RangeInclusive<f32> = 0.5..=60.0;
 
 /// The frames of a sequence opened in the window and the playback over them.
 #[derive(Debug, Clone)]
@@ -57,18 +57,18 @@ impl Player {
     }
 
     /// The next frame, after the last the first (playback loops).
-    pub fn step_forward(&mut self) -> bool {
+    pub(crate) fn step_forward(&mut self) -> bool {
         let n = self.frames.len().max(1);
         self.seek((self.index + 1) % n)
     }
 
     /// The previous frame, before the first the last.
-    pub fn step_back(&mut self) -> bool {
+    pub(crate) fn step_back(&mut self) -> bool {
         let n = self.frames.len().max(1);
         self.seek((self.index + n - 1) % n)
     }
 
-    pub fn toggle(&mut self) {
+    pub(crate) fn toggle(&mut self) {
         self.playing = !self.playing;
         self.shown_at = None;
     }
@@ -76,7 +76,7 @@ impl Player {
     /// Called once per UI frame with whether an image of the current frame is on screen;
     /// while playing, moves to the next frame once the current one has been on screen
     /// for `1/fps`. Returns whether it moved.
-    pub fn tick(&mut self, now: Instant, current_on_screen: bool) -> bool {
+    pub(crate) fn tick(&mut self, now: Instant, current_on_screen: bool) -> bool {
         if !self.playing || self.frames.len() < 2 {
             return false;
         }

@@ -50,7 +50,7 @@ pub struct OrbitReport {
 }
 
 /// What the window should do before drawing a frame.
-pub enum ScriptStep {
+pub(crate) enum ScriptStep {
     Nothing,
     /// Turn the camera by this many radians about the pivot.
     Orbit(f64),
@@ -63,7 +63,7 @@ enum Phase {
     Done,
 }
 
-pub struct ScriptRunner {
+pub(crate) struct ScriptRunner {
     script: Script,
     /// Where the screenshot goes, if one is taken.
     screenshot: Option<PathBuf>,
@@ -111,12 +111,12 @@ impl ScriptRunner {
         }
     }
 
-    pub fn report_mut(&mut self) -> Option<&mut OrbitReport> {
+    pub(crate) fn report_mut(&mut self) -> Option<&mut OrbitReport> {
         matches!(self.script, Script::Orbit { .. }).then_some(&mut self.report)
     }
 
     /// Called at the start of a UI frame with the time since the previous one.
-    pub fn before_frame(&mut self, interval: Option<Duration>) -> ScriptStep {
+    pub(crate) fn before_frame(&mut self, interval: Option<Duration>) -> ScriptStep {
         self.frames_seen += 1;
         let working = matches!(self.phase, Phase::Orbiting { .. } | Phase::Refining { .. });
         if let (true, Some(d)) = (working, interval) {
@@ -135,7 +135,7 @@ impl ScriptRunner {
 
     /// Called after the frame's UI was built. `received`: a new image was taken this
     /// frame; `shown`: the image on screen. Returns the report once done.
-    pub fn after_frame(
+    pub(crate) fn after_frame(
         &mut self,
         ctx: &egui::Context,
         received: bool,

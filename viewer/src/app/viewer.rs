@@ -96,7 +96,7 @@ pub(crate) enum DialogPurpose {
 
 /// The image on screen and where it came from.
 pub(crate) struct Shown {
-    pub texture: TextureHandle,
+    pub(crate) texture: TextureHandle,
     pub update: Update,
 }
 
@@ -123,17 +123,17 @@ pub struct ViewerApp {
     /// Render resolution relative to the window's pixels.
     pub resolution_scale: f32,
     /// The default lights follow the camera (key light at `light_dir` in the camera frame).
-    pub lights_follow: bool,
+    pub(crate) lights_follow: bool,
     /// Key light azimuth and elevation in degrees, relative to the camera.
-    pub light_dir: [f32; 2],
-    pub pick_mode: bool,
+    pub(crate) light_dir: [f32; 2],
+    pub(crate) pick_mode: bool,
     pub(crate) pick: Option<PickInfo>,
     pub(crate) dialog: FileDialog,
     pub(crate) dialog_purpose: Option<DialogPurpose>,
     /// The `--mesh`-style spec typed into the panel.
-    pub mesh_spec: String,
+    pub(crate) mesh_spec: String,
     /// Meshes switched off in the panel (kept so they can be switched on again).
-    pub hidden_meshes: Vec<MeshInstance>,
+    pub(crate) hidden_meshes: Vec<MeshInstance>,
     /// Image size in pixels the central area asks for.
     viewport_px: [u32; 2],
     script: Option<ScriptRunner>,
@@ -241,7 +241,7 @@ impl ViewerApp {
 
     /// Opens `path`, or the sequence when it is a frame pattern (`frame_####.qbk`) that is
     /// not itself a file; on failure the error is shown and the current file stays open.
-    pub fn open_file(&mut self, path: &Path) {
+    pub(crate) fn open_file(&mut self, path: &Path) {
         if !path.exists() {
             match FramePattern::parse(path) {
                 Ok(Some(pattern)) => return self.open_sequence(path, &pattern),
@@ -303,7 +303,7 @@ impl ViewerApp {
 
     /// Opens the player's current frame, keeping the view. A frame that fails shows its
     /// error and leaves the last good frame on screen; playback goes on past it.
-    pub fn show_frame(&mut self) {
+    pub(crate) fn show_frame(&mut self) {
         let Some(path) = self
             .sequence
             .as_ref()
@@ -389,7 +389,7 @@ impl ViewerApp {
     }
 
     /// Frames the whole data set again.
-    pub fn frame_data(&mut self) {
+    pub(crate) fn frame_data(&mut self) {
         if let Some(doc) = &self.doc {
             let vol = doc.dataset.volume();
             let cam = navigation::frame_box(
@@ -404,7 +404,7 @@ impl ViewerApp {
 
     /// Sets the key light from `light_dir` relative to the camera (and the fill light
     /// from the default rig), when the lights follow the camera.
-    pub fn relight(&mut self) {
+    pub(crate) fn relight(&mut self) {
         if !self.lights_follow {
             return;
         }
@@ -553,7 +553,7 @@ impl ViewerApp {
     }
 
     /// Adds the mesh typed as `PATH[@x,y,z,scale]`.
-    pub fn add_mesh_from_spec(&mut self) {
+    pub(crate) fn add_mesh_from_spec(&mut self) {
         match MeshInstance::parse(self.mesh_spec.trim()) {
             Ok(m) => {
                 self.state.meshes.push(m);

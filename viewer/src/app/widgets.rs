@@ -52,7 +52,7 @@ fn bars(painter: &egui::Painter, rect: Rect, histogram: &[u64]) {
 
 /// Histogram of the iso field with the iso value marked; a click or drag sets the value.
 /// Returns whether the value changed.
-pub fn iso_histogram(
+pub(crate) fn iso_histogram(
     ui: &mut egui::Ui,
     histogram: &[u64],
     lo: f32,
@@ -83,7 +83,7 @@ pub fn iso_histogram(
 /// The colour map as a bar over the colour field's histogram. Click on the bar to add a
 /// control point, drag a handle to move it, right-click a handle to remove it. Returns
 /// whether the map changed.
-pub fn colormap_editor(
+pub(crate) fn colormap_editor(
     ui: &mut egui::Ui,
     map: &mut ColorMap,
     histogram: &[u64],
@@ -157,7 +157,7 @@ pub fn colormap_editor(
 }
 
 /// Adds a control point at `v` with the colour the map has there, keeping points sorted.
-pub fn add_point(map: &mut ColorMap, v: f32) {
+pub(crate) fn add_point(map: &mut ColorMap, v: f32) {
     let colour = map.colour(v);
     let at = map.points.partition_point(|p| p.value <= v);
     map.points.insert(at, ControlPoint { value: v, colour });

@@ -162,7 +162,7 @@ impl Planes {
 
 /// First root of the cubic on `[0, 1]` (a sign change or an exact zero), refined by
 /// bisection to round-off.
-pub fn first_root(c: &Cubic) -> Option<f64> {
+pub(crate) fn first_root(c: &Cubic) -> Option<f64> {
     // Bernstein coefficients on [0, 1]: g lies in their convex hull, so when all of them
     // are clearly of one sign g has no zero there (most intervals whose cells straddle
     // the iso value), without the critical points and evaluations below.

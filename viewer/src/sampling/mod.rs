@@ -19,7 +19,7 @@
 //! - `iso`: iso mode ([`Tracer::iso`], [`Tracer::iso_occluded`]) and its sample-based
 //!   search for `uniform`, `paper` and `bisect`: bracket a crossing, then narrow it;
 //! - `exact`: the `exact` iso search, a cubic per interval between lattice planes and its
-//!   first root ([`first_root`]);
+//!   first root ([`exact::first_root`]);
 //! - `dvr`: direct volume rendering ([`Tracer::dvr`], [`Tracer::transmittance`]) and
 //!   `bisect`'s search for the band between two samples.
 //!
@@ -42,10 +42,8 @@ mod exact;
 mod iso;
 mod positions;
 
-pub use exact::first_root;
-
 /// Smallest bisection interval of `bisect`, in cell widths.
-pub const BISECT_RESOLUTION: f64 = 0.005;
+pub(crate) const BISECT_RESOLUTION: f64 = 0.005;
 
 /// Sampling strategy along a ray (see `docs/design.md`, "Sampling strategies").
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
@@ -62,7 +60,7 @@ pub enum Strategy {
 }
 
 impl Strategy {
-    pub const ALL: [Strategy; 4] = [
+    pub(crate) const ALL: [Strategy; 4] = [
         Strategy::Uniform,
         Strategy::Paper,
         Strategy::Bisect,
@@ -171,12 +169,12 @@ impl std::ops::AddAssign for Stats {
 }
 
 /// Most distinct cell lattices `exact` cuts planes for in one region.
-pub const MAX_LATTICES: usize = 8;
+pub(crate) const MAX_LATTICES: usize = 8;
 
 /// Most sample positions in one region segment. With the smallest step
 /// (`view_state::MIN_STEP`, a thousand per cell width) that is a thousand cells along one
 /// segment; bricks are far smaller, so only a degenerate step or geometry reaches it.
-pub const MAX_POSITIONS_PER_SEGMENT: u32 = 1 << 20;
+pub(crate) const MAX_POSITIONS_PER_SEGMENT: u32 = 1 << 20;
 
 /// What `--pixel` prints.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
