@@ -60,17 +60,17 @@ pub const FORMAT_VERSION: u32 = 2;
 pub const HEADER_LEN: usize = 48;
 
 /// Alignment of the payload within the file and in memory.
-pub const PAYLOAD_ALIGN: usize = 16;
+pub(crate) const PAYLOAD_ALIGN: usize = 16;
 
 /// Flag bit: archive primitives are little-endian (rkyv feature `little_endian`).
-pub const FLAG_LITTLE_ENDIAN: u32 = 1 << 0;
+pub(crate) const FLAG_LITTLE_ENDIAN: u32 = 1 << 0;
 /// Flag bit: archive primitives are naturally aligned (rkyv default, not `unaligned`).
-pub const FLAG_ALIGNED: u32 = 1 << 1;
+pub(crate) const FLAG_ALIGNED: u32 = 1 << 1;
 /// Flag bit: relative pointers are 32-bit (rkyv feature `pointer_width_32`).
-pub const FLAG_POINTER_WIDTH_32: u32 = 1 << 2;
+pub(crate) const FLAG_POINTER_WIDTH_32: u32 = 1 << 2;
 
 /// The flags of archives written by this build (rkyv 0.8 defaults).
-pub const FLAGS: u32 = FLAG_LITTLE_ENDIAN | FLAG_ALIGNED | FLAG_POINTER_WIDTH_32;
+pub(crate) const FLAGS: u32 = FLAG_LITTLE_ENDIAN | FLAG_ALIGNED | FLAG_POINTER_WIDTH_32;
 
 const _: () = assert!(HEADER_LEN & (PAYLOAD_ALIGN - 1) == 0);
 

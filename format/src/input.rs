@@ -24,7 +24,7 @@ pub struct Limits {
 
 /// Default cap for inputs that are not regular files: large enough for a piped sample file,
 /// small enough that `/dev/zero` is refused within a second.
-pub const STREAM_LIMIT: u64 = 1 << 30;
+pub(crate) const STREAM_LIMIT: u64 = 1 << 30;
 
 impl Limits {
     /// Limits for a file that is decoded in memory as a whole (a VDB file): a regular file
@@ -70,13 +70,6 @@ pub enum InputErrorKind {
     StreamTooLarge { limit: u64 },
     #[error("cannot allocate {bytes} bytes to read it")]
     OutOfMemory { bytes: u64 },
-}
-
-impl InputErrorKind {
-    /// Whether this is an I/O error of kind `kind`.
-    pub fn is_io(&self, kind: std::io::ErrorKind) -> bool {
-        matches!(self, InputErrorKind::Io(e) if e.kind() == kind)
-    }
 }
 
 /// Reads all of `path` within `limits` (see the module docs).

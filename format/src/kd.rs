@@ -378,7 +378,7 @@ pub fn segments<N: WalkNodes, K: Fn(f32, f32) -> bool, F: FnMut(Segment) -> bool
 /// [`crate::BrickFile::kd_full`]): for every node the range of every field over its
 /// subtree and whether every leaf below holds a region. `region_ranges` is region-major
 /// (`r * fields + f`). Nodes that the root does not reach get an empty range and `false`.
-pub fn subtree_tables(
+pub(crate) fn subtree_tables(
     nodes: &[KdNode],
     region_ranges: &[crate::ValueRange],
     fields: usize,

@@ -258,7 +258,7 @@ fn canonical(p: &Path) -> Option<PathBuf> {
 }
 
 /// Standard output that treats a closed reader (EPIPE) as the end of interest, not as a
-/// failure: the write reports success and [`stdout_closed`] turns true, so a run whose
+/// failure: the write reports success and later writes are skipped, so a run whose
 /// report nobody reads still writes its output files and exits quietly with status 0.
 /// Other errors (a full disk behind a redirect) are still errors.
 pub struct QuietStdout(io::StdoutLock<'static>);
@@ -301,11 +301,6 @@ impl Write for QuietStdout {
         let r = self.0.flush();
         self.quiet(r)
     }
-}
-
-/// Whether a write to [`QuietStdout`] found its reader gone.
-pub fn stdout_closed() -> bool {
-    STDOUT_CLOSED.load(Ordering::Relaxed)
 }
 
 /// Whether an error, or any error in its `source` chain, is a vanished stdout reader

@@ -22,7 +22,7 @@ pub struct RegionSegment {
 }
 
 /// Native copy of an archived box.
-pub fn aabb(b: &ArchivedAabb) -> Aabb {
+pub(crate) fn aabb(b: &ArchivedAabb) -> Aabb {
     Aabb {
         min: b.min.map(|v| v.to_native()),
         max: b.max.map(|v| v.to_native()),

@@ -125,7 +125,7 @@ impl FramePattern {
 
     /// A path next to the frames: the pattern with the placeholder replaced by `word` and
     /// the extension by `ext` (`frame_####.qbk` → `frame_sequence.json`).
-    pub fn sibling(&self, word: &str, ext: &str) -> PathBuf {
+    pub(crate) fn sibling(&self, word: &str, ext: &str) -> PathBuf {
         let name = format!("{}{}{}", self.prefix, word, self.suffix);
         self.dir.join(Path::new(&name).with_extension(ext))
     }
@@ -138,7 +138,7 @@ impl FramePattern {
 
     /// The frame number a file name stands for: the prefix, then digits (exactly `width`,
     /// or more without a leading zero, as `%04d` prints 12345), then the suffix.
-    pub fn frame_of(&self, name: &str) -> Option<u64> {
+    pub(crate) fn frame_of(&self, name: &str) -> Option<u64> {
         let digits = name
             .strip_prefix(&self.prefix)?
             .strip_suffix(&self.suffix)?;
@@ -222,7 +222,7 @@ pub struct Manifest {
 
 /// Largest manifest [`Manifest::load`] reads: a few hundred bytes per frame, so this is
 /// tens of thousands of frames with many fields.
-pub const MAX_MANIFEST_BYTES: u64 = 64 << 20;
+pub(crate) const MAX_MANIFEST_BYTES: u64 = 64 << 20;
 
 /// Why a manifest could not be read.
 #[derive(Debug, thiserror::Error)]

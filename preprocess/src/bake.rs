@@ -29,7 +29,7 @@ pub use crate::error::BakeError;
 /// Default cap on brick edge length (cells).
 pub const DEFAULT_MAX_BRICK: u32 = 8;
 /// Default cap on the number of input cells (tiles counted as the voxels they cover).
-pub const DEFAULT_MAX_CELLS: u64 = 1 << 28;
+pub(crate) const DEFAULT_MAX_CELLS: u64 = 1 << 28;
 
 /// What to bake and how.
 #[derive(Debug, Clone, Serialize)]
@@ -911,7 +911,7 @@ fn snapped_supports(sets: &[CellSet], bricks: &[BrickBox], finest: f64) -> Vec<B
 /// Replaces the non-finite values of `vals` (±∞ → ±`f32::MAX`, NaN → 0), so that every
 /// stored value lies inside the field's range. Returns their count and the index of the
 /// first, or `None` when all are finite.
-pub fn clamp_nonfinite(vals: &mut [f32]) -> Option<(u64, usize)> {
+pub(crate) fn clamp_nonfinite(vals: &mut [f32]) -> Option<(u64, usize)> {
     let mut first = None;
     let mut count = 0;
     for (i, v) in vals.iter_mut().enumerate() {

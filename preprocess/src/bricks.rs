@@ -25,7 +25,7 @@ impl BrickBox {
     }
 
     /// Cell coordinates in brick order (x fastest).
-    pub fn cell_coords(&self) -> impl Iterator<Item = [i32; 3]> + '_ {
+    pub(crate) fn cell_coords(&self) -> impl Iterator<Item = [i32; 3]> + '_ {
         let d = self.dims;
         (0..d[2]).flat_map(move |z| {
             (0..d[1]).flat_map(move |y| {
@@ -42,7 +42,7 @@ impl BrickBox {
 }
 
 /// Bricks of all sets: ordered by level, then set index, then greedy order.
-pub fn make_bricks(sets: &[CellSet], max: u32) -> Vec<BrickBox> {
+pub(crate) fn make_bricks(sets: &[CellSet], max: u32) -> Vec<BrickBox> {
     let per_set: Vec<Vec<BrickBox>> = sets
         .par_iter()
         .enumerate()

@@ -13,15 +13,15 @@ use std::hash::{BuildHasherDefault, Hasher};
 
 use rayon::prelude::*;
 
-use crate::grid::{leaf_offset, Grid, Transform, LEAF_DIM, LEAF_VOXELS};
+use crate::grid::{leaf_offset, Grid, Transform, LEAF_VOXELS};
 
 /// Cells per block (one VDB leaf).
-pub const BLOCK_CELLS: usize = LEAF_VOXELS;
+pub(crate) const BLOCK_CELLS: usize = LEAF_VOXELS;
 
 /// Small multiplicative hasher for integer keys (block origins): the default SipHash costs
 /// more than the rest of a neighbour lookup.
 #[derive(Default, Clone, Copy)]
-pub struct MixHasher(u64);
+pub(crate) struct MixHasher(u64);
 
 impl Hasher for MixHasher {
     fn write(&mut self, bytes: &[u8]) {
@@ -95,7 +95,7 @@ pub struct CellSet {
 impl CellSet {
     /// Builds the cell set of `grid` and its values converted by `conv`, one per slot.
     /// Tiles are expanded to cells; the caller bounds the total beforehand.
-    pub fn from_grid<V: Copy, T: Copy + Default>(
+    pub(crate) fn from_grid<V: Copy, T: Copy + Default>(
         grid: &Grid<V>,
         level: u32,
         conv: impl Fn(V) -> T,
@@ -161,14 +161,14 @@ impl CellSet {
     }
 
     /// Slot of `ijk` when its block exists (the cell may be inactive).
-    pub fn slot(&self, ijk: [i32; 3]) -> Option<usize> {
+    pub(crate) fn slot(&self, ijk: [i32; 3]) -> Option<usize> {
         let b = *self.index.get(&block_origin(ijk))? as usize;
         Some(b * BLOCK_CELLS + offset_in_block(ijk))
     }
 
     /// Active slot of the neighbour `d` cells (|d| <= 8) along `axis` of cell `ijk`
     /// (held in `slot`): in-block arithmetic when the neighbour shares the block.
-    pub fn active_neighbour(
+    pub(crate) fn active_neighbour(
         &self,
         slot: usize,
         ijk: [i32; 3],
@@ -187,12 +187,12 @@ impl CellSet {
     }
 
     /// Slot of `ijk` when that cell is active.
-    pub fn active_slot(&self, ijk: [i32; 3]) -> Option<usize> {
+    pub(crate) fn active_slot(&self, ijk: [i32; 3]) -> Option<usize> {
         self.slot(ijk).filter(|&s| self.is_active(s))
     }
 
     /// Slot of `ijk` when that cell is a leaf cell.
-    pub fn leaf_slot(&self, ijk: [i32; 3]) -> Option<usize> {
+    pub(crate) fn leaf_slot(&self, ijk: [i32; 3]) -> Option<usize> {
         self.slot(ijk).filter(|&s| self.is_leaf(s))
     }
 
@@ -200,7 +200,7 @@ impl CellSet {
         bit(&self.active[slot / BLOCK_CELLS], slot % BLOCK_CELLS)
     }
 
-    pub fn is_leaf(&self, slot: usize) -> bool {
+    pub(crate) fn is_leaf(&self, slot: usize) -> bool {
         bit(&self.leaf[slot / BLOCK_CELLS], slot % BLOCK_CELLS)
     }
 
@@ -221,7 +221,7 @@ impl CellSet {
     }
 
     /// Index coordinate of the cell containing world point `p` (None outside `i32`).
-    pub fn cell_at(&self, p: [f64; 3]) -> Option<[i32; 3]> {
+    pub(crate) fn cell_at(&self, p: [f64; 3]) -> Option<[i32; 3]> {
         let mut out = [0; 3];
         for a in 0..3 {
             let f = round_half_away((p[a] - self.transform.translation[a]) / self.width);
@@ -233,7 +233,8 @@ impl CellSet {
         Some(out)
     }
 
-    pub fn active_count(&self) -> u64 {
+    #[cfg(test)]
+    pub(crate) fn active_count(&self) -> u64 {
         self.active
             .iter()
             .flatten()
@@ -241,7 +242,7 @@ impl CellSet {
             .sum()
     }
 
-    pub fn leaf_count(&self) -> u64 {
+    pub(crate) fn leaf_count(&self) -> u64 {
         self.leaf
             .iter()
             .flatten()
@@ -250,7 +251,7 @@ impl CellSet {
     }
 
     /// Active slots in slot order.
-    pub fn active_slots(&self) -> impl Iterator<Item = usize> + '_ {
+    pub(crate) fn active_slots(&self) -> impl Iterator<Item = usize> + '_ {
         self.active.iter().enumerate().flat_map(|(b, m)| {
             (0..BLOCK_CELLS)
                 .filter(move |&n| bit(m, n))
@@ -258,9 +259,6 @@ impl CellSet {
         })
     }
 }
-
-/// Edge length of a block in cells.
-pub const BLOCK_DIM: i32 = LEAF_DIM;
 
 /// Marks as non-leaf every active cell whose box is fully covered by active cells of
 /// grids with a smaller cell width. Runs in parallel over blocks; the result does not
@@ -280,7 +278,7 @@ fn round_half_away(x: f64) -> f64 {
     r.copysign(x)
 }
 
-pub fn classify_leaves(sets: &mut [CellSet]) {
+pub(crate) fn classify_leaves(sets: &mut [CellSet]) {
     let leaves: Vec<Vec<[u64; 8]>> = (0..sets.len())
         .map(|s| {
             let me = &sets[s];

@@ -39,7 +39,7 @@ pub enum Stencil {
 }
 
 /// `Q = ½(‖Ω‖² − ‖S‖²) = −½ Σᵢⱼ gᵢⱼ gⱼᵢ` for `g[i][j] = ∂uᵢ/∂xⱼ`.
-pub fn q_from_gradient(g: &[[f64; 3]; 3]) -> f64 {
+pub(crate) fn q_from_gradient(g: &[[f64; 3]; 3]) -> f64 {
     let mut s = 0.0;
     for (i, row) in g.iter().enumerate() {
         for (j, gij) in row.iter().enumerate() {
@@ -71,7 +71,7 @@ pub struct VelocityField<'a> {
 /// neighbour) the value is extrapolated linearly from the two lower faces (second order,
 /// like the one-sided differences), or is the lower face alone when only it exists.
 /// Inactive slots hold zero.
-pub fn centre_from_faces(set: &CellSet, faces: &[[f64; 3]]) -> Vec<[f64; 3]> {
+pub(crate) fn centre_from_faces(set: &CellSet, faces: &[[f64; 3]]) -> Vec<[f64; 3]> {
     let mut out = vec![[0.0; 3]; faces.len()];
     out.par_chunks_mut(BLOCK_CELLS)
         .enumerate()

@@ -8,7 +8,7 @@ use crate::bricks::BrickBox;
 use crate::regions::Bbox;
 
 /// Bins of every field's histogram.
-pub const HISTOGRAM_BINS: usize = 64;
+pub(crate) const HISTOGRAM_BINS: usize = 64;
 
 /// A baked field: derived from the velocity, or a scalar grid of the file resampled onto
 /// the velocity's leaf cells.
@@ -61,7 +61,7 @@ impl FieldKind {
 }
 
 /// Range over finite values (`(0, 0)` when there is none) and histogram over that range.
-pub fn range_and_histogram(values: &[f32]) -> (f32, f32, Vec<u64>) {
+pub(crate) fn range_and_histogram(values: &[f32]) -> (f32, f32, Vec<u64>) {
     let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
     for &v in values.iter().filter(|v| v.is_finite()) {
         lo = lo.min(v);

@@ -62,7 +62,7 @@ impl<V: Copy> Leaf<V> {
             })
     }
 
-    pub fn active_count(&self) -> u32 {
+    pub(crate) fn active_count(&self) -> u32 {
         self.active.iter().map(|w| w.count_ones()).sum()
     }
 }
@@ -134,16 +134,16 @@ impl AnyGrid {
         with_grid!(self, g => g.active_voxel_count())
     }
 
-    pub fn leaf_count(&self) -> usize {
+    pub(crate) fn leaf_count(&self) -> usize {
         with_grid!(self, g => g.leaves.len())
     }
 
-    pub fn tile_count(&self) -> usize {
+    pub(crate) fn tile_count(&self) -> usize {
         with_grid!(self, g => g.tiles.len())
     }
 
     /// A vec3 grid (single or double precision).
-    pub fn is_vector(&self) -> bool {
+    pub(crate) fn is_vector(&self) -> bool {
         matches!(self, AnyGrid::Vec3s(_) | AnyGrid::Vec3d(_))
     }
 

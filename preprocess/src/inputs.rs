@@ -266,7 +266,7 @@ const STYLES: [&str; 3] = [".", "_", ""];
 /// (`velx`, `vely`, `velz`) is taken only where it is unambiguous: its base is not empty,
 /// does not end in `.` or `_` (those are the other styles' grids), none of its grids belongs
 /// to another set, and no other candidate has the same name.
-pub fn velocity_candidates(grids: &[(&str, GridKind)]) -> Vec<Velocity> {
+pub(crate) fn velocity_candidates(grids: &[(&str, GridKind)]) -> Vec<Velocity> {
     let mut out: Vec<Velocity> = Vec::new();
     for (i, (name, kind)) in grids.iter().enumerate() {
         if *kind != GridKind::Vector || out.iter().any(|v| v.name() == *name) {
@@ -336,7 +336,7 @@ pub fn velocity_candidates(grids: &[(&str, GridKind)]) -> Vec<Velocity> {
 /// nested set), or `None` when no name is given and the file has no component grids (the
 /// caller then keeps its default: every vec3 grid). Without names, one component set and no
 /// vec3 grid is taken as the velocity; any other mix is ambiguous.
-pub fn choose_velocity(
+pub(crate) fn choose_velocity(
     grids: &[(&str, GridKind)],
     names: &[String],
 ) -> Result<Option<Vec<Velocity>>, InputError> {

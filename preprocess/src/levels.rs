@@ -9,7 +9,9 @@ use crate::grid::Transform;
 const SIZE_TOL: f64 = 1e-6;
 
 /// Level of every grid (same order as `grids`) and the cell width of every level.
-pub fn assign_levels(grids: &[(&str, Transform)]) -> Result<(Vec<u32>, Vec<f64>), BakeError> {
+pub(crate) fn assign_levels(
+    grids: &[(&str, Transform)],
+) -> Result<(Vec<u32>, Vec<f64>), BakeError> {
     for (name, t) in grids {
         let v = t.voxel_size;
         if !v.iter().all(|x| x.is_finite() && *x > 0.0)

@@ -107,13 +107,14 @@ pub struct GridLayout {
 impl GridLayout {
     /// Active voxels in the box, saturating at `u64::MAX` (an allowed `--n0` with ten levels
     /// has a finest box of 2^75 voxels, which a plain product would overflow).
-    pub fn voxel_count(&self) -> u64 {
+    #[cfg(test)]
+    pub(crate) fn voxel_count(&self) -> u64 {
         saturating_product((0..3).map(|a| self.hi[a].saturating_sub(self.lo[a])))
     }
 
     /// Leaves [`sample_grid`] allocates for this box (every 8³ block the box touches),
     /// saturating at `u64::MAX`.
-    pub fn leaf_count(&self) -> u64 {
+    pub(crate) fn leaf_count(&self) -> u64 {
         let d = i64::from(LEAF_DIM);
         saturating_product((0..3).map(|a| {
             if self.hi[a] <= self.lo[a] {
@@ -209,7 +210,7 @@ fn saturating_product(extents: impl Iterator<Item = i64>) -> u64 {
 
 /// Refuses a scene whose leaves (velocity, plus speed when `speed_grids`) would take more than
 /// [`MAX_LEAF_BYTES`], before anything is sampled.
-pub fn check_memory(
+pub(crate) fn check_memory(
     scene: &str,
     n0: u32,
     layouts: &[GridLayout],
@@ -297,7 +298,11 @@ pub fn sample_grid(flow: &dyn Flow, layout: &GridLayout) -> Grid<Vec3> {
 /// OpenVDB's convention (component `c` of voxel `i` at the lower face, centre − ½h·e_c).
 /// The active voxels are the same either way, so the upper faces of the last cells along
 /// each axis are not stored (as in a solver's MAC grid of the same size as its cell grid).
-pub fn sample_grid_with(flow: &dyn Flow, layout: &GridLayout, staggered: bool) -> Grid<Vec3> {
+pub(crate) fn sample_grid_with(
+    flow: &dyn Flow,
+    layout: &GridLayout,
+    staggered: bool,
+) -> Grid<Vec3> {
     let origins = leaf_origins(layout);
     let leaves = origins
         .par_iter()
@@ -496,7 +501,7 @@ pub fn write_scene(
 }
 
 /// A float grid `name` over `layout`'s box with `f` at the voxel centres.
-pub fn sample_scalar(
+pub(crate) fn sample_scalar(
     name: &str,
     layout: &GridLayout,
     f: impl Fn([f64; 3]) -> f64 + Sync,

@@ -22,7 +22,7 @@ mod vortex;
 mod wake;
 
 pub use abc::Abc;
-pub use plume::{RingPlume, FRAME_SECONDS};
+pub use plume::RingPlume;
 pub use vortex::{Burgers, LambOseen};
 pub use wake::{Ring, Wake};
 
@@ -47,12 +47,13 @@ pub trait Flow: Send + Sync {
     }
 }
 
+use crate::derive::q_from_gradient;
 /// The exact Q and speed of a flow use the same formulas as the baked fields, so a
 /// difference between them is the discretisation's, never a second formula's.
-pub use crate::derive::{q_from_gradient, speed};
+pub use crate::derive::speed;
 
 /// Names accepted by [`scene`], in documentation order.
-pub const SCENE_NAMES: [&str; 6] = [
+pub(crate) const SCENE_NAMES: [&str; 6] = [
     "wake",
     "wake-single",
     "lamb-oseen",
@@ -70,7 +71,7 @@ pub fn scene(name: &str) -> Option<Box<dyn Flow + Send + Sync>> {
 
 /// As [`scene`], at frame `frame` (1-based) for the time-dependent `ring-plume`; the other
 /// scenes are steady and ignore it.
-pub fn scene_at(name: &str, frame: u64) -> Option<Box<dyn Flow + Send + Sync>> {
+pub(crate) fn scene_at(name: &str, frame: u64) -> Option<Box<dyn Flow + Send + Sync>> {
     if name == "ring-plume" {
         return Some(Box::new(RingPlume::frame(frame)));
     }
@@ -126,7 +127,7 @@ pub(crate) mod testutil {
         pub fn new(seed: u64) -> Self {
             Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
         }
-        pub fn next_f64(&mut self) -> f64 {
+        pub(crate) fn next_f64(&mut self) -> f64 {
             self.0 ^= self.0 >> 12;
             self.0 ^= self.0 << 25;
             self.0 ^= self.0 >> 27;
@@ -143,7 +144,7 @@ pub(crate) mod testutil {
     }
 
     /// Central finite-difference gradient of the velocity with step `h`.
-    pub fn fd_gradient(flow: &dyn Flow, p: [f64; 3], h: f64) -> Gradient {
+    pub(crate) fn fd_gradient(flow: &dyn Flow, p: [f64; 3], h: f64) -> Gradient {
         let mut g = [[0.0; 3]; 3];
         for j in 0..3 {
             let mut a = p;
@@ -160,7 +161,7 @@ pub(crate) mod testutil {
     }
 
     /// Largest |a - b| over the nine entries, relative to `max(1e-12, max |a|)`.
-    pub fn max_rel_diff(a: &Gradient, b: &Gradient) -> f64 {
+    pub(crate) fn max_rel_diff(a: &Gradient, b: &Gradient) -> f64 {
         let mut scale = 1e-12f64;
         let mut diff = 0.0f64;
         for i in 0..3 {
@@ -173,7 +174,7 @@ pub(crate) mod testutil {
     }
 
     /// Checks gradient against central differences and divergence at `n` random points.
-    pub fn check_flow(flow: &dyn Flow, lo: [f64; 3], hi: [f64; 3], n: usize, seed: u64) {
+    pub(crate) fn check_flow(flow: &dyn Flow, lo: [f64; 3], hi: [f64; 3], n: usize, seed: u64) {
         let mut rng = Rng::new(seed);
         for _ in 0..n {
             let p = rng.point(lo, hi);

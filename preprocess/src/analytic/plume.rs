@@ -4,7 +4,7 @@ use super::{Flow, Gradient, Ring, Wake};
 use std::f64::consts::PI;
 
 /// Seconds between frames of the `ring-plume` scene.
-pub const FRAME_SECONDS: f64 = 4.0;
+pub(crate) const FRAME_SECONDS: f64 = 4.0;
 
 /// One frame of a vortex ring rising along +z through still fluid, with a smoke density
 /// that the ring has rolled up into its core plus the trail it leaves below.
@@ -19,7 +19,7 @@ pub const FRAME_SECONDS: f64 = 4.0;
 pub struct RingPlume {
     pub ring: Ring,
     /// Height of the smoke source (bottom of the trail).
-    pub source_z: f64,
+    pub(crate) source_z: f64,
     flow: Wake,
 }
 

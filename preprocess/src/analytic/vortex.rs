@@ -11,9 +11,9 @@ use std::f64::consts::PI;
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LambOseen {
     /// Circulation Γ.
-    pub circulation: f64,
+    pub(crate) circulation: f64,
     /// Core radius r_c.
-    pub core_radius: f64,
+    pub(crate) core_radius: f64,
 }
 
 impl LambOseen {
@@ -45,7 +45,8 @@ impl LambOseen {
     }
 
     /// Q in closed form from the swirl profile: `Q = (u_θ / r) · du_θ/dr`.
-    pub fn q_exact(&self, p: [f64; 3]) -> f64 {
+    #[cfg(test)]
+    pub(crate) fn q_exact(&self, p: [f64; 3]) -> f64 {
         let s = p[0] * p[0] + p[1] * p[1];
         let (w, dw) = self.omega(s);
         w * (w + 2.0 * s * dw)
@@ -88,7 +89,8 @@ impl Burgers {
     }
 
     /// Q in closed form.
-    pub fn q_exact(&self, p: [f64; 3]) -> f64 {
+    #[cfg(test)]
+    pub(crate) fn q_exact(&self, p: [f64; 3]) -> f64 {
         self.swirl.q_exact(p) - 0.75 * self.strain * self.strain
     }
 }

@@ -12,7 +12,7 @@ pub struct Ring {
     pub normal: [f64; 3],
     pub radius: f64,
     /// Circulation Γ.
-    pub circulation: f64,
+    pub(crate) circulation: f64,
     /// Rosenhead–Moore core radius σ.
     pub core: f64,
 }
@@ -20,7 +20,8 @@ pub struct Ring {
 impl Ring {
     /// Angular velocity at the centre of the core of a straight filament with the same Γ and
     /// σ: `ω₀ = Γ / (2π σ²)`. Q in the core is close to `ω₀²`.
-    pub fn core_omega(&self) -> f64 {
+    #[cfg(test)]
+    pub(crate) fn core_omega(&self) -> f64 {
         self.circulation / (2.0 * PI * self.core * self.core)
     }
 
@@ -84,7 +85,7 @@ struct Particle {
 /// (up to ≈ 0.36 for δ = 0.1), which would coat the sphere with the iso-0.05 surface.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Wake {
-    pub free_stream: f64,
+    pub(crate) free_stream: f64,
     pub sphere_centre: [f64; 3],
     pub sphere_radius: f64,
     /// Thickness δ of the no-slip layer on the sphere (0: slip, pure potential flow).
@@ -138,11 +139,6 @@ impl Wake {
             })
             .collect();
         Wake::new(0.06, [0.0; 3], 0.5, SAMPLE_BOUNDARY_LAYER, rings)
-    }
-
-    /// Number of vortex particles.
-    pub fn particle_count(&self) -> usize {
-        self.particles.len()
     }
 
     /// Radial profile of the sphere flow's Stokes stream function
@@ -222,7 +218,7 @@ impl Wake {
     /// no-slip layer). Finite differences across the surface then see only a jump in the
     /// normal component, which reads as strain (Q < 0); a zero interior under slip flow
     /// would be a vortex sheet and give a spurious skin of large positive Q.
-    pub fn interior_velocity(&self) -> f64 {
+    pub(crate) fn interior_velocity(&self) -> f64 {
         let a = self.sphere_radius;
         let (_, f1, _) = self.profile(a);
         0.5 * self.free_stream * a * f1
@@ -234,7 +230,7 @@ impl Wake {
 }
 
 /// No-slip layer thickness of the `wake` scene.
-pub const SAMPLE_BOUNDARY_LAYER: f64 = 0.0;
+pub(crate) const SAMPLE_BOUNDARY_LAYER: f64 = 0.0;
 
 /// Rotates `v` by `angle` about the unit `axis` (Rodrigues).
 fn rotate(v: [f64; 3], axis: [f64; 3], angle: f64) -> [f64; 3] {

@@ -16,12 +16,12 @@ pub struct CompressionFlags(pub u32);
 impl CompressionFlags {
     pub const NONE: Self = Self(0);
     /// zlib over each block of node values (`COMPRESS_ZIP`).
-    pub const ZIP: Self = Self(0x1);
+    pub(crate) const ZIP: Self = Self(0x1);
     /// Inactive node values left out where the node's metadata byte (see [`NodeMeta`])
     /// says how to restore them (`COMPRESS_ACTIVE_MASK`).
-    pub const ACTIVE_MASK: Self = Self(0x2);
+    pub(crate) const ACTIVE_MASK: Self = Self(0x2);
     /// blosc (LZ4) over each block of node values (`COMPRESS_BLOSC`).
-    pub const BLOSC: Self = Self(0x4);
+    pub(crate) const BLOSC: Self = Self(0x4);
 
     /// Both sets of flags.
     pub const fn union(self, other: Self) -> Self {
@@ -34,7 +34,7 @@ impl CompressionFlags {
     }
 
     /// No bit outside the three flags OpenVDB defines is set.
-    pub fn is_known(self) -> bool {
+    pub(crate) fn is_known(self) -> bool {
         self.0 & !(Self::ZIP.0 | Self::ACTIVE_MASK.0 | Self::BLOSC.0) == 0
     }
 
@@ -58,7 +58,7 @@ impl CompressionFlags {
 /// every code but [`NodeMeta::NoMaskAndAllVals`] then stores only the active values.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[repr(u8)]
-pub enum NodeMeta {
+pub(crate) enum NodeMeta {
     /// No inactive values, or all equal the background: only active values stored.
     NoMaskOrInactiveVals = 0,
     /// All inactive values are −background.
@@ -77,7 +77,7 @@ pub enum NodeMeta {
 
 impl NodeMeta {
     /// The code of a stored metadata byte, or `None` past 6.
-    pub fn from_byte(byte: u8) -> Option<Self> {
+    pub(crate) fn from_byte(byte: u8) -> Option<Self> {
         use NodeMeta::*;
         Some(match byte {
             0 => NoMaskOrInactiveVals,
@@ -92,7 +92,7 @@ impl NodeMeta {
     }
 
     /// A selection mask (one bit per node entry) follows the inactive values.
-    pub fn has_selection_mask(self) -> bool {
+    pub(crate) fn has_selection_mask(self) -> bool {
         matches!(
             self,
             NodeMeta::MaskAndNoInactiveVals
@@ -110,7 +110,9 @@ pub(crate) fn mask_is_on(mask: &[u64], n: usize) -> bool {
 
 /// A value type that a standard 5-4-3 tree stores: `float`, `double`, `vec3s`, `vec3d`, each
 /// little endian, full precision or (read only) as 16-bit halves.
-pub trait VdbValue: Copy + Default + PartialEq + std::fmt::Debug + Send + Sync + 'static {
+pub(crate) trait VdbValue:
+    Copy + Default + PartialEq + std::fmt::Debug + Send + Sync + 'static
+{
     /// The grid type name in the file (`Tree_float_5_4_3`, …).
     const TREE_TYPE: &'static str;
     /// The `value_type` metadata OpenVDB writes, and the name reports use.

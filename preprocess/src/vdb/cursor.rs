@@ -34,7 +34,7 @@ impl<'a> Cursor<'a> {
     }
 
     /// `n` bytes, or an error saying `expected` (e.g. "512 values") was not there.
-    pub fn take_as(
+    pub(crate) fn take_as(
         &mut self,
         n: usize,
         what: &'static str,
@@ -92,7 +92,7 @@ impl<'a> Cursor<'a> {
     }
 
     /// OpenVDB string: u32 length, then that many bytes (not NUL-terminated).
-    pub fn bytes_with_len(&mut self, what: &'static str) -> RawResult<&'a [u8]> {
+    pub(crate) fn bytes_with_len(&mut self, what: &'static str) -> RawResult<&'a [u8]> {
         let start = self.pos;
         let len = self.u32(what)? as usize;
         if len > self.left() {

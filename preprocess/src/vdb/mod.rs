@@ -45,9 +45,9 @@ use error::{RawError, RawResult};
 use values::Codec;
 
 /// Oldest supported file format version (node mask compression, OpenVDB 3+).
-pub const MIN_FILE_VERSION: u32 = 222;
+pub(crate) const MIN_FILE_VERSION: u32 = 222;
 /// Newest supported file format version (OpenVDB 12).
-pub const MAX_FILE_VERSION: u32 = 225;
+pub(crate) const MAX_FILE_VERSION: u32 = 225;
 
 /// Grid value type, from the grid type name.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -82,7 +82,7 @@ impl ValueType {
         }
     }
 
-    pub fn is_vector(&self) -> bool {
+    pub(crate) fn is_vector(&self) -> bool {
         matches!(self, ValueType::Vec3s | ValueType::Vec3d)
     }
 }
@@ -95,7 +95,7 @@ pub struct GridDescriptor {
     /// Name as stored, with OpenVDB's `\x1e<n>` suffix for duplicates.
     pub unique_name: String,
     /// Grid type name as stored, without the `_HalfFloat` suffix.
-    pub grid_type: String,
+    pub(crate) grid_type: String,
     pub value_type: ValueType,
     /// Map type name (e.g. `UniformScaleTranslateMap`).
     pub map_type: String,
@@ -111,7 +111,7 @@ pub struct GridDescriptor {
     pub instance_of: Option<usize>,
     /// Byte offsets from the grid descriptor: grid start, tree buffers, end.
     pub grid_pos: u64,
-    pub block_pos: u64,
+    pub(crate) block_pos: u64,
     pub end_pos: u64,
     /// Where the tree topology starts (after compression flags, metadata and transform).
     tree_pos: usize,
@@ -129,7 +129,7 @@ impl GridDescriptor {
     }
 
     /// The compression flags, checked when the file was opened (no unknown bits).
-    pub fn compression_flags(&self) -> CompressionFlags {
+    pub(crate) fn compression_flags(&self) -> CompressionFlags {
         CompressionFlags(self.compression)
     }
 
@@ -147,7 +147,7 @@ pub struct VdbFile {
     data: Vec<u8>,
     pub file_version: u32,
     pub library_version: (u32, u32),
-    pub uuid: String,
+    pub(crate) uuid: String,
     pub metadata: Metadata,
     grids: Vec<GridDescriptor>,
 }

@@ -57,7 +57,7 @@ impl Tracer<'_> {
     }
 
     /// Whether anything opaque (iso mode) lies on `o + t d`, `t ∈ (t0, t1)`.
-    pub(crate) fn iso_occluded(&mut self, o: [f64; 3], d: [f64; 3], t0: f64, t1: f64) -> bool {
+    pub fn iso_occluded(&mut self, o: [f64; 3], d: [f64; 3], t0: f64, t1: f64) -> bool {
         let Some((t0, t1)) = self.clip(&o, &d, t0, t1) else {
             return false;
         };

@@ -50,9 +50,9 @@ use super::codec::{CompressionFlags, VdbValue, MAGIC};
 use crate::grid::{AnyGrid, Grid};
 
 /// `OPENVDB_FILE_VERSION_MULTIPASS_IO`: the newest format before half-float grid types.
-pub const FILE_VERSION: u32 = 224;
+pub(crate) const FILE_VERSION: u32 = 224;
 /// Library version written into the header: qbricks' own, not an OpenVDB release.
-pub const LIBRARY_VERSION: (u32, u32) = (0, 1);
+pub(crate) const LIBRARY_VERSION: (u32, u32) = (0, 1);
 
 /// Per-grid compression of node values.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
