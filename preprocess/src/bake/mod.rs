@@ -25,6 +25,13 @@ use crate::regions::{self, Bbox};
 
 /// Re-exported from [`crate::error`], where it lives since [`crate::levels`] returns it too.
 pub use crate::error::BakeError;
+pub use select::{select_grids, GridKind};
+
+mod extra;
+mod select;
+
+use extra::{extra_fields, ExtraGrid};
+use select::select;
 
 /// Default cap on brick edge length (cells).
 pub const DEFAULT_MAX_BRICK: u32 = 8;
@@ -129,107 +136,6 @@ pub fn bake_with_progress(
         }
         None => run(grids, opts, stage),
     }
-}
-
-/// Kind of an input grid, for selection.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum GridKind {
-    Vector,
-    Scalar,
-    /// A grid type the baker cannot read (listed, never selected by default).
-    Other,
-}
-
-/// Indices (file order) of the grids to bake among `grids` (name, kind): every grid named
-/// in `names`, or by default all vec3 grids, or the scalar grid(s) of the one scalar name
-/// when there is no vec3 grid.
-pub fn select_grids(grids: &[(&str, GridKind)], names: &[String]) -> Result<Vec<usize>, BakeError> {
-    let quoted = |v: Vec<&str>| {
-        v.iter()
-            .map(|n| format!("\"{n}\""))
-            .collect::<Vec<_>>()
-            .join(", ")
-    };
-    if !names.is_empty() {
-        for n in names {
-            if !grids.iter().any(|(g, _)| g == n) {
-                return Err(BakeError::GridNotFound {
-                    name: n.clone(),
-                    available: quoted(grids.iter().map(|g| g.0).collect()),
-                });
-            }
-        }
-        let chosen: Vec<usize> = (0..grids.len())
-            .filter(|&i| names.iter().any(|n| n == grids[i].0))
-            .collect();
-        if let Some(&i) = chosen.iter().find(|&&i| grids[i].1 == GridKind::Other) {
-            return Err(BakeError::UnsupportedGrid {
-                grid: grids[i].0.to_string(),
-            });
-        }
-        let v = chosen.iter().find(|&&i| grids[i].1 == GridKind::Vector);
-        let s = chosen.iter().find(|&&i| grids[i].1 == GridKind::Scalar);
-        if let (Some(&v), Some(&s)) = (v, s) {
-            return Err(BakeError::MixedKinds {
-                vector: format!("\"{}\"", grids[v].0),
-                scalar: format!("\"{}\"", grids[s].0),
-            });
-        }
-        let mut snames: Vec<&str> = chosen
-            .iter()
-            .filter(|&&i| grids[i].1 == GridKind::Scalar)
-            .map(|&i| grids[i].0)
-            .collect();
-        snames.dedup();
-        snames.sort_unstable();
-        snames.dedup();
-        if snames.len() > 1 {
-            return Err(BakeError::SeveralScalarGrids {
-                names: quoted(snames),
-            });
-        }
-        return Ok(chosen);
-    }
-    let vectors: Vec<usize> = (0..grids.len())
-        .filter(|&i| grids[i].1 == GridKind::Vector)
-        .collect();
-    if !vectors.is_empty() {
-        return Ok(vectors);
-    }
-    let scalars: Vec<usize> = (0..grids.len())
-        .filter(|&i| grids[i].1 == GridKind::Scalar)
-        .collect();
-    let mut snames: Vec<&str> = scalars.iter().map(|&i| grids[i].0).collect();
-    snames.sort_unstable();
-    snames.dedup();
-    match snames.len() {
-        0 => Err(BakeError::NoGrids),
-        1 => Ok(scalars),
-        _ => Err(BakeError::AmbiguousScalar {
-            names: quoted(snames),
-        }),
-    }
-}
-
-fn select(grids: Vec<AnyGrid>, names: &[String]) -> Result<Vec<AnyGrid>, BakeError> {
-    let kinds: Vec<(&str, GridKind)> = grids
-        .iter()
-        .map(|g| {
-            let k = if g.is_vector() {
-                GridKind::Vector
-            } else {
-                GridKind::Scalar
-            };
-            (g.name(), k)
-        })
-        .collect();
-    let keep = select_grids(&kinds, names)?;
-    Ok(grids
-        .into_iter()
-        .enumerate()
-        .filter(|(i, _)| keep.contains(i))
-        .map(|(_, g)| g)
-        .collect())
 }
 
 /// Cell sets and values of the selected grids.
@@ -927,115 +833,4 @@ pub(crate) fn clamp_nonfinite(vals: &mut [f32]) -> Option<(u64, usize)> {
         };
     }
     first.map(|f| (count, f))
-}
-
-/// A scalar grid baked as an extra field: its cells, values and background, finest first
-/// among grids of the same name.
-struct ExtraGrid {
-    name: String,
-    grids: Vec<(CellSet, Vec<f64>, f64)>,
-}
-
-impl ExtraGrid {
-    /// Trilinear sample at world point `p` from the finest grid with an active voxel among
-    /// the 8 around `p`; inactive or missing voxels count as the background (OpenVDB's
-    /// reading of a sparse grid); the background where no grid has data. At a voxel centre
-    /// (same lattice as the velocity) this is the voxel's value.
-    fn sample(&self, p: [f64; 3]) -> f64 {
-        for (set, vals, bg) in &self.grids {
-            let t = set.transform.translation;
-            let mut base = [0i32; 3];
-            let mut frac = [0.0; 3];
-            let mut ok = true;
-            for a in 0..3 {
-                let x = (p[a] - t[a]) / set.width;
-                let mut fl = x.floor();
-                let mut fr = x - fl;
-                // Snap to the lattice so that a voxel centre reads exactly that voxel.
-                if fr > 1.0 - 1e-9 {
-                    fl += 1.0;
-                    fr = 0.0;
-                } else if fr < 1e-9 {
-                    fr = 0.0;
-                }
-                if !(fl > f64::from(i32::MIN) + 2.0 && fl < f64::from(i32::MAX) - 2.0) {
-                    ok = false;
-                    break;
-                }
-                base[a] = fl as i32;
-                frac[a] = fr;
-            }
-            if !ok {
-                continue;
-            }
-            let (mut sum, mut any) = (0.0, false);
-            for corner in 0..8 {
-                let d = [corner & 1, (corner >> 1) & 1, corner >> 2];
-                let w: f64 = (0..3)
-                    .map(|a| if d[a] == 0 { 1.0 - frac[a] } else { frac[a] })
-                    .product();
-                if w == 0.0 {
-                    continue;
-                }
-                let ijk = [0, 1, 2].map(|a| base[a] + d[a]);
-                match set.active_slot(ijk) {
-                    Some(s) => {
-                        any = true;
-                        sum += w * vals[s];
-                    }
-                    None => sum += w * bg,
-                }
-            }
-            if any {
-                return sum;
-            }
-        }
-        self.grids.first().map_or(0.0, |g| g.2)
-    }
-}
-
-/// Cell sets of the scalar grids baked as extra fields (non-finite values handled as for
-/// the velocity), one entry per field name.
-fn extra_fields(
-    names: &[String],
-    grids: &[AnyGrid],
-    strict: bool,
-    warnings: &mut Vec<String>,
-) -> Result<Vec<ExtraGrid>, BakeError> {
-    let mut out = Vec::with_capacity(names.len());
-    for name in names {
-        let mine: Vec<&AnyGrid> = grids.iter().filter(|g| g.name() == name).collect();
-        let mut sets = Vec::with_capacity(mine.len());
-        let mut vals = Vec::with_capacity(mine.len());
-        let mut bgs = Vec::with_capacity(mine.len());
-        for g in mine {
-            let (set, v, bg) = match g {
-                AnyGrid::Float(g) => {
-                    let (s, v) = CellSet::from_grid(g, 0, f64::from);
-                    (s, v, f64::from(g.background))
-                }
-                AnyGrid::Double(g) => {
-                    let (s, v) = CellSet::from_grid(g, 0, |v: f64| v);
-                    (s, v, g.background)
-                }
-                _ => continue,
-            };
-            sets.push(set);
-            vals.push(v);
-            bgs.push(if bg.is_finite() { bg } else { 0.0 });
-        }
-        fix_nonfinite(&sets, &mut vals, strict, warnings)?;
-        let mut grids: Vec<(CellSet, Vec<f64>, f64)> = sets
-            .into_iter()
-            .zip(vals)
-            .zip(bgs)
-            .map(|((s, v), b)| (s, v, b))
-            .collect();
-        grids.sort_by(|a, b| a.0.width.total_cmp(&b.0.width));
-        out.push(ExtraGrid {
-            name: name.clone(),
-            grids,
-        });
-    }
-    Ok(out)
 }

@@ -1,0 +1,120 @@
+//! Extra scalar fields (`--fields density,…`): scalar grids of the file resampled at the
+//! velocity's leaf-cell centres. Their own grids need not share the velocity's lattice, so
+//! they are sampled, not copied.
+
+use crate::cells::CellSet;
+use crate::error::BakeError;
+use crate::grid::AnyGrid;
+
+use super::fix_nonfinite;
+
+/// A scalar grid baked as an extra field: its cells, values and background, finest first
+/// among grids of the same name.
+pub(super) struct ExtraGrid {
+    pub(super) name: String,
+    grids: Vec<(CellSet, Vec<f64>, f64)>,
+}
+
+impl ExtraGrid {
+    /// Trilinear sample at world point `p` from the finest grid with an active voxel among
+    /// the 8 around `p`; inactive or missing voxels count as the background (OpenVDB's
+    /// reading of a sparse grid); the background where no grid has data. At a voxel centre
+    /// (same lattice as the velocity) this is the voxel's value.
+    pub(super) fn sample(&self, p: [f64; 3]) -> f64 {
+        for (set, vals, bg) in &self.grids {
+            let t = set.transform.translation;
+            let mut base = [0i32; 3];
+            let mut frac = [0.0; 3];
+            let mut ok = true;
+            for a in 0..3 {
+                let x = (p[a] - t[a]) / set.width;
+                let mut fl = x.floor();
+                let mut fr = x - fl;
+                // Snap to the lattice so that a voxel centre reads exactly that voxel.
+                if fr > 1.0 - 1e-9 {
+                    fl += 1.0;
+                    fr = 0.0;
+                } else if fr < 1e-9 {
+                    fr = 0.0;
+                }
+                if !(fl > f64::from(i32::MIN) + 2.0 && fl < f64::from(i32::MAX) - 2.0) {
+                    ok = false;
+                    break;
+                }
+                base[a] = fl as i32;
+                frac[a] = fr;
+            }
+            if !ok {
+                continue;
+            }
+            let (mut sum, mut any) = (0.0, false);
+            for corner in 0..8 {
+                let d = [corner & 1, (corner >> 1) & 1, corner >> 2];
+                let w: f64 = (0..3)
+                    .map(|a| if d[a] == 0 { 1.0 - frac[a] } else { frac[a] })
+                    .product();
+                if w == 0.0 {
+                    continue;
+                }
+                let ijk = [0, 1, 2].map(|a| base[a] + d[a]);
+                match set.active_slot(ijk) {
+                    Some(s) => {
+                        any = true;
+                        sum += w * vals[s];
+                    }
+                    None => sum += w * bg,
+                }
+            }
+            if any {
+                return sum;
+            }
+        }
+        self.grids.first().map_or(0.0, |g| g.2)
+    }
+}
+
+/// Cell sets of the scalar grids baked as extra fields (non-finite values handled as for
+/// the velocity), one entry per field name.
+pub(super) fn extra_fields(
+    names: &[String],
+    grids: &[AnyGrid],
+    strict: bool,
+    warnings: &mut Vec<String>,
+) -> Result<Vec<ExtraGrid>, BakeError> {
+    let mut out = Vec::with_capacity(names.len());
+    for name in names {
+        let mine: Vec<&AnyGrid> = grids.iter().filter(|g| g.name() == name).collect();
+        let mut sets = Vec::with_capacity(mine.len());
+        let mut vals = Vec::with_capacity(mine.len());
+        let mut bgs = Vec::with_capacity(mine.len());
+        for g in mine {
+            let (set, v, bg) = match g {
+                AnyGrid::Float(g) => {
+                    let (s, v) = CellSet::from_grid(g, 0, f64::from);
+                    (s, v, f64::from(g.background))
+                }
+                AnyGrid::Double(g) => {
+                    let (s, v) = CellSet::from_grid(g, 0, |v: f64| v);
+                    (s, v, g.background)
+                }
+                _ => continue,
+            };
+            sets.push(set);
+            vals.push(v);
+            bgs.push(if bg.is_finite() { bg } else { 0.0 });
+        }
+        fix_nonfinite(&sets, &mut vals, strict, warnings)?;
+        let mut grids: Vec<(CellSet, Vec<f64>, f64)> = sets
+            .into_iter()
+            .zip(vals)
+            .zip(bgs)
+            .map(|((s, v), b)| (s, v, b))
+            .collect();
+        grids.sort_by(|a, b| a.0.width.total_cmp(&b.0.width));
+        out.push(ExtraGrid {
+            name: name.clone(),
+            grids,
+        });
+    }
+    Ok(out)
+}
