@@ -223,15 +223,21 @@ fn locate(file: &BrickFile, p: [f64; 3]) -> Option<u32> {
     crate::kdtree::locate(&file.kd_nodes, p)
 }
 
-/// The basis-method reconstruction at `p` (`Σ H v / Σ H`, tents of the cell width around
-/// every leaf-cell centre of the region's bricks), the formula the viewer evaluates; written
-/// here over the in-memory file because this crate does not link the viewer.
+/// The basis-method reconstruction at `p` over the bricks of the region holding it.
 fn reconstruct(file: &BrickFile, f: usize, p: [f64; 3]) -> Option<f64> {
     let r = locate(file, p)?;
     let reg = file.regions.get(r as usize)?;
     let ids = file
         .region_bricks
         .get(reg.bricks_start as usize..(reg.bricks_start + reg.bricks_len) as usize)?;
+    reconstruct_over(file, ids, f, p)
+}
+
+/// The basis-method reconstruction at `p` over the bricks `ids` (`Σ H v / Σ H`, tents of
+/// the cell width around every leaf-cell centre), the formula the viewer evaluates, written
+/// over the in-memory file so a bake can be checked before it is written; `None` where no
+/// tent reaches `p`. The bake tests use it too, to compare a region's bricks with all bricks.
+pub fn reconstruct_over(file: &BrickFile, ids: &[u32], f: usize, p: [f64; 3]) -> Option<f64> {
     let (mut s, mut ws) = (0.0, 0.0);
     for &bi in ids {
         let b = &file.bricks[bi as usize];

@@ -54,40 +54,10 @@ pub fn region_bricks(file: &BrickFile, r: u32) -> &[u32] {
     &file.region_bricks[reg.bricks_start as usize..(reg.bricks_start + reg.bricks_len) as usize]
 }
 
-/// Reference reconstruction over the given bricks: `Σ H v / Σ H` with tents
+/// Reconstruction over the given bricks: `Σ H v / Σ H` with tents
 /// `H = Π max(0, 1 − |p − c| / w)`; `None` where no tent reaches `p`.
 pub fn reconstruct(file: &BrickFile, bricks: &[u32], f: usize, p: [f64; 3]) -> Option<f64> {
-    let (mut s, mut ws) = (0.0, 0.0);
-    for &bi in bricks {
-        let b = &file.bricks[bi as usize];
-        let d = b.dims.map(|d| d as i64);
-        // Only cells within one width of p can contribute.
-        let mut lo = [0i64; 3];
-        let mut hi = [0i64; 3];
-        for a in 0..3 {
-            let x = (p[a] - b.origin[a]) / b.cell_width;
-            lo[a] = (x.floor() - 1.0).max(0.0) as i64;
-            hi[a] = ((x.ceil() + 1.0) as i64).min(d[a] - 1);
-        }
-        for z in lo[2]..=hi[2] {
-            for y in lo[1]..=hi[1] {
-                for x in lo[0]..=hi[0] {
-                    let c = [x, y, z];
-                    let mut h = 1.0;
-                    for a in 0..3 {
-                        let ca = b.origin[a] + c[a] as f64 * b.cell_width;
-                        h *= (1.0 - (p[a] - ca).abs() / b.cell_width).max(0.0);
-                    }
-                    if h > 0.0 {
-                        let i = b.first_value as usize + (x + d[0] * (y + d[1] * z)) as usize;
-                        s += h * file.fields[f].values[i] as f64;
-                        ws += h;
-                    }
-                }
-            }
-        }
-    }
-    (ws > 1e-12).then(|| s / ws)
+    qbricks_preprocess::accuracy::reconstruct_over(file, bricks, f, p)
 }
 
 /// Reconstruction at `p` through the KD-tree (None outside the data).
