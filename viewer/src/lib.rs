@@ -5,6 +5,7 @@
 // Numeric kernels index several per-axis arrays in lockstep; iterators would obscure them.
 #![allow(clippy::needless_range_loop)]
 
+mod active;
 #[cfg(feature = "gui")]
 pub mod app;
 pub mod bench;

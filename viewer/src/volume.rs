@@ -70,6 +70,8 @@ pub struct Volume<'a> {
     /// Per field, the KD-tree packed for the ray walk on first use (see
     /// [`crate::traverse`]).
     packed: Vec<std::sync::OnceLock<crate::traverse::Packed>>,
+    /// The last few trees of regions that one iso value can touch (see [`crate::active`]).
+    active: crate::active::ActiveCache,
     /// Finest cell width in the file (reference length for opacity).
     pub finest_w: f64,
 }
@@ -121,6 +123,7 @@ impl<'a> Volume<'a> {
             packed: (0..file.fields.len())
                 .map(|_| std::sync::OnceLock::new())
                 .collect(),
+            active: Default::default(),
             finest_w: if finest_w.is_finite() { finest_w } else { 1.0 },
         })
     }
@@ -154,6 +157,16 @@ impl<'a> Volume<'a> {
     pub(crate) fn packed(&self, f: usize) -> Option<&crate::traverse::Packed> {
         let cell = self.packed.get(f)?;
         Some(cell.get_or_init(|| crate::traverse::Packed::build(self.file, f)))
+    }
+
+    /// The regions whose range of field `f` holds `value`, as a tree (built on first
+    /// use, kept for the next frames); `None` for a field the file does not have.
+    pub(crate) fn active_tree(
+        &self,
+        f: usize,
+        value: f64,
+    ) -> Option<std::sync::Arc<crate::active::ActiveTree>> {
+        self.active.get(self, f, value)
     }
 
     /// Number of bricks.

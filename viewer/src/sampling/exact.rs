@@ -4,13 +4,15 @@
 
 use super::{Event, Tracer, MAX_LATTICES};
 use crate::reconstruct::Cubic;
-use crate::traverse::{Skip, SKIPPED};
+use crate::traverse::{inverse, ray_box, Segment, Skip, SKIPPED};
 use crate::volume::Volume;
 
 impl Tracer<'_> {
-    /// Exact iso search: per region (skipped by bounds), per interval between lattice
-    /// planes of every level present (inside which `Σ H (v − iso)` is a cubic), skip when
-    /// all contributing cells lie on one side, else take the cubic's first root.
+    /// Exact iso search: per region whose range holds the iso value (the volume's
+    /// [`ActiveTree`](crate::active) for it; everything else is stepped over), per
+    /// interval between lattice planes of every level present (inside which
+    /// `Σ H (v − iso)` is a cubic), skip when all contributing cells lie on one side, else
+    /// take the cubic's first root.
     pub(super) fn iso_exact(
         &mut self,
         o: [f64; 3],
@@ -19,53 +21,111 @@ impl Tracer<'_> {
         t1: f64,
     ) -> Option<(f64, Option<u32>)> {
         let vol = self.vol;
-        let params = self.params;
-        let iso = params.tf.iso;
+        let (field, iso) = (self.params.field, self.params.tf.iso);
+        let tree = match self.active.take() {
+            Some(t) if t.is_for(field, iso) => Some(t),
+            _ => vol.active_tree(field, iso),
+        };
         let mut found = None;
         let mut stack = std::mem::take(&mut self.stack);
-        let skip = Skip {
-            field: params.field,
-            keep: |a: f32, b: f32| a as f64 <= iso && iso <= b as f64,
-            across_gaps: true,
-        };
-        vol.segments_skipping(o, d, t0, t1, &mut stack, &skip, |seg| {
-            let r = seg.region as usize;
-            let (mn, mx) = (seg.min, seg.max);
-            let skipped = seg.region == SKIPPED || !(mn as f64 <= iso && iso <= mx as f64);
-            self.enter_segment(&seg, skipped);
-            if skipped {
-                return true;
-            }
-            let mut planes = Planes::new(vol, r, &o, &d, seg.t0);
-            if planes.inexact {
-                self.stats.inexact_segments += 1;
-            }
-            let mut ta = seg.t0;
-            while ta < seg.t1 {
-                let tb = planes.next(ta).min(seg.t1);
-                if tb <= ta {
-                    break;
-                }
-                let cubic = vol.cubic(r, &o, &d, ta, tb, params.field, iso);
-                self.stats.samples += 1;
-                let may_cross = cubic.any_above && cubic.any_below;
-                self.record(Event::Interval {
-                    t0: ta,
-                    t1: tb,
-                    may_cross,
+        match &tree {
+            Some(tree) => {
+                // The stretches between the regions walked are counted (and logged) as
+                // skipped, as the file's walk reports the subtrees it steps over.
+                let data = ray_box(&vol.bounds_min, &vol.bounds_max, &o, &inverse(&d), t0, t1);
+                let mut covered = data.map(|(a, _)| a);
+                tree.segments(vol, o, d, t0, t1, &mut stack, |seg| {
+                    if let Some(c) = covered.filter(|&c| seg.t0 > c) {
+                        self.enter_gap(c, seg.t0);
+                    }
+                    covered = Some(covered.map_or(seg.t1, |c| c.max(seg.t1)));
+                    self.enter_segment(&seg, false);
+                    found = self.exact_in_segment(&seg, &o, &d, iso);
+                    found.is_none()
                 });
-                if may_cross {
-                    if let Some(x) = first_root(&cubic) {
-                        found = Some((ta + x * (tb - ta), Some(seg.region)));
-                        return false;
+                if found.is_none() {
+                    if let (Some((_, end)), Some(c)) = (data, covered) {
+                        if end > c {
+                            self.enter_gap(c, end);
+                        }
                     }
                 }
-                ta = tb;
             }
-            true
-        });
+            None => {
+                let skip = Skip {
+                    field,
+                    keep: |a: f32, b: f32| a as f64 <= iso && iso <= b as f64,
+                    across_gaps: true,
+                };
+                vol.segments_skipping(o, d, t0, t1, &mut stack, &skip, |seg| {
+                    let skipped =
+                        seg.region == SKIPPED || !(seg.min as f64 <= iso && iso <= seg.max as f64);
+                    self.enter_segment(&seg, skipped);
+                    if skipped {
+                        return true;
+                    }
+                    found = self.exact_in_segment(&seg, &o, &d, iso);
+                    found.is_none()
+                });
+            }
+        }
         self.stack = stack;
+        self.active = tree;
         found
+    }
+
+    /// Counts (and logs) the stretch `[t0, t1]` of the data that `exact` steps over
+    /// without walking it: no region there has the iso value in its range.
+    fn enter_gap(&mut self, t0: f64, t1: f64) {
+        self.enter_segment(
+            &Segment {
+                region: SKIPPED,
+                t0,
+                t1,
+                min: f32::NAN,
+                max: f32::NAN,
+            },
+            true,
+        );
+    }
+
+    /// The first root in one region segment whose range holds the iso value.
+    fn exact_in_segment(
+        &mut self,
+        seg: &Segment,
+        o: &[f64; 3],
+        d: &[f64; 3],
+        iso: f64,
+    ) -> Option<(f64, Option<u32>)> {
+        let vol = self.vol;
+        let field = self.params.field;
+        let r = seg.region as usize;
+        let mut planes = Planes::new(vol, r, o, d, seg.t0);
+        if planes.inexact {
+            self.stats.inexact_segments += 1;
+        }
+        let mut ta = seg.t0;
+        while ta < seg.t1 {
+            let tb = planes.next(ta).min(seg.t1);
+            if tb <= ta {
+                break;
+            }
+            let cubic = vol.cubic(r, o, d, ta, tb, field, iso);
+            self.stats.samples += 1;
+            let may_cross = cubic.any_above && cubic.any_below;
+            self.record(Event::Interval {
+                t0: ta,
+                t1: tb,
+                may_cross,
+            });
+            if may_cross {
+                if let Some(x) = first_root(&cubic) {
+                    return Some((ta + x * (tb - ta), Some(seg.region)));
+                }
+            }
+            ta = tb;
+        }
+        None
     }
 }
 

@@ -234,6 +234,8 @@ pub struct Tracer<'v> {
     stack: Vec<(u32, f64, f64)>,
     /// Region of the last refinement probe.
     probe_hint: Option<u32>,
+    /// The regions `exact` walks for the current iso value (fetched on its first ray).
+    active: Option<std::sync::Arc<crate::active::ActiveTree>>,
 }
 
 impl<'v> Tracer<'v> {
@@ -245,6 +247,7 @@ impl<'v> Tracer<'v> {
             log: None,
             stack: Vec::with_capacity(64),
             probe_hint: None,
+            active: None,
         }
     }
 
