@@ -24,6 +24,7 @@ use std::sync::Arc;
 
 use format::kd::{inverse, ray_box, Node, Segment, WalkNodes};
 
+use crate::sampling::{Lattice, Lattices};
 use crate::volume::Volume;
 
 /// Marker of "no node".
@@ -43,6 +44,10 @@ struct ActiveNode {
     b: u32,
     /// 0..=2: inner node split on this axis; [`LEAF`]: a region.
     axis: u8,
+    /// Leaf: its region has more cell lattices than `exact` cuts.
+    inexact: bool,
+    /// Leaf: how many of [`ActiveTree::lattices`], from `b` on, are its region's.
+    lattices: u8,
 }
 
 /// The regions whose range of one field holds one value, in the file's tree order.
@@ -52,6 +57,10 @@ pub(crate) struct ActiveTree {
     value_bits: u64,
     /// Children before parents; the root is the last node (empty: no region qualifies).
     nodes: Vec<ActiveNode>,
+    /// The cell lattices of every leaf's region, leaf after leaf: `exact` cuts a segment at
+    /// their planes, and listing them once here spares each segment a pass over the
+    /// region's bricks.
+    lattices: Vec<Lattice>,
 }
 
 impl ActiveTree {
@@ -68,6 +77,7 @@ impl ActiveTree {
         let tree = vol.packed(field)?;
         let holds = |mn: f32, mx: f32| mn as f64 <= value && value <= mx as f64;
         let mut nodes: Vec<ActiveNode> = Vec::new();
+        let mut lattices: Vec<Lattice> = Vec::new();
         // Post-order without recursion (a valid tree may still be deep): `(node, expanded)`.
         let mut todo: Vec<(u32, bool)> = Vec::with_capacity(64);
         // The active-tree node each finished subtree became, or `NONE`.
@@ -96,6 +106,8 @@ impl ActiveTree {
                             a: lo,
                             b: hi,
                             axis: axis.min(2) as u8,
+                            inexact: false,
+                            lattices: 0,
                         });
                         (nodes.len() - 1) as u32
                     }
@@ -116,12 +128,17 @@ impl ActiveTree {
                     let [mn, mx] = vol.range(r as usize, field);
                     if holds(mn, mx) {
                         let reg = vol.region(r as usize);
+                        let l = Lattices::of(vol, r as usize);
+                        let first = u32::try_from(lattices.len()).ok()?;
+                        lattices.extend_from_slice(l.as_slice());
                         nodes.push(ActiveNode {
                             min: reg.min,
                             max: reg.max,
                             a: r,
-                            b: NONE,
+                            b: first,
                             axis: LEAF,
+                            inexact: l.inexact,
+                            lattices: l.as_slice().len() as u8,
                         });
                         done.push((nodes.len() - 1) as u32);
                     } else {
@@ -136,18 +153,23 @@ impl ActiveTree {
             [root] if *root as usize + 1 == nodes.len() => {}
             _ => return None,
         }
+        if let Some(better) = surface_area_tree(&nodes) {
+            nodes = better;
+        }
         Some(ActiveTree {
             field,
             value_bits: value.to_bits(),
             nodes,
+            lattices,
         })
     }
 
     /// Calls `f` for every region of the tree the ray `o + t d` (local frame) crosses
-    /// within `[t_min, t_max]`, front to back, with the region's range of the field;
-    /// `f` returns `false` to stop. `stack` is scratch space reused between calls.
+    /// within `[t_min, t_max]`, front to back, with the region's range of the field, its
+    /// cell lattices and whether it has more than are listed; `f` returns `false` to stop.
+    /// `stack` is scratch space reused between calls.
     #[allow(clippy::too_many_arguments)]
-    pub(crate) fn segments<F: FnMut(Segment) -> bool>(
+    pub(crate) fn segments<F: FnMut(Segment, &[Lattice], bool) -> bool>(
         &self,
         vol: &Volume,
         o: [f64; 3],
@@ -171,13 +193,19 @@ impl ActiveTree {
                 };
                 if node.axis == LEAF {
                     let [mn, mx] = vol.range(node.a as usize, self.field);
-                    if !f(Segment {
+                    let first = node.b as usize;
+                    let lattices = self
+                        .lattices
+                        .get(first..first + usize::from(node.lattices))
+                        .unwrap_or(&[]);
+                    let seg = Segment {
                         region: node.a,
                         t0: s0,
                         t1: s1,
                         min: mn,
                         max: mx,
-                    }) {
+                    };
+                    if !f(seg, lattices, node.inexact) {
                         return;
                     }
                     break;
@@ -194,6 +222,111 @@ impl ActiveTree {
             }
         }
     }
+}
+
+/// Above this many regions the active tree keeps the file's splits: the surface-area
+/// build sorts at every node, which would make an iso value that touches much of a large
+/// file slow to switch to.
+const SAH_MAX_LEAVES: usize = 1 << 15;
+
+/// Surface area of a box (what the chance of a ray meeting it grows with).
+fn area(min: &[f64; 3], max: &[f64; 3]) -> f64 {
+    let e: [f64; 3] = std::array::from_fn(|a| (max[a] - min[a]).max(0.0));
+    e[0] * e[1] + e[1] * e[2] + e[2] * e[0]
+}
+
+/// The leaves of `tree` (children before parents, root last) regrouped by the surface
+/// area heuristic: at every node, of all planes that separate the node's regions into two
+/// non-empty groups without cutting one (a region lies wholly on one side), the one that
+/// minimises `area(left) · count(left) + area(right) · count(right)`. The file's splits
+/// were chosen for all regions; for the few that hold one iso value, tighter groups let a
+/// ray that passes beside them stop sooner. Every node keeps a separating plane, so the
+/// walk stays front to back. Root last, like the input. `None` (keep `tree`) when there is
+/// nothing to regroup, too much, or no separating plane somewhere.
+fn surface_area_tree(tree: &[ActiveNode]) -> Option<Vec<ActiveNode>> {
+    let mut leaves: Vec<ActiveNode> = tree.iter().filter(|n| n.axis == LEAF).copied().collect();
+    if leaves.len() < 3 || leaves.len() > SAH_MAX_LEAVES {
+        return None;
+    }
+    // Built top-down into slots (index 0 is the root), then reversed so that the root is
+    // last and children come before parents, as the walk expects.
+    let mut out: Vec<ActiveNode> = vec![leaves[0]];
+    let mut work: Vec<(usize, usize, usize)> = vec![(0, leaves.len(), 0)];
+    let mut prefix: Vec<([f64; 3], [f64; 3], f64)> = Vec::with_capacity(leaves.len());
+    while let Some((lo, hi, slot)) = work.pop() {
+        let items = &mut leaves[lo..hi];
+        if items.len() == 1 {
+            out[slot] = items[0];
+            continue;
+        }
+        // Best separating plane: (cost, axis, number of items on the left).
+        let mut best: Option<(f64, usize, usize)> = None;
+        for axis in 0..3 {
+            items.sort_unstable_by(|p, q| p.min[axis].total_cmp(&q.min[axis]));
+            // Left groups: bounds and the largest upper face so far.
+            prefix.clear();
+            let (mut mn, mut mx) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+            for it in items.iter() {
+                for a in 0..3 {
+                    mn[a] = mn[a].min(it.min[a]);
+                    mx[a] = mx[a].max(it.max[a]);
+                }
+                prefix.push((mn, mx, mx[axis]));
+            }
+            let (mut rmn, mut rmx) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+            for k in (1..items.len()).rev() {
+                for a in 0..3 {
+                    rmn[a] = rmn[a].min(items[k].min[a]);
+                    rmx[a] = rmx[a].max(items[k].max[a]);
+                }
+                let (lmn, lmx, reach) = prefix[k - 1];
+                // Items are sorted by lower face: a plane at items[k].min separates the
+                // first k from the rest when none of the first k reaches past it (the
+                // rest all start at or after it).
+                if reach > items[k].min[axis] {
+                    continue;
+                }
+                let cost =
+                    area(&lmn, &lmx) * k as f64 + area(&rmn, &rmx) * (items.len() - k) as f64;
+                if best.is_none_or(|(c, _, _)| cost < c) {
+                    best = Some((cost, axis, k));
+                }
+            }
+        }
+        let (_, axis, k) = best?;
+        items.sort_unstable_by(|p, q| p.min[axis].total_cmp(&q.min[axis]));
+        let (mut mn, mut mx) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        for it in items.iter() {
+            for a in 0..3 {
+                mn[a] = mn[a].min(it.min[a]);
+                mx[a] = mx[a].max(it.max[a]);
+            }
+        }
+        let (left, right) = (out.len(), out.len() + 1);
+        out.push(items[0]);
+        out.push(items[0]);
+        out[slot] = ActiveNode {
+            min: mn,
+            max: mx,
+            a: left as u32,
+            b: right as u32,
+            axis: axis as u8,
+            inexact: false,
+            lattices: 0,
+        };
+        work.push((lo, lo + k, left));
+        work.push((lo + k, hi, right));
+    }
+    // Reverse: slot i becomes n - 1 - i.
+    let n = out.len();
+    out.reverse();
+    for node in &mut out {
+        if node.axis != LEAF {
+            node.a = (n - 1 - node.a as usize) as u32;
+            node.b = (n - 1 - node.b as usize) as u32;
+        }
+    }
+    Some(out)
 }
 
 /// The last few active trees of a volume, newest last.
@@ -250,7 +383,10 @@ mod tests {
         });
         let tree = ActiveTree::build(vol, 0, iso).expect("a valid tree");
         let mut active = Vec::new();
-        tree.segments(vol, o, d, t.0, t.1, &mut stack, |s| {
+        tree.segments(vol, o, d, t.0, t.1, &mut stack, |s, l, inexact| {
+            let want = Lattices::of(vol, s.region as usize);
+            assert_eq!(l, want.as_slice(), "lattices of region {}", s.region);
+            assert_eq!(inexact, want.inexact);
             active.push((s.region, s.t0.to_bits(), s.t1.to_bits()));
             true
         });
@@ -337,7 +473,7 @@ mod tests {
                 0.0,
                 1e3,
                 &mut stack,
-                |_| {
+                |_, _, _| {
                     n += 1;
                     true
                 },

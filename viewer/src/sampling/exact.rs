@@ -34,13 +34,13 @@ impl Tracer<'_> {
                 // skipped, as the file's walk reports the subtrees it steps over.
                 let data = ray_box(&vol.bounds_min, &vol.bounds_max, &o, &inverse(&d), t0, t1);
                 let mut covered = data.map(|(a, _)| a);
-                tree.segments(vol, o, d, t0, t1, &mut stack, |seg| {
+                tree.segments(vol, o, d, t0, t1, &mut stack, |seg, lattices, inexact| {
                     if let Some(c) = covered.filter(|&c| seg.t0 > c) {
                         self.enter_gap(c, seg.t0);
                     }
                     covered = Some(covered.map_or(seg.t1, |c| c.max(seg.t1)));
                     self.enter_segment(&seg, false);
-                    found = self.exact_in_segment(&seg, &o, &d, iso);
+                    found = self.exact_in_segment(&seg, &o, &d, iso, lattices, inexact);
                     found.is_none()
                 });
                 if found.is_none() {
@@ -64,7 +64,8 @@ impl Tracer<'_> {
                     if skipped {
                         return true;
                     }
-                    found = self.exact_in_segment(&seg, &o, &d, iso);
+                    let l = Lattices::of(vol, seg.region as usize);
+                    found = self.exact_in_segment(&seg, &o, &d, iso, l.as_slice(), l.inexact);
                     found.is_none()
                 });
             }
@@ -96,12 +97,14 @@ impl Tracer<'_> {
         o: &[f64; 3],
         d: &[f64; 3],
         iso: f64,
+        lattices: &[Lattice],
+        inexact: bool,
     ) -> Option<(f64, Option<u32>)> {
         let vol = self.vol;
         let field = self.params.field;
         let r = seg.region as usize;
-        let mut planes = Planes::new(vol, r, o, d, seg.t0);
-        if planes.inexact {
+        let mut planes = Planes::new(lattices, o, d, seg.t0);
+        if inexact {
             self.stats.inexact_segments += 1;
         }
         let mut ta = seg.t0;
@@ -135,26 +138,32 @@ struct Planes {
     next: [f64; 3 * MAX_LATTICES],
     step: [f64; 3 * MAX_LATTICES],
     n: usize,
-    /// The region has more lattices than are cut (see
-    /// [`Stats::inexact_segments`](super::Stats::inexact_segments)).
-    inexact: bool,
 }
 
-impl Planes {
-    fn new(vol: &Volume, r: usize, o: &[f64; 3], d: &[f64; 3], t: f64) -> Planes {
-        let mut pl = Planes {
-            next: [f64::INFINITY; 3 * MAX_LATTICES],
-            step: [f64::INFINITY; 3 * MAX_LATTICES],
+/// One cell lattice of a region: cell width, its inverse and one cell centre (local).
+pub(crate) type Lattice = (f64, f64, [f64; 3]);
+
+/// The distinct cell lattices of a region's bricks (at most [`MAX_LATTICES`]).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Lattices {
+    list: [Lattice; MAX_LATTICES],
+    n: usize,
+    /// The region has more lattices than are listed (see
+    /// [`Stats::inexact_segments`](super::Stats::inexact_segments)).
+    pub(crate) inexact: bool,
+}
+
+impl Lattices {
+    /// The lattices of region `r`: bricks whose cells are whole cells apart share one.
+    pub(crate) fn of(vol: &Volume, r: usize) -> Lattices {
+        let mut l = Lattices {
+            list: [(0.0, 0.0, [0.0; 3]); MAX_LATTICES],
             n: 0,
             inexact: false,
         };
-        let ids = vol.region_brick_ids(r);
-        // Distinct lattices: (cell width, 1 / width, a cell centre).
-        let mut lattices = [(0.0f64, 0.0f64, [0.0f64; 3]); MAX_LATTICES];
-        let mut nl = 0;
-        for b in ids {
+        for b in vol.region_brick_ids(r) {
             let br = vol.brick(b.to_native());
-            let same = |&(w, _, origin): &(f64, f64, [f64; 3])| {
+            let same = |&(w, _, origin): &Lattice| {
                 w == br.w
                     && (origin == br.origin
                         || (0..3).all(|a| {
@@ -165,21 +174,36 @@ impl Planes {
                             !(1e-9..=1.0 - 1e-9).contains(&frac)
                         }))
             };
-            if lattices[..nl].iter().any(same) {
+            if l.list[..l.n].iter().any(same) {
                 continue;
             }
-            if nl == MAX_LATTICES {
+            if l.n == MAX_LATTICES {
                 // More distinct lattices in one region than are cut (never produced by
                 // nested grids of one refinement ratio): the remaining lattices' planes are
                 // not cut, so intervals there are only approximately cubic. Counted in
                 // `Stats::inexact_segments` and reported by `render --json`.
-                pl.inexact = true;
+                l.inexact = true;
                 break;
             }
-            lattices[nl] = (br.w, br.inv_w, br.origin);
-            nl += 1;
+            l.list[l.n] = (br.w, br.inv_w, br.origin);
+            l.n += 1;
         }
-        for &(w, inv_w, origin) in &lattices[..nl] {
+        l
+    }
+
+    pub(crate) fn as_slice(&self) -> &[Lattice] {
+        &self.list[..self.n]
+    }
+}
+
+impl Planes {
+    fn new(lattices: &[Lattice], o: &[f64; 3], d: &[f64; 3], t: f64) -> Planes {
+        let mut pl = Planes {
+            next: [f64::INFINITY; 3 * MAX_LATTICES],
+            step: [f64::INFINITY; 3 * MAX_LATTICES],
+            n: 0,
+        };
+        for &(w, inv_w, origin) in lattices.iter().take(MAX_LATTICES) {
             for a in 0..3 {
                 if d[a] == 0.0 {
                     continue;

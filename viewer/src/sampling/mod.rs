@@ -39,6 +39,7 @@ use crate::volume::Volume;
 
 mod dvr;
 mod exact;
+pub(crate) use exact::{Lattice, Lattices};
 mod iso;
 mod positions;
 
