@@ -189,3 +189,36 @@ fn a_missing_file_opens_the_window_with_the_error() {
     );
     assert!(image::open(&shot).is_ok());
 }
+
+/// Without `--frames` the screenshot waits for the refined image; a file that fails to open
+/// never gives one, so the window with the error in its panel is saved at once (it used to
+/// wait for the script's 120 s timeout and fail).
+#[test]
+fn a_file_that_fails_to_open_is_saved_without_waiting_for_an_image() {
+    if !have_xvfb() {
+        return;
+    }
+    let dir = tempfile::tempdir().expect("tempdir");
+    let bad = dir.path().join("bad.qbk");
+    std::fs::write(&bad, b"not a qbk file").expect("write");
+    let shot = dir.path().join("window.png");
+    let started = std::time::Instant::now();
+    let out = in_xvfb(
+        &[
+            bad.to_str().expect("utf8"),
+            "--size",
+            "800x600",
+            "--screenshot",
+            shot.to_str().expect("utf8"),
+        ],
+        dir.path(),
+    );
+    assert!(
+        out.status.success(),
+        "exit {:?} after {:?}: {}",
+        out.status.code(),
+        started.elapsed(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(image::open(&shot).is_ok());
+}

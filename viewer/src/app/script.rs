@@ -134,13 +134,17 @@ impl ScriptRunner {
     }
 
     /// Called after the frame's UI was built. `received`: a new image was taken this
-    /// frame; `shown`: the image on screen. Returns the report once done.
+    /// frame; `shown`: the image on screen; `no_image`: the window has nothing to render
+    /// (the file failed to open), so no refined image will ever come and the window as
+    /// it is, with the error in its panel, is the final picture. Returns the report once
+    /// done.
     pub(crate) fn after_frame(
         &mut self,
         ctx: &egui::Context,
         received: bool,
         shown: Option<&Update>,
         preview_scale: u32,
+        no_image: bool,
     ) -> anyhow::Result<Option<OrbitReport>> {
         if self.started.elapsed() > TIMEOUT {
             anyhow::bail!(
@@ -191,6 +195,8 @@ impl ScriptRunner {
                 *waited += 1;
                 let ready = match frames_limit {
                     Some(n) => *waited >= n,
+                    // Two frames, so the panel with the error has been drawn once whole.
+                    None if no_image => *waited >= 2,
                     // One more frame after the refined image arrived, so it is on screen.
                     None => complete && !received,
                 };
@@ -244,4 +250,72 @@ fn save_screenshot(path: &std::path::Path, image: &egui::ColorImage) -> anyhow::
         .collect();
     film::save_png(path, w as u32, h as u32, &rgb)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Runs one UI frame of `runner` and returns its result and whether it asked for a
+    /// screenshot.
+    fn frame(
+        runner: &mut ScriptRunner,
+        ctx: &egui::Context,
+        events: Vec<egui::Event>,
+        no_image: bool,
+    ) -> (anyhow::Result<Option<OrbitReport>>, bool) {
+        let mut result = None;
+        let input = egui::RawInput {
+            events,
+            ..egui::RawInput::default()
+        };
+        let out = ctx.run_ui(input, |ui| {
+            result = Some(runner.after_frame(ui.ctx(), false, None, 1, no_image));
+        });
+        let asked = out.viewport_output.values().any(|v| {
+            v.commands
+                .iter()
+                .any(|c| matches!(c, egui::ViewportCommand::Screenshot(_)))
+        });
+        (result.expect("frame ran"), asked)
+    }
+
+    #[test]
+    fn a_window_without_an_image_saves_its_screenshot_without_waiting_for_one() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let out = dir.path().join("shot.png");
+        let mut runner = ScriptRunner::new(Script::Screenshot {
+            out: out.clone(),
+            frames: None,
+        });
+        let ctx = egui::Context::default();
+        let (first, asked) = frame(&mut runner, &ctx, Vec::new(), true);
+        assert!(matches!(first, Ok(None)) && !asked);
+        let (second, asked) = frame(&mut runner, &ctx, Vec::new(), true);
+        assert!(matches!(second, Ok(None)) && asked);
+        let image = egui::ColorImage::new([4, 3], vec![egui::Color32::RED; 12]);
+        let shot = egui::Event::Screenshot {
+            viewport_id: egui::ViewportId::ROOT,
+            user_data: egui::UserData::default(),
+            image: std::sync::Arc::new(image),
+        };
+        let (third, _) = frame(&mut runner, &ctx, vec![shot], true);
+        assert!(matches!(third, Ok(Some(_))));
+        let saved = image::open(&out).expect("a PNG").to_rgb8();
+        assert_eq!(saved.dimensions(), (4, 3));
+    }
+
+    #[test]
+    fn a_window_with_an_image_coming_waits_for_it() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let mut runner = ScriptRunner::new(Script::Screenshot {
+            out: dir.path().join("shot.png"),
+            frames: None,
+        });
+        let ctx = egui::Context::default();
+        for _ in 0..5 {
+            let (result, asked) = frame(&mut runner, &ctx, Vec::new(), false);
+            assert!(matches!(result, Ok(None)) && !asked);
+        }
+    }
 }

@@ -596,7 +596,7 @@ impl ViewerApp {
             painter.text(
                 rect.center(),
                 egui::Align2::CENTER_CENTER,
-                "Open a .qbk file (File ▸ Open, or drop it here)",
+                "Open a .qbk file (File > Open, or drop it here)",
                 egui::FontId::proportional(18.0),
                 Color32::LIGHT_GRAY,
             );
@@ -797,7 +797,9 @@ impl ViewerApp {
         }
         if let Some(script) = &mut self.script {
             let shown = self.shown.as_ref().map(|s| &s.update);
-            match script.after_frame(&ctx, received, shown, self.renderer.preview_scale()) {
+            let no_image = self.doc.is_none() && self.sequence.is_none();
+            let scale = self.renderer.preview_scale();
+            match script.after_frame(&ctx, received, shown, scale, no_image) {
                 Ok(Some(report)) => {
                     if let Ok(mut g) = self.outcome.lock() {
                         *g = Some(Ok(Some(report)));
