@@ -7,6 +7,7 @@
 
 use std::fmt::Write as _;
 
+use format::sequence::FieldRange;
 use format::{query, ArchivedKdNode, BrickFileView};
 use serde::Serialize;
 
@@ -19,13 +20,14 @@ pub struct LevelInfo {
     pub bricks: u64,
 }
 
-/// Summary of one field. `min`/`max` are the file's range over all finite leaf cells
-/// (JSON `null` if not a number).
+/// Summary of one field: its name and the file's range over all finite leaf cells (the
+/// same [`FieldRange`] the volume and the view state use; JSON `null` if not a number),
+/// and the size of its histogram. Flattened, so the JSON keys stay `name`, `min`, `max`,
+/// `histogram_bins`.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct FieldInfo {
-    pub name: String,
-    pub min: f32,
-    pub max: f32,
+    #[serde(flatten)]
+    pub range: FieldRange,
     pub(crate) histogram_bins: u64,
 }
 
@@ -134,9 +136,11 @@ pub fn info(view: &BrickFileView) -> Info {
             .fields
             .iter()
             .map(|f| FieldInfo {
-                name: f.name.to_string(),
-                min: f.min.to_native(),
-                max: f.max.to_native(),
+                range: FieldRange {
+                    name: f.name.to_string(),
+                    min: f.min.to_native(),
+                    max: f.max.to_native(),
+                },
                 histogram_bins: f.histogram.len() as u64,
             })
             .collect(),
@@ -268,7 +272,7 @@ pub fn to_text(info: &Info) -> String {
         let _ = writeln!(
             s,
             "    {}: min {}, max {} ({} histogram bins)",
-            f.name, f.min, f.max, f.histogram_bins
+            f.range.name, f.range.min, f.range.max, f.histogram_bins
         );
     }
     s

@@ -135,19 +135,10 @@ impl ViewState {
     /// framing the regions where the iso field can cross the iso value (the interesting
     /// part, often much smaller than the domain), or the whole data when none can.
     pub fn default_for_volume(vol: &crate::volume::Volume) -> ViewState {
-        let fields: Vec<FieldRange> = vol
-            .fields
-            .iter()
-            .map(|f| FieldRange {
-                name: f.name.clone(),
-                min: f.min,
-                max: f.max,
-            })
-            .collect();
         let mut s = ViewState::default_for(
             vol.to_world(vol.bounds_min),
             vol.to_world(vol.bounds_max),
-            &fields,
+            &vol.fields,
         );
         if let Ok(f) = vol.field_index(&s.iso_field) {
             let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);

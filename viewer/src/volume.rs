@@ -8,6 +8,7 @@
 //! that data placed at 1e6 keeps sub-cell precision; the traversal and point location
 //! use the same subtraction ([`format::kd`]), so their edge rules agree.
 
+use format::sequence::FieldRange;
 use format::{ArchivedBrickFile, BrickFileView};
 use rkyv::Archived;
 
@@ -48,13 +49,6 @@ pub struct RegionN {
     pub finest_w: f64,
 }
 
-#[derive(Debug, Clone)]
-pub struct FieldInfo {
-    pub name: String,
-    pub min: f32,
-    pub max: f32,
-}
-
 /// The volume as the ray caster sees it.
 pub struct Volume<'a> {
     /// World position of the local frame's origin (`world = local + frame`).
@@ -62,7 +56,8 @@ pub struct Volume<'a> {
     /// Union of supports, local frame.
     pub bounds_min: [f64; 3],
     pub bounds_max: [f64; 3],
-    pub fields: Vec<FieldInfo>,
+    /// Name and range of every field, in the file's order (the values' index).
+    pub fields: Vec<FieldRange>,
     pub(crate) values: Vec<&'a [StoredF32]>,
     pub(crate) file: &'a ArchivedBrickFile,
     /// Cell width per level.
@@ -92,10 +87,10 @@ impl<'a> Volume<'a> {
                 0.0
             }
         });
-        let fields: Vec<FieldInfo> = file
+        let fields: Vec<FieldRange> = file
             .fields
             .iter()
-            .map(|f| FieldInfo {
+            .map(|f| FieldRange {
                 name: f.name.as_str().to_string(),
                 min: f.min.to_native(),
                 max: f.max.to_native(),

@@ -11,7 +11,7 @@ use format::sequence::FramePattern;
 use qbricks_viewer::film;
 use qbricks_viewer::mesh::Meshes;
 use qbricks_viewer::render::{Frame, FrameReport, Renderer, Scene};
-use qbricks_viewer::view_state::{FieldRange, Overrides, ViewState};
+use qbricks_viewer::view_state::{Overrides, ViewState};
 use qbricks_viewer::volume::Volume;
 
 /// The bundled sample, relative to the current directory.
@@ -130,17 +130,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .view
         .apply(&mut state, args.state.is_some())
         .map_err(|m| anyhow::anyhow!(m))?;
-    let fields: Vec<FieldRange> = vol
-        .fields
-        .iter()
-        .map(|f| FieldRange {
-            name: f.name.clone(),
-            min: f.min,
-            max: f.max,
-        })
-        .collect();
     args.view
-        .apply_fields(&mut state, &fields)
+        .apply_fields(&mut state, &vol.fields)
         .with_context(|| path.display().to_string())?;
     state
         .validate()
