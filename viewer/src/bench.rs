@@ -58,8 +58,10 @@ impl Default for BenchOptions {
 pub enum BenchError {
     #[error(transparent)]
     Volume(#[from] VolumeError),
-    #[error("{0}")]
-    Invalid(String),
+    #[error("--reference-step: expected a positive number, found {step}")]
+    ReferenceStep { step: f64 },
+    #[error("steps must be positive numbers")]
+    Steps,
     #[error("{path}: {message}")]
     Plot { path: String, message: String },
 }
@@ -140,16 +142,20 @@ fn render_median(
     repeat: u32,
 ) -> Result<(Frame, f64), BenchError> {
     let scene = Scene::new(vol, state, meshes)?;
-    let mut times = Vec::new();
-    let mut frame = None;
-    for _ in 0..repeat.max(1) {
+    let timed = || {
         let t = Instant::now();
         let f = renderer.render(&scene);
-        times.push(t.elapsed().as_secs_f64() * 1e3);
-        frame = Some(f);
+        (f, t.elapsed().as_secs_f64() * 1e3)
+    };
+    // At least one render, so there always is a frame; the last one is kept.
+    let (mut frame, ms) = timed();
+    let mut times = vec![ms];
+    for _ in 1..repeat {
+        let (f, ms) = timed();
+        times.push(ms);
+        frame = f;
     }
     times.sort_by(f64::total_cmp);
-    let frame = frame.ok_or_else(|| BenchError::Invalid("nothing rendered".into()))?;
     Ok((frame, times[times.len() / 2]))
 }
 
@@ -163,10 +169,9 @@ pub fn reference(
     opts: &BenchOptions,
 ) -> Result<Reference, BenchError> {
     if !(opts.reference_step > 0.0 && opts.reference_step.is_finite()) {
-        return Err(BenchError::Invalid(format!(
-            "--reference-step: expected a positive number, found {}",
-            opts.reference_step
-        )));
+        return Err(BenchError::ReferenceStep {
+            step: opts.reference_step,
+        });
     }
     let mut st = state.clone();
     st.strategy = Strategy::Uniform;
@@ -273,9 +278,7 @@ pub fn bench(
     progress: &mut dyn FnMut(&str),
 ) -> Result<(Reference, Vec<Run>), BenchError> {
     if opts.steps.iter().any(|s| !(*s > 0.0 && s.is_finite())) {
-        return Err(BenchError::Invalid(
-            "steps must be positive numbers".to_string(),
-        ));
+        return Err(BenchError::Steps);
     }
     let reference = reference(renderer, vol, state, meshes, opts)?;
     progress("reference");
@@ -423,7 +426,7 @@ pub fn plot_png(runs: &[Run], title: &str, size: (u32, u32)) -> Result<Vec<u8>, 
         .chunks_exact(3)
         .map(|p| [p[0], p[1], p[2]].map(|v| f32::from(v) / 255.0))
         .collect();
-    crate::film::encode_png(w, h, &rgb)
+    crate::film::encode_png(w, h, &rgb).map_err(|e| e.to_string())
 }
 
 /// Writes [`plot_png`] to `path` atomically.

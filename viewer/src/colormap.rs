@@ -131,42 +131,65 @@ impl ColorMap {
     }
 
     /// Checks what serde cannot: finite, sorted values, a finite non-negative band,
-    /// colours in 0..=1. The message names the offending entry.
-    pub fn validate(&self) -> Result<(), String> {
+    /// colours in 0..=1.
+    pub fn validate(&self) -> Result<(), ColorMapError> {
         if !(self.band.is_finite() && self.band >= 0.0) {
-            return Err(format!(
-                "band: expected a finite number ≥ 0, found {}",
-                self.band
-            ));
+            return Err(ColorMapError::Band { band: self.band });
         }
         if self.points.is_empty() {
-            return Err("points: expected at least one control point, found none".into());
+            return Err(ColorMapError::NoPoints);
         }
-        for (i, p) in self.points.iter().enumerate() {
+        for (index, p) in self.points.iter().enumerate() {
             if !p.value.is_finite() {
-                return Err(format!("points[{i}].value: not finite ({})", p.value));
+                return Err(ColorMapError::Value {
+                    index,
+                    value: p.value,
+                });
             }
             if p.colour.iter().any(|c| !(0.0..=1.0).contains(c)) {
-                return Err(format!(
-                    "points[{i}].colour: expected components in 0..=1, found {:?}",
-                    p.colour
-                ));
+                return Err(ColorMapError::Colour {
+                    index,
+                    colour: p.colour,
+                });
             }
         }
         for (i, w) in self.points.windows(2).enumerate() {
             if let [a, b] = w {
                 if b.value < a.value {
-                    return Err(format!(
-                        "points[{}].value {} is below points[{i}].value {}: points must be sorted",
-                        i + 1,
-                        b.value,
-                        a.value
-                    ));
+                    return Err(ColorMapError::Unsorted {
+                        index: i + 1,
+                        value: b.value,
+                        previous: a.value,
+                    });
                 }
             }
         }
         Ok(())
     }
+}
+
+/// Why a colour map is refused. The message names the offending entry, so a view state's
+/// error can prefix `colormap.`.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum ColorMapError {
+    #[error("band: expected a finite number ≥ 0, found {band}")]
+    Band { band: f32 },
+    #[error("points: expected at least one control point, found none")]
+    NoPoints,
+    #[error("points[{index}].value: not finite ({value})")]
+    Value { index: usize, value: f32 },
+    #[error("points[{index}].colour: expected components in 0..=1, found {colour:?}")]
+    Colour { index: usize, colour: [f32; 3] },
+    /// `points[index]` lies below the point before it.
+    #[error(
+        "points[{index}].value {value} is below points[{}].value {previous}: points must be sorted",
+        .index - 1
+    )]
+    Unsorted {
+        index: usize,
+        value: f32,
+        previous: f32,
+    },
 }
 
 #[cfg(test)]
@@ -266,12 +289,18 @@ mod tests {
     fn validate_names_the_problem() {
         let mut m = ColorMap::seed_report();
         m.points.swap(0, 1);
-        assert!(m.validate().unwrap_err().contains("points[1]"));
+        assert!(matches!(
+            m.validate(),
+            Err(ColorMapError::Unsorted { index: 1, .. })
+        ));
         let mut m = ColorMap::seed_report();
         m.band = -1.0;
-        assert!(m.validate().unwrap_err().contains("band"));
+        assert!(matches!(m.validate(), Err(ColorMapError::Band { .. })));
         let mut m = ColorMap::seed_report();
         m.points[2].colour = [2.0, 0.0, 0.0];
-        assert!(m.validate().unwrap_err().contains("points[2].colour"));
+        assert!(matches!(
+            m.validate(),
+            Err(ColorMapError::Colour { index: 2, .. })
+        ));
     }
 }

@@ -76,11 +76,29 @@ impl Film {
     }
 }
 
+/// Why a PNG could not be written: the file, and whether encoding or writing failed.
 #[derive(Debug, thiserror::Error)]
-#[error("{}: {message}", path.display())]
-pub struct FilmError {
-    pub path: PathBuf,
-    pub message: String,
+pub enum FilmError {
+    #[error("{}: {error}", path.display())]
+    Encode { path: PathBuf, error: EncodeError },
+    #[error("{}: {error}", path.display())]
+    Write {
+        path: PathBuf,
+        error: std::io::Error,
+    },
+}
+
+/// Why pixels could not be encoded as a PNG.
+#[derive(Debug, thiserror::Error)]
+pub enum EncodeError {
+    #[error("expected {} pixels for {width}x{height}, found {found}", *width as usize * *height as usize)]
+    PixelCount {
+        width: u32,
+        height: u32,
+        found: usize,
+    },
+    #[error("{0}")]
+    Png(image::ImageError),
 }
 
 /// 8-bit RGB bytes of an image of linear values in 0..=1 (clamped, rounded).
@@ -91,28 +109,31 @@ pub fn to_rgb8(rgb: &[[f32; 3]]) -> Vec<u8> {
 }
 
 /// PNG bytes of a `width`×`height` image.
-pub fn encode_png(width: u32, height: u32, rgb: &[[f32; 3]]) -> Result<Vec<u8>, String> {
+pub fn encode_png(width: u32, height: u32, rgb: &[[f32; 3]]) -> Result<Vec<u8>, EncodeError> {
+    let wrong_count = || EncodeError::PixelCount {
+        width,
+        height,
+        found: rgb.len(),
+    };
     if rgb.len() != width as usize * height as usize {
-        return Err(format!(
-            "expected {} pixels for {width}x{height}, found {}",
-            width as usize * height as usize,
-            rgb.len()
-        ));
+        return Err(wrong_count());
     }
-    let img = image::RgbImage::from_raw(width, height, to_rgb8(rgb))
-        .ok_or_else(|| "pixel buffer does not match the image size".to_string())?;
+    // Cannot fail after the count check; the same error if it ever did.
+    let img = image::RgbImage::from_raw(width, height, to_rgb8(rgb)).ok_or_else(wrong_count)?;
     let mut out = std::io::Cursor::new(Vec::new());
     img.write_to(&mut out, image::ImageFormat::Png)
-        .map_err(|e| e.to_string())?;
+        .map_err(EncodeError::Png)?;
     Ok(out.into_inner())
 }
 
 /// Writes the image as a PNG at `path`, atomically.
 pub fn save_png(path: &Path, width: u32, height: u32, rgb: &[[f32; 3]]) -> Result<(), FilmError> {
-    let err = |message: String| FilmError {
+    let bytes = encode_png(width, height, rgb).map_err(|error| FilmError::Encode {
         path: path.to_path_buf(),
-        message,
-    };
-    let bytes = encode_png(width, height, rgb).map_err(err)?;
-    format::output::write_atomic(path, |f| f.write_all(&bytes)).map_err(|e| err(e.to_string()))
+        error,
+    })?;
+    format::output::write_atomic(path, |f| f.write_all(&bytes)).map_err(|error| FilmError::Write {
+        path: path.to_path_buf(),
+        error,
+    })
 }

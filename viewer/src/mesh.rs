@@ -35,7 +35,7 @@ impl MeshInstance {
     }
 
     /// Parses the CLI form `PATH[@x,y,z,scale]`, e.g. `data/sphere.obj@0,0,0,1`.
-    pub fn parse(spec: &str) -> Result<MeshInstance, String> {
+    pub fn parse(spec: &str) -> Result<MeshInstance, MeshSpecError> {
         let Some((path, place)) = spec.rsplit_once('@') else {
             return Ok(MeshInstance::at_origin(spec));
         };
@@ -43,19 +43,22 @@ impl MeshInstance {
             .split(',')
             .map(|s| s.trim().parse::<f64>())
             .collect::<Result<_, _>>()
-            .map_err(|e| format!("mesh placement `{place}`: expected x,y,z,scale numbers: {e}"))?;
+            .map_err(|error| MeshSpecError::Number {
+                place: place.to_string(),
+                error,
+            })?;
         let [x, y, z, scale] = nums[..] else {
-            return Err(format!(
-                "mesh placement `{place}`: expected 4 numbers x,y,z,scale, found {}",
-                nums.len()
-            ));
+            return Err(MeshSpecError::Count {
+                place: place.to_string(),
+                found: nums.len(),
+            });
         };
         let m = MeshInstance {
             translation: [x, y, z],
             scale,
             ..MeshInstance::at_origin(path)
         };
-        m.validate().map_err(|e| e.to_string())?;
+        m.validate().map_err(MeshSpecError::Placement)?;
         Ok(m)
     }
 
@@ -436,6 +439,21 @@ impl Meshes {
     }
 }
 
+/// Why a `PATH[@x,y,z,scale]` mesh spec is refused.
+#[derive(Debug, thiserror::Error)]
+pub enum MeshSpecError {
+    #[error("mesh placement `{place}`: expected x,y,z,scale numbers: {error}")]
+    Number {
+        place: String,
+        error: std::num::ParseFloatError,
+    },
+    #[error("mesh placement `{place}`: expected 4 numbers x,y,z,scale, found {found}")]
+    Count { place: String, found: usize },
+    /// The numbers parse but do not place a mesh (a scale ≤ 0, …).
+    #[error("{0}")]
+    Placement(MeshError),
+}
+
 /// A mesh that cannot be placed or loaded: the file and what is wrong with it.
 #[derive(Debug, thiserror::Error)]
 #[error("{}: {kind}", path.display())]
@@ -651,9 +669,21 @@ mod tests {
         assert_eq!(m.translation, [1.0, 2.0, 3.0]);
         assert_eq!(m.scale, 0.5);
         assert_eq!(MeshInstance::parse("a.obj").expect("plain").scale, 1.0);
-        assert!(MeshInstance::parse("a.obj@1,2,3").is_err());
-        assert!(MeshInstance::parse("a.obj@1,2,3,x").is_err());
-        assert!(MeshInstance::parse("a.obj@1,2,3,-1").is_err());
+        assert!(matches!(
+            MeshInstance::parse("a.obj@1,2,3"),
+            Err(MeshSpecError::Count { found: 3, .. })
+        ));
+        assert!(matches!(
+            MeshInstance::parse("a.obj@1,2,3,x"),
+            Err(MeshSpecError::Number { .. })
+        ));
+        assert!(matches!(
+            MeshInstance::parse("a.obj@1,2,3,-1"),
+            Err(MeshSpecError::Placement(MeshError {
+                kind: MeshErrorKind::Scale { .. },
+                ..
+            }))
+        ));
     }
 
     #[test]

@@ -48,7 +48,7 @@ pub fn default_field(vol: &Volume) -> usize {
 /// Only a line of three column names (see [`is_header`]) is a header: a malformed first
 /// data line (`0,0`, `nan,0,0`, `0;0;0`, `0x1,0,0`) is an error like any other line, so a
 /// typo cannot silently drop the only point, or every point after a mistaken header.
-pub fn parse_points_csv(text: &str) -> Result<Vec<[f64; 3]>, String> {
+pub fn parse_points_csv(text: &str) -> Result<Vec<[f64; 3]>, PointsCsvError> {
     let mut out = Vec::new();
     let mut first = true;
     for (i, line) in text.lines().enumerate() {
@@ -59,7 +59,7 @@ pub fn parse_points_csv(text: &str) -> Result<Vec<[f64; 3]>, String> {
         if std::mem::take(&mut first) && is_header(line) {
             continue;
         }
-        out.push(parse_xyz(line).map_err(|e| format!("line {}: {e}", i + 1))?);
+        out.push(parse_xyz(line).map_err(|error| PointsCsvError { line: i + 1, error })?);
     }
     Ok(out)
 }
@@ -78,40 +78,85 @@ pub(crate) fn is_header(line: &str) -> bool {
         })
 }
 
+/// Why a line of a points CSV is refused: its 1-based number and the point's error.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("line {line}: {error}")]
+pub struct PointsCsvError {
+    pub line: usize,
+    pub error: PointError,
+}
+
+/// Why `x,y,z` is not a point.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PointError {
+    #[error("expected x,y,z, found `{text}`")]
+    NotThree { text: String },
+    #[error("expected a number, found `{number}` in `{text}`")]
+    NotNumber { number: String, text: String },
+    #[error("expected a finite number, found `{number}`")]
+    NotFinite { number: String },
+}
+
 /// Parses `x,y,z`.
-pub(crate) fn parse_xyz(s: &str) -> Result<[f64; 3], String> {
+pub(crate) fn parse_xyz(s: &str) -> Result<[f64; 3], PointError> {
     let nums: Vec<&str> = s.split(',').map(str::trim).collect();
     if nums.len() != 3 {
-        return Err(format!("expected x,y,z, found `{s}`"));
+        return Err(PointError::NotThree {
+            text: s.to_string(),
+        });
     }
     let mut p = [0.0; 3];
     for (a, n) in nums.iter().enumerate() {
-        p[a] = n
-            .parse::<f64>()
-            .map_err(|_| format!("expected a number, found `{n}` in `{s}`"))?;
+        p[a] = n.parse::<f64>().map_err(|_| PointError::NotNumber {
+            number: n.to_string(),
+            text: s.to_string(),
+        })?;
         if !p[a].is_finite() {
-            return Err(format!("expected a finite number, found `{n}`"));
+            return Err(PointError::NotFinite {
+                number: n.to_string(),
+            });
         }
     }
     Ok(p)
+}
+
+/// Why a `--line` is refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum LineError {
+    #[error("expected x0,y0,z0:x1,y1,z1:N, found `{text}`")]
+    Form { text: String },
+    /// One of the two ends.
+    #[error("{0}")]
+    End(PointError),
+    #[error("expected a point count N, found `{count}`")]
+    NotCount { count: String },
+    #[error("expected 1..={MAX_LINE_POINTS} points, found {count}")]
+    Count { count: usize },
+    /// Ends so far apart that points between them overflow.
+    #[error("a point of the line is not finite ({point:?}): ends too close to the largest f64")]
+    NotFinite { point: [f64; 3] },
 }
 
 /// Largest number of points of a `--line`.
 pub(crate) const MAX_LINE_POINTS: usize = 10_000_000;
 
 /// Parses `x0,y0,z0:x1,y1,z1:N` into `N` evenly spaced points from start to end inclusive.
-pub fn parse_line(s: &str) -> Result<Vec<[f64; 3]>, String> {
+pub fn parse_line(s: &str) -> Result<Vec<[f64; 3]>, LineError> {
     let parts: Vec<&str> = s.split(':').collect();
     let [a, b, n] = parts[..] else {
-        return Err(format!("expected x0,y0,z0:x1,y1,z1:N, found `{s}`"));
+        return Err(LineError::Form {
+            text: s.to_string(),
+        });
     };
-    let (a, b) = (parse_xyz(a)?, parse_xyz(b)?);
-    let n: usize = n
-        .trim()
-        .parse()
-        .map_err(|_| format!("expected a point count N, found `{n}`"))?;
+    let (a, b) = (
+        parse_xyz(a).map_err(LineError::End)?,
+        parse_xyz(b).map_err(LineError::End)?,
+    );
+    let n: usize = n.trim().parse().map_err(|_| LineError::NotCount {
+        count: n.to_string(),
+    })?;
     if n == 0 || n > MAX_LINE_POINTS {
-        return Err(format!("expected 1..={MAX_LINE_POINTS} points, found {n}"));
+        return Err(LineError::Count { count: n });
     }
     // `a + s (b - a)` overflows when `b - a` does (`-1e308 → 1e308`); the weighted sum of
     // two finite ends stays within them up to rounding, and is exact at both ends.
@@ -125,10 +170,8 @@ pub fn parse_line(s: &str) -> Result<Vec<[f64; 3]>, String> {
             std::array::from_fn(|k| (1.0 - s) * a[k] + s * b[k])
         })
         .collect();
-    if let Some(p) = points.iter().find(|p| !p.iter().all(|v| v.is_finite())) {
-        return Err(format!(
-            "a point of the line is not finite ({p:?}): ends too close to the largest f64"
-        ));
+    if let Some(&point) = points.iter().find(|p| !p.iter().all(|v| v.is_finite())) {
+        return Err(LineError::NotFinite { point });
     }
     Ok(points)
 }
@@ -157,7 +200,7 @@ mod tests {
             "x,y,z,w",
         ] {
             let e = parse_points_csv(&format!("{bad}\n1,2,3\n")).expect_err(bad);
-            assert!(e.starts_with("line 1: "), "{bad}: {e}");
+            assert_eq!(e.line, 1, "{bad}: {e}");
         }
         // Blank lines before the header do not make it a data line; a second header is.
         assert_eq!(
@@ -165,7 +208,11 @@ mod tests {
             vec![[4.0, 5.0, 6.0]]
         );
         let e = parse_points_csv("x,y,z\nx,y,z\n").expect_err("two headers");
-        assert!(e.starts_with("line 2: "), "{e}");
+        assert_eq!(e.line, 2, "{e}");
+        assert_eq!(
+            e.to_string(),
+            "line 2: expected a number, found `x` in `x,y,z`"
+        );
     }
 
     #[test]
@@ -178,7 +225,13 @@ mod tests {
         let pts = parse_line("0.1,0.2,0.3:0.7,-0.9,1.1:7").expect("line");
         assert_eq!(pts[0], [0.1, 0.2, 0.3]);
         assert_eq!(pts[6], [0.7, -0.9, 1.1]);
-        assert!(parse_line("nan,0,0:1,0,0:2").is_err());
-        assert!(parse_line("1e309,0,0:1,0,0:2").is_err());
+        assert!(matches!(
+            parse_line("nan,0,0:1,0,0:2"),
+            Err(LineError::End(PointError::NotFinite { .. }))
+        ));
+        assert!(matches!(
+            parse_line("1e309,0,0:1,0,0:2"),
+            Err(LineError::End(PointError::NotFinite { .. }))
+        ));
     }
 }

@@ -25,6 +25,7 @@ use crate::film::Film;
 use crate::mesh::Meshes;
 use crate::render::{tiles, CancelToken, Counts, Renderer, Scene, TileResult};
 use crate::view_state::ViewState;
+use crate::volume::VolumeError;
 
 /// One view to render.
 #[derive(Clone)]
@@ -318,8 +319,8 @@ fn worker_loop(shared: &Shared, renderer: &Renderer) {
             }
         };
         let generation = pending.generation;
-        if let Err(message) = run_job(shared, renderer, pending) {
-            shared.lock().error = Some((generation, message));
+        if let Err(e) = run_job(shared, renderer, pending) {
+            shared.lock().error = Some((generation, e.to_string()));
             shared.changed.notify_all();
             (shared.notify)();
         }
@@ -341,7 +342,7 @@ fn upscale(src: &[[f32; 3]], pw: u32, ph: u32, w: u32, h: u32) -> Vec<[f32; 3]> 
     out
 }
 
-fn run_job(shared: &Shared, renderer: &Renderer, p: Pending) -> Result<(), String> {
+fn run_job(shared: &Shared, renderer: &Renderer, p: Pending) -> Result<(), VolumeError> {
     let Pending {
         generation,
         job,
@@ -365,7 +366,7 @@ fn run_job(shared: &Shared, renderer: &Renderer, p: Pending) -> Result<(), Strin
         ps.width = w.div_ceil(scale).max(1);
         ps.height = h.div_ceil(scale).max(1);
         ps.spp = 1;
-        let scene = Scene::new(vol, &ps, &job.meshes).map_err(|e| e.to_string())?;
+        let scene = Scene::new(vol, &ps, &job.meshes)?;
         let t = Instant::now();
         let acc = Mutex::new((Film::new(ps.width, ps.height), Counts::default()));
         let sink = |r: TileResult| {
@@ -414,7 +415,7 @@ fn run_job(shared: &Shared, renderer: &Renderer, p: Pending) -> Result<(), Strin
     }
 
     // Full resolution, one sample wave after another.
-    let scene = Scene::new(vol, state, &job.meshes).map_err(|e| e.to_string())?;
+    let scene = Scene::new(vol, state, &job.meshes)?;
     let spp = state.spp.max(1);
     let all = tiles(w, h);
     let t = Instant::now();

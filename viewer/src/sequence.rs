@@ -11,7 +11,7 @@
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
-use format::sequence::{FieldRange, FramePattern, Manifest, ManifestError};
+use format::sequence::{FieldRange, FramePattern, Manifest, ManifestError, PatternError};
 use format::OpenOptions;
 
 use crate::view_state::ViewState;
@@ -27,11 +27,22 @@ pub struct FrameRange {
     pub last: Option<u64>,
 }
 
+/// Why a `--frames` range does not parse.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum FrameRangeError {
+    #[error("expected A..B (both included), A.., ..B or A, found `{text}`")]
+    Form { text: String },
+    #[error("first frame {first} is after the last {last} in `{text}`")]
+    Reversed { first: u64, last: u64, text: String },
+}
+
 impl FromStr for FrameRange {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        let bad = || format!("expected A..B (both included), A.., ..B or A, found `{s}`");
-        let num = |t: &str| -> Result<Option<u64>, String> {
+    type Err = FrameRangeError;
+    fn from_str(s: &str) -> Result<Self, FrameRangeError> {
+        let bad = || FrameRangeError::Form {
+            text: s.to_string(),
+        };
+        let num = |t: &str| -> Result<Option<u64>, FrameRangeError> {
             let t = t.trim();
             if t.is_empty() {
                 Ok(None)
@@ -48,7 +59,11 @@ impl FromStr for FrameRange {
         };
         if let (Some(a), Some(b)) = (first, last) {
             if a > b {
-                return Err(format!("first frame {a} is after the last {b} in `{s}`"));
+                return Err(FrameRangeError::Reversed {
+                    first: a,
+                    last: b,
+                    text: s.to_string(),
+                });
             }
         }
         Ok(FrameRange { first, last })
@@ -227,16 +242,27 @@ pub fn survey(
 
 /// Output path of `frame` for an output pattern, refusing a plain output name: every frame
 /// would overwrite the one before.
-pub fn output_pattern(output: &Path) -> Result<FramePattern, String> {
+pub fn output_pattern(output: &Path) -> Result<FramePattern, OutputPatternError> {
     match FramePattern::parse(output) {
         Ok(Some(p)) => Ok(p),
-        Ok(None) => Err(format!(
-            "{}: the input is a frame sequence, so -o must be a pattern too \
-             (e.g. png/frame_####.png or png/frame_%04d.png)",
-            output.display()
-        )),
-        Err(e) => Err(e.to_string()),
+        Ok(None) => Err(OutputPatternError::NotPattern {
+            output: output.to_path_buf(),
+        }),
+        Err(e) => Err(OutputPatternError::Pattern(e)),
     }
+}
+
+/// Why `-o` cannot name the frames of a sequence.
+#[derive(Debug, thiserror::Error)]
+pub enum OutputPatternError {
+    #[error(
+        "{}: the input is a frame sequence, so -o must be a pattern too \
+         (e.g. png/frame_####.png or png/frame_%04d.png)",
+        output.display()
+    )]
+    NotPattern { output: PathBuf },
+    #[error("{0}")]
+    Pattern(PatternError),
 }
 
 #[cfg(test)]
@@ -301,7 +327,10 @@ mod tests {
             select_frames(&empty, "g", None),
             Err(SequenceError::NoFrames { .. })
         ));
-        assert!(output_pattern(Path::new("out.png")).is_err());
+        assert!(matches!(
+            output_pattern(Path::new("out.png")),
+            Err(OutputPatternError::NotPattern { .. })
+        ));
         assert!(output_pattern(Path::new("png/f_%04d.png")).is_ok());
     }
 }

@@ -46,9 +46,28 @@ impl Default for Material {
     }
 }
 
+/// Why a light or a material is refused. The message names the field, so a view state's
+/// error can prefix where the light or material sits (`lights[1].`, `material.`).
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum ShadingError {
+    /// A material coefficient (`ambient`, `diffuse`, `specular`, `shininess`).
+    #[error("{name}: expected a finite number ≥ 0, found {value}")]
+    Coefficient { name: &'static str, value: f32 },
+    /// A light's `direction` or `position`.
+    #[error("{name}: not finite ({value:?})")]
+    NotFinite { name: &'static str, value: [f64; 3] },
+    /// A directional light needs a direction to shine along.
+    #[error("direction: expected a non-zero vector, found [0, 0, 0]")]
+    ZeroDirection,
+    #[error("colour: expected components ≥ 0, found {colour:?}")]
+    Colour { colour: [f32; 3] },
+    #[error("intensity: expected a finite number ≥ 0, found {intensity}")]
+    Intensity { intensity: f32 },
+}
+
 impl Material {
-    /// Checks finite, non-negative coefficients (the message names the field).
-    pub fn validate(&self) -> Result<(), String> {
+    /// Checks finite, non-negative coefficients.
+    pub fn validate(&self) -> Result<(), ShadingError> {
         for (name, v) in [
             ("ambient", self.ambient),
             ("diffuse", self.diffuse),
@@ -56,7 +75,7 @@ impl Material {
             ("shininess", self.shininess),
         ] {
             if !(v.is_finite() && v >= 0.0) {
-                return Err(format!("{name}: expected a finite number ≥ 0, found {v}"));
+                return Err(ShadingError::Coefficient { name, value: v });
             }
         }
         Ok(())
@@ -101,8 +120,8 @@ impl Light {
     }
 
     /// Checks finite numbers, a non-zero direction and non-negative colour/intensity.
-    pub fn validate(&self) -> Result<(), String> {
-        let (v, what, colour, intensity) = match *self {
+    pub fn validate(&self) -> Result<(), ShadingError> {
+        let (v, name, colour, intensity) = match *self {
             Light::Directional {
                 direction,
                 colour,
@@ -115,18 +134,16 @@ impl Light {
             } => (position, "position", colour, intensity),
         };
         if v.iter().any(|x| !x.is_finite()) {
-            return Err(format!("{what}: not finite ({v:?})"));
+            return Err(ShadingError::NotFinite { name, value: v });
         }
-        if what == "direction" && v.iter().all(|x| *x == 0.0) {
-            return Err("direction: expected a non-zero vector, found [0, 0, 0]".into());
+        if name == "direction" && v.iter().all(|x| *x == 0.0) {
+            return Err(ShadingError::ZeroDirection);
         }
         if colour.iter().any(|c| !(c.is_finite() && *c >= 0.0)) {
-            return Err(format!("colour: expected components ≥ 0, found {colour:?}"));
+            return Err(ShadingError::Colour { colour });
         }
         if !(intensity.is_finite() && intensity >= 0.0) {
-            return Err(format!(
-                "intensity: expected a finite number ≥ 0, found {intensity}"
-            ));
+            return Err(ShadingError::Intensity { intensity });
         }
         Ok(())
     }
@@ -231,7 +248,7 @@ mod tests {
         assert!(d.is_finite() && dist == 0.0);
         let zero = dir_light([0.0; 3], 1.0);
         assert!(zero.towards(DVec3::ZERO).0.is_finite());
-        assert!(zero.validate().is_err());
+        assert_eq!(zero.validate(), Err(ShadingError::ZeroDirection));
     }
 
     #[test]

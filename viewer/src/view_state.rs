@@ -12,10 +12,10 @@ use format::input::{read_whole, InputErrorKind, Limits};
 use serde::{Deserialize, Serialize};
 
 use crate::camera::{Camera, Projection};
-use crate::colormap::ColorMap;
-use crate::mesh::MeshInstance;
+use crate::colormap::{ColorMap, ColorMapError};
+use crate::mesh::{MeshError, MeshInstance, MeshSpecError};
 pub use crate::sampling::Strategy;
-use crate::shading::{default_lights, Light, Material};
+use crate::shading::{default_lights, Light, Material, ShadingError};
 pub use crate::transfer::{Band, Mode};
 
 /// Range of one field: of a file (from its field table), or of a whole sequence (from its
@@ -101,8 +101,83 @@ pub enum ViewStateError {
         path: PathBuf,
         error: serde_json::Error,
     },
-    #[error("{}: {message}", path.display())]
-    Invalid { path: PathBuf, message: String },
+    #[error("{}: {error}", path.display())]
+    Invalid {
+        path: PathBuf,
+        error: InvalidViewState,
+    },
+    /// Larger than a view state may be; `size` is `None` for a stream that went on past
+    /// the limit.
+    #[error(
+        "{}: expected a JSON view state of at most {limit} bytes, found {}",
+        path.display(),
+        found_bytes(*size)
+    )]
+    TooLarge {
+        path: PathBuf,
+        limit: u64,
+        size: Option<u64>,
+    },
+    /// Not a file that can be read whole (a directory, …).
+    #[error("{}: {kind}", path.display())]
+    Input { path: PathBuf, kind: InputErrorKind },
+    #[error("{}: not UTF-8 text: {error}", path.display())]
+    NotUtf8 {
+        path: PathBuf,
+        error: std::str::Utf8Error,
+    },
+}
+
+/// `N bytes`, or `more` for a stream read no further than the limit.
+fn found_bytes(size: Option<u64>) -> String {
+    match size {
+        Some(n) => format!("{n} bytes"),
+        None => "more".to_string(),
+    }
+}
+
+/// What [`ViewState::validate`] refuses: a value the JSON types allow but the renderer
+/// cannot use. The message names the field by its JSON path.
+#[derive(Debug, thiserror::Error)]
+pub enum InvalidViewState {
+    /// `eye`, `look_at` or `up` of the camera.
+    #[error("camera.{name}: not finite ({value:?})")]
+    CameraNotFinite { name: &'static str, value: [f64; 3] },
+    #[error("camera: eye and look_at are the same point")]
+    EyeAtLookAt,
+    #[error(
+        "camera.up: {up:?} is zero or parallel to the view direction (eye → look_at), \
+         which leaves the image's roll undefined"
+    )]
+    UpAlongView { up: [f64; 3] },
+    #[error("camera.projection.fov_deg: expected 0 < fov < 179, found {fov_deg}")]
+    FieldOfView { fov_deg: f64 },
+    #[error("camera.projection.width: expected a finite number > 0, found {width}")]
+    OrthographicWidth { width: f64 },
+    #[error("iso: not finite ({iso})")]
+    Iso { iso: f64 },
+    #[error("step: expected a finite number ≥ {MIN_STEP} (cell widths), found {step:?}")]
+    Step { step: f64 },
+    #[error("spp: expected 1..={MAX_SPP}, found {spp}")]
+    Spp { spp: u32 },
+    /// `transfer.sigma`, `transfer.peak` or `transfer.k`.
+    #[error("{name}: expected a finite number > 0, found {value}")]
+    Transfer { name: &'static str, value: f64 },
+    #[error("colormap.{0}")]
+    ColorMap(ColorMapError),
+    #[error("lights[{index}].{error}")]
+    Light { index: usize, error: ShadingError },
+    #[error("material.{0}")]
+    Material(ShadingError),
+    #[error("meshes: expected at most {MAX_MESHES} entries, found {count}")]
+    TooManyMeshes { count: usize },
+    #[error("meshes[{index}]: {error}")]
+    Mesh { index: usize, error: MeshError },
+    #[error("background: expected components in 0..=1, found {background:?}")]
+    Background { background: [f32; 3] },
+    /// `width` or `height`.
+    #[error("{name}: expected 1..={MAX_IMAGE_SIDE}, found {value}")]
+    ImageSide { name: &'static str, value: u32 },
 }
 
 /// The iso value and dvr band width a field starts with: 10 % of its positive maximum
@@ -228,16 +303,16 @@ impl ViewState {
         }
     }
 
-    /// Checks what the JSON types cannot; the message names the field.
-    pub fn validate(&self) -> Result<(), String> {
+    /// Checks what the JSON types cannot.
+    pub fn validate(&self) -> Result<(), InvalidViewState> {
         let c = &self.camera;
-        for (name, v) in [("eye", c.eye), ("look_at", c.look_at), ("up", c.up)] {
-            if v.iter().any(|x| !x.is_finite()) {
-                return Err(format!("camera.{name}: not finite ({v:?})"));
+        for (name, value) in [("eye", c.eye), ("look_at", c.look_at), ("up", c.up)] {
+            if value.iter().any(|x| !x.is_finite()) {
+                return Err(InvalidViewState::CameraNotFinite { name, value });
             }
         }
         if c.eye == c.look_at {
-            return Err("camera: eye and look_at are the same point".into());
+            return Err(InvalidViewState::EyeAtLookAt);
         }
         // An up vector along the view direction leaves the image's roll undefined; the
         // camera would silently pick a world axis instead.
@@ -250,73 +325,62 @@ impl ViewState {
         let norm = |v: [f64; 3]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
         let sine_ok = norm(cross) > 1e-9 * norm(forward) * norm(c.up);
         if !sine_ok {
-            return Err(format!(
-                "camera.up: {:?} is zero or parallel to the view direction (eye → look_at), \
-                 which leaves the image's roll undefined",
-                c.up
-            ));
+            return Err(InvalidViewState::UpAlongView { up: c.up });
         }
         match c.projection {
             Projection::Perspective { fov_deg } if !(fov_deg > 0.0 && fov_deg < 179.0) => {
-                return Err(format!(
-                    "camera.projection.fov_deg: expected 0 < fov < 179, found {fov_deg}"
-                ))
+                return Err(InvalidViewState::FieldOfView { fov_deg })
             }
             Projection::Orthographic { width } if !(width > 0.0 && width.is_finite()) => {
-                return Err(format!(
-                    "camera.projection.width: expected a finite number > 0, found {width}"
-                ))
+                return Err(InvalidViewState::OrthographicWidth { width })
             }
             _ => {}
         }
         if !self.iso.is_finite() {
-            return Err(format!("iso: not finite ({})", self.iso));
+            return Err(InvalidViewState::Iso { iso: self.iso });
         }
         if !(self.step.is_finite() && self.step >= MIN_STEP) {
-            return Err(format!(
-                "step: expected a finite number ≥ {MIN_STEP} (cell widths), found {:?}",
-                self.step
-            ));
+            return Err(InvalidViewState::Step { step: self.step });
         }
         if !(1..=MAX_SPP).contains(&self.spp) {
-            return Err(format!("spp: expected 1..={MAX_SPP}, found {}", self.spp));
+            return Err(InvalidViewState::Spp { spp: self.spp });
         }
-        for (name, v) in [
+        for (name, value) in [
             ("transfer.sigma", self.transfer.sigma),
             ("transfer.peak", self.transfer.peak),
             ("transfer.k", self.transfer.k),
         ] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(format!("{name}: expected a finite number > 0, found {v}"));
+            if !(value.is_finite() && value > 0.0) {
+                return Err(InvalidViewState::Transfer { name, value });
             }
         }
         self.colormap
             .validate()
-            .map_err(|m| format!("colormap.{m}"))?;
-        for (i, l) in self.lights.iter().enumerate() {
-            l.validate().map_err(|m| format!("lights[{i}].{m}"))?;
+            .map_err(InvalidViewState::ColorMap)?;
+        for (index, l) in self.lights.iter().enumerate() {
+            l.validate()
+                .map_err(|error| InvalidViewState::Light { index, error })?;
         }
         self.material
             .validate()
-            .map_err(|m| format!("material.{m}"))?;
+            .map_err(InvalidViewState::Material)?;
         if self.meshes.len() > MAX_MESHES {
-            return Err(format!(
-                "meshes: expected at most {MAX_MESHES} entries, found {}",
-                self.meshes.len()
-            ));
+            return Err(InvalidViewState::TooManyMeshes {
+                count: self.meshes.len(),
+            });
         }
-        for (i, m) in self.meshes.iter().enumerate() {
-            m.validate().map_err(|e| format!("meshes[{i}]: {e}"))?;
+        for (index, m) in self.meshes.iter().enumerate() {
+            m.validate()
+                .map_err(|error| InvalidViewState::Mesh { index, error })?;
         }
         if self.background.iter().any(|c| !(0.0..=1.0).contains(c)) {
-            return Err(format!(
-                "background: expected components in 0..=1, found {:?}",
-                self.background
-            ));
+            return Err(InvalidViewState::Background {
+                background: self.background,
+            });
         }
-        for (name, v) in [("width", self.width), ("height", self.height)] {
-            if !(1..=MAX_IMAGE_SIDE).contains(&v) {
-                return Err(format!("{name}: expected 1..={MAX_IMAGE_SIDE}, found {v}"));
+        for (name, value) in [("width", self.width), ("height", self.height)] {
+            if !(1..=MAX_IMAGE_SIDE).contains(&value) {
+                return Err(InvalidViewState::ImageSide { name, value });
             }
         }
         Ok(())
@@ -329,12 +393,10 @@ impl ViewState {
                 path: path.to_path_buf(),
                 error,
             })?;
-        state
-            .validate()
-            .map_err(|message| ViewStateError::Invalid {
-                path: path.to_path_buf(),
-                message,
-            })?;
+        state.validate().map_err(|error| ViewStateError::Invalid {
+            path: path.to_path_buf(),
+            error,
+        })?;
         Ok(state)
     }
 
@@ -342,25 +404,28 @@ impl ViewState {
     /// reading, a device or pipe read no further than that).
     pub fn load(path: &Path) -> Result<ViewState, ViewStateError> {
         const MAX_BYTES: u64 = 16 << 20;
-        let invalid = |message: String| ViewStateError::Invalid {
-            path: path.to_path_buf(),
-            message,
+        let path_buf = || path.to_path_buf();
+        let too_large = |size| ViewStateError::TooLarge {
+            path: path_buf(),
+            limit: MAX_BYTES,
+            size,
         };
         let bytes = read_whole(path, Limits::both(MAX_BYTES)).map_err(|e| match e.kind {
             InputErrorKind::Io(error) => ViewStateError::Io {
-                path: path.to_path_buf(),
+                path: path_buf(),
                 error,
             },
-            InputErrorKind::TooLarge { size, .. } => invalid(format!(
-                "expected a JSON view state of at most {MAX_BYTES} bytes, found {size} bytes"
-            )),
-            InputErrorKind::StreamTooLarge { .. } => invalid(format!(
-                "expected a JSON view state of at most {MAX_BYTES} bytes, found more"
-            )),
-            kind => invalid(kind.to_string()),
+            InputErrorKind::TooLarge { size, .. } => too_large(Some(size)),
+            InputErrorKind::StreamTooLarge { .. } => too_large(None),
+            kind => ViewStateError::Input {
+                path: path_buf(),
+                kind,
+            },
         })?;
-        let text = String::from_utf8(bytes)
-            .map_err(|e| invalid(format!("not UTF-8 text: {}", e.utf8_error())))?;
+        let text = String::from_utf8(bytes).map_err(|e| ViewStateError::NotUtf8 {
+            path: path_buf(),
+            error: e.utf8_error(),
+        })?;
         ViewState::from_json(path, &text)
     }
 
@@ -449,6 +514,19 @@ pub struct Overrides {
     pub iso_field: Option<String>,
 }
 
+/// A `--mesh`, `--eye`, `--look-at` or `--up` flag that does not parse.
+#[derive(Debug, thiserror::Error)]
+pub enum OverrideError {
+    #[error("--mesh: {0}")]
+    Mesh(MeshSpecError),
+    /// `flag` without its dashes (`eye`, `look-at`, `up`).
+    #[error("--{flag}: {error}")]
+    Point {
+        flag: &'static str,
+        error: crate::probe::PointError,
+    },
+}
+
 /// A field override that names no field of the data.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("{flag}: no field named {name:?} (fields: {})", known.join(", "))]
@@ -463,7 +541,11 @@ impl Overrides {
     /// its lights and band are the user's; otherwise the data-derived defaults follow
     /// the flags (lights over the viewer's shoulder after `--eye`, σ at 8 % of `--iso`).
     /// Returns notes worth telling the user.
-    pub fn apply(&self, state: &mut ViewState, from_file: bool) -> Result<Vec<String>, String> {
+    pub fn apply(
+        &self,
+        state: &mut ViewState,
+        from_file: bool,
+    ) -> Result<Vec<String>, OverrideError> {
         let mut notes = Vec::new();
         if let Some(v) = self.width {
             state.width = v;
@@ -503,11 +585,12 @@ impl Overrides {
             state.meshes = self
                 .meshes
                 .iter()
-                .map(|m| MeshInstance::parse(m).map_err(|e| format!("--mesh: {e}")))
+                .map(|m| MeshInstance::parse(m).map_err(OverrideError::Mesh))
                 .collect::<Result<_, _>>()?;
         }
-        let vec =
-            |name: &str, s: &str| crate::probe::parse_xyz(s).map_err(|e| format!("--{name}: {e}"));
+        let vec = |flag: &'static str, s: &str| {
+            crate::probe::parse_xyz(s).map_err(|error| OverrideError::Point { flag, error })
+        };
         if let Some(s) = &self.eye {
             state.camera.eye = vec("eye", s)?;
         }
@@ -764,31 +847,77 @@ mod tests {
 
     #[test]
     fn invalid_values_are_rejected_with_their_name() {
+        use InvalidViewState as I;
         let s = ViewState::default_for([0.0; 3], [1.0; 3], &fields());
         type Change = Box<dyn Fn(&mut ViewState)>;
-        let cases: Vec<(&str, Change)> = vec![
-            ("width", Box::new(|s| s.width = 0)),
-            ("height", Box::new(|s| s.height = 100_000)),
-            ("step", Box::new(|s| s.step = -1.0)),
-            ("step", Box::new(|s| s.step = 1e-30)),
+        type Check = fn(&InvalidViewState) -> bool;
+        let cases: Vec<(&str, Change, Check)> = vec![
+            ("width", Box::new(|s| s.width = 0), |e| {
+                matches!(
+                    e,
+                    I::ImageSide {
+                        name: "width",
+                        value: 0
+                    }
+                )
+            }),
+            ("height", Box::new(|s| s.height = 100_000), |e| {
+                matches!(e, I::ImageSide { name: "height", .. })
+            }),
+            ("step", Box::new(|s| s.step = -1.0), |e| {
+                matches!(e, I::Step { .. })
+            }),
+            ("step", Box::new(|s| s.step = 1e-30), |e| {
+                matches!(e, I::Step { .. })
+            }),
             (
                 "camera.up",
                 Box::new(|s| {
                     s.camera.up = std::array::from_fn(|a| s.camera.look_at[a] - s.camera.eye[a])
                 }),
+                |e| matches!(e, I::UpAlongView { .. }),
             ),
-            ("camera.up", Box::new(|s| s.camera.up = [0.0; 3])),
-            ("colormap.points", Box::new(|s| s.colormap.points.clear())),
+            ("camera.up", Box::new(|s| s.camera.up = [0.0; 3]), |e| {
+                matches!(
+                    e,
+                    I::UpAlongView {
+                        up: [0.0, 0.0, 0.0]
+                    }
+                )
+            }),
+            (
+                "colormap.points",
+                Box::new(|s| s.colormap.points.clear()),
+                |e| matches!(e, I::ColorMap(ColorMapError::NoPoints)),
+            ),
             (
                 "meshes: expected at most 64",
                 Box::new(|s| s.meshes = vec![MeshInstance::at_origin("a.obj"); MAX_MESHES + 1]),
+                |e| matches!(e, I::TooManyMeshes { count } if *count == MAX_MESHES + 1),
             ),
-            ("spp", Box::new(|s| s.spp = 0)),
-            ("transfer.sigma", Box::new(|s| s.transfer.sigma = 0.0)),
-            ("colormap.band", Box::new(|s| s.colormap.band = -1.0)),
+            ("spp", Box::new(|s| s.spp = 0), |e| {
+                matches!(e, I::Spp { spp: 0 })
+            }),
+            (
+                "transfer.sigma",
+                Box::new(|s| s.transfer.sigma = 0.0),
+                |e| {
+                    matches!(
+                        e,
+                        I::Transfer {
+                            name: "transfer.sigma",
+                            ..
+                        }
+                    )
+                },
+            ),
+            ("colormap.band", Box::new(|s| s.colormap.band = -1.0), |e| {
+                matches!(e, I::ColorMap(ColorMapError::Band { .. }))
+            }),
             (
                 "camera.projection.fov_deg",
                 Box::new(|s| s.camera.projection = Projection::Perspective { fov_deg: 200.0 }),
+                |e| matches!(e, I::FieldOfView { .. }),
             ),
             (
                 "meshes[0]",
@@ -797,14 +926,46 @@ mod tests {
                     m.scale = -1.0;
                     s.meshes.push(m);
                 }),
+                |e| matches!(e, I::Mesh { index: 0, .. }),
+            ),
+            (
+                "lights[0].intensity",
+                Box::new(|s| {
+                    if let Some(Light::Directional { intensity, .. }) = s.lights.first_mut() {
+                        *intensity = -1.0;
+                    }
+                }),
+                |e| {
+                    matches!(
+                        e,
+                        I::Light {
+                            index: 0,
+                            error: ShadingError::Intensity { .. }
+                        }
+                    )
+                },
             ),
         ];
-        for (name, change) in cases {
+        for (name, change, check) in cases {
             let mut bad = s.clone();
             change(&mut bad);
             let e = ViewState::from_json(Path::new("v.json"), &bad.to_json()).expect_err(name);
+            let ViewStateError::Invalid { error, .. } = &e else {
+                panic!("{name}: not an invalid value: {e}");
+            };
+            assert!(check(error), "{name}: {error:?}");
+            // The message names the field by its JSON path.
             assert!(e.to_string().contains(name), "{name}: {e}");
         }
+        assert_eq!(
+            I::ColorMap(ColorMapError::Unsorted {
+                index: 2,
+                value: 0.5,
+                previous: 1.0
+            })
+            .to_string(),
+            "colormap.points[2].value 0.5 is below points[1].value 1: points must be sorted"
+        );
         let e = ViewState::load(Path::new("/nonexistent/v.json")).expect_err("missing");
         assert!(e.to_string().contains("/nonexistent/v.json"), "{e}");
     }

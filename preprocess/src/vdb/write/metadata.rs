@@ -3,13 +3,13 @@
 //! caller gives, every grid gets the entries OpenVDB itself writes (`class`, `value_type`,
 //! `file_bbox_min`, …) so that OpenVDB tools show the file as they would one of their own.
 
-use super::{write_string, Compression, MetaMap, MetaValue};
+use super::{write_string, Compression, MetaMap, MetaValue, Unwritable};
 use crate::grid::{Grid, Tile};
 use crate::vdb::codec::VdbValue;
 
-/// OpenVDB type name and little-endian bytes of a metadata value; `Other` (a type the
-/// reader only names) cannot be written.
-fn meta_encoding(value: &MetaValue) -> Result<(&'static str, Vec<u8>), String> {
+/// OpenVDB type name and little-endian bytes of a metadata value; `None` for `Other` (a
+/// type the reader only names, which cannot be written).
+fn meta_encoding(value: &MetaValue) -> Option<(&'static str, Vec<u8>)> {
     let mut b = Vec::new();
     let name = match value {
         MetaValue::Bool(v) => {
@@ -48,16 +48,24 @@ fn meta_encoding(value: &MetaValue) -> Result<(&'static str, Vec<u8>), String> {
             v.iter().for_each(|c| b.extend_from_slice(&c.to_le_bytes()));
             "vec3d"
         }
-        MetaValue::Other(t) => return Err(format!("cannot write metadata of type {t:?}")),
+        MetaValue::Other(_) => return None,
     };
-    Ok((name, b))
+    Some((name, b))
 }
 
-pub(super) fn write_meta_map(out: &mut Vec<u8>, meta: &MetaMap) -> Result<(), String> {
+pub(super) fn write_meta_map(out: &mut Vec<u8>, meta: &MetaMap) -> Result<(), Unwritable> {
     out.extend_from_slice(&(meta.len() as u32).to_le_bytes());
     for (name, value) in meta {
-        let (type_name, bytes) =
-            meta_encoding(value).map_err(|e| format!("metadata {name:?}: {e}"))?;
+        let Some((type_name, bytes)) = meta_encoding(value) else {
+            let type_name = match value {
+                MetaValue::Other(t) => t.clone(),
+                _ => String::new(),
+            };
+            return Err(Unwritable::MetadataType {
+                name: name.clone(),
+                type_name,
+            });
+        };
         write_string(out, name);
         write_string(out, type_name);
         out.extend_from_slice(&(bytes.len() as u32).to_le_bytes());
@@ -145,6 +153,16 @@ mod tests {
 
         meta.insert("m".into(), MetaValue::Other("mat4d".into()));
         let err = write_meta_map(&mut Vec::new(), &meta).expect_err("unknown type");
-        assert!(err.contains("\"m\"") && err.contains("mat4d"), "{err}");
+        assert_eq!(
+            err,
+            Unwritable::MetadataType {
+                name: "m".into(),
+                type_name: "mat4d".into()
+            }
+        );
+        assert_eq!(
+            err.to_string(),
+            "metadata \"m\": cannot write metadata of type \"mat4d\""
+        );
     }
 }

@@ -47,7 +47,7 @@ use std::path::{Path, PathBuf};
 use thiserror::Error;
 
 use super::codec::{CompressionFlags, VdbValue, MAGIC};
-use crate::grid::{AnyGrid, Grid};
+use crate::grid::{AnyGrid, Grid, Transform};
 
 /// `OPENVDB_FILE_VERSION_MULTIPASS_IO`: the newest format before half-float grid types.
 pub(crate) const FILE_VERSION: u32 = 224;
@@ -124,10 +124,48 @@ pub enum WriteError {
     InvalidGrid {
         path: PathBuf,
         grid: String,
-        reason: String,
+        reason: Unwritable,
     },
     #[error("{}: file {reason}", path.display())]
-    InvalidMetadata { path: PathBuf, reason: String },
+    InvalidMetadata { path: PathBuf, reason: Unwritable },
+}
+
+/// What in a grid or its metadata an OpenVDB file cannot hold, found before anything is
+/// written.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum Unwritable {
+    /// OpenVDB could not invert (zero, negative or non-finite scale) or place (non-finite
+    /// translation) the transform.
+    #[error("transform {transform:?} is not a positive finite scale + translation")]
+    Transform { transform: Transform },
+    /// A metadata entry of a type the reader only names.
+    #[error("metadata {name:?}: cannot write metadata of type {type_name:?}")]
+    MetadataType { name: String, type_name: String },
+    /// `what` (`tile` or `leaf`) does not start on a multiple of its node's size.
+    #[error("{what} origin {origin:?} is not a multiple of {size}")]
+    Misaligned {
+        what: &'static str,
+        origin: [i32; 3],
+        size: i32,
+    },
+    #[error("tile at {origin:?} has size {size}, expected 8, 128 or 4096")]
+    TileSize { origin: [i32; 3], size: u32 },
+    #[error("two tiles at {origin:?}")]
+    TwoTiles { origin: [i32; 3] },
+    #[error("two leaves at {origin:?}")]
+    TwoLeaves { origin: [i32; 3] },
+    /// `what` (`tile` or `leaf`) inside a tile of the upper internal level.
+    #[error("{what} at {origin:?} lies inside a 128³ tile")]
+    InsideUpperTile {
+        what: &'static str,
+        origin: [i32; 3],
+    },
+    /// A leaf inside a tile of the lower internal level.
+    #[error("leaf at {origin:?} lies inside an 8³ tile")]
+    InsideLowerTile { origin: [i32; 3] },
+    /// Anything inside a root tile (4096³).
+    #[error("{origin:?} lies inside a 4096³ tile")]
+    InsideRootTile { origin: [i32; 3] },
 }
 
 /// Writes `grids` to `path` with the given compression. Returns the file size in bytes.
@@ -320,7 +358,7 @@ fn encode_grid<V: VdbValue>(
     grid: &Grid<V>,
     compression: Compression,
     extra: Option<&MetaMap>,
-) -> Result<EncodedGrid, String> {
+) -> Result<EncodedGrid, Unwritable> {
     let t = grid.transform;
     transform::check_transform(&t)?;
     let nodes = tree::build_tree(grid)?;

@@ -2,18 +2,16 @@
 //! map, the only kind qbricks grids have, stored with the derived vectors OpenVDB's
 //! `ScaleTranslateMap` keeps so that OpenVDB reads it without recomputing them.
 
-use super::write_string;
+use super::{write_string, Unwritable};
 use crate::grid::Transform;
 
 /// Refuses a transform OpenVDB could not invert (zero, negative or non-finite scale) or
 /// place (non-finite translation).
-pub(super) fn check_transform(t: &Transform) -> Result<(), String> {
+pub(super) fn check_transform(t: &Transform) -> Result<(), Unwritable> {
     if !(t.voxel_size.iter().all(|v| v.is_finite() && *v > 0.0)
         && t.translation.iter().all(|v| v.is_finite()))
     {
-        return Err(format!(
-            "transform {t:?} is not a positive finite scale + translation"
-        ));
+        return Err(Unwritable::Transform { transform: *t });
     }
     Ok(())
 }

@@ -10,6 +10,7 @@ use std::collections::BTreeMap;
 use rayon::prelude::*;
 
 use super::values::write_values;
+use super::Unwritable;
 use crate::grid::{Grid, Leaf, LEAF_VOXELS};
 use crate::vdb::codec::{CompressionFlags, VdbValue};
 
@@ -58,13 +59,13 @@ fn root_key(p: [i32; 3]) -> [i32; 3] {
 
 /// Places every tile and leaf of `grid` in its node, refusing overlaps, misaligned origins
 /// and tile sizes a 5-4-3 tree does not have.
-pub(super) fn build_tree<V: VdbValue>(grid: &Grid<V>) -> Result<Tree<'_, V>, String> {
+pub(super) fn build_tree<V: VdbValue>(grid: &Grid<V>) -> Result<Tree<'_, V>, Unwritable> {
     let mut root: Root<'_, V> = BTreeMap::new();
     // Root tiles first, so that anything placed inside one is reported.
     for t in grid.tiles.iter().filter(|t| t.size == 4096) {
         check_aligned(t.origin, 4096, "tile")?;
         if root.insert(t.origin, RootEntry::Tile(t.value)).is_some() {
-            return Err(format!("two tiles at {:?}", t.origin));
+            return Err(Unwritable::TwoTiles { origin: t.origin });
         }
     }
     for t in grid.tiles.iter().filter(|t| t.size != 4096) {
@@ -73,7 +74,7 @@ pub(super) fn build_tree<V: VdbValue>(grid: &Grid<V>) -> Result<Tree<'_, V>, Str
                 check_aligned(t.origin, 128, "tile")?;
                 let u = upper_of(&mut root, t.origin)?;
                 if u.tiles.insert(upper_index(t.origin), t.value).is_some() {
-                    return Err(format!("two tiles at {:?}", t.origin));
+                    return Err(Unwritable::TwoTiles { origin: t.origin });
                 }
             }
             8 => {
@@ -81,21 +82,24 @@ pub(super) fn build_tree<V: VdbValue>(grid: &Grid<V>) -> Result<Tree<'_, V>, Str
                 let u = upper_of(&mut root, t.origin)?;
                 let ui = upper_index(t.origin);
                 if u.tiles.contains_key(&ui) {
-                    return Err(format!("tile at {:?} lies inside a 128³ tile", t.origin));
+                    return Err(Unwritable::InsideUpperTile {
+                        what: "tile",
+                        origin: t.origin,
+                    });
                 }
                 let lower = u.children.entry(ui).or_insert_with(|| Lower {
                     leaves: BTreeMap::new(),
                     tiles: BTreeMap::new(),
                 });
                 if lower.tiles.insert(lower_index(t.origin), t.value).is_some() {
-                    return Err(format!("two tiles at {:?}", t.origin));
+                    return Err(Unwritable::TwoTiles { origin: t.origin });
                 }
             }
             other => {
-                return Err(format!(
-                    "tile at {:?} has size {other}, expected 8, 128 or 4096",
-                    t.origin
-                ))
+                return Err(Unwritable::TileSize {
+                    origin: t.origin,
+                    size: other,
+                })
             }
         }
     }
@@ -104,7 +108,10 @@ pub(super) fn build_tree<V: VdbValue>(grid: &Grid<V>) -> Result<Tree<'_, V>, Str
         let u = upper_of(&mut root, leaf.origin)?;
         let ui = upper_index(leaf.origin);
         if u.tiles.contains_key(&ui) {
-            return Err(format!("leaf at {:?} lies inside a 128³ tile", leaf.origin));
+            return Err(Unwritable::InsideUpperTile {
+                what: "leaf",
+                origin: leaf.origin,
+            });
         }
         let lower = u.children.entry(ui).or_insert_with(|| Lower {
             leaves: BTreeMap::new(),
@@ -112,10 +119,14 @@ pub(super) fn build_tree<V: VdbValue>(grid: &Grid<V>) -> Result<Tree<'_, V>, Str
         });
         let li = lower_index(leaf.origin);
         if lower.tiles.contains_key(&li) {
-            return Err(format!("leaf at {:?} lies inside an 8³ tile", leaf.origin));
+            return Err(Unwritable::InsideLowerTile {
+                origin: leaf.origin,
+            });
         }
         if lower.leaves.insert(li, leaf).is_some() {
-            return Err(format!("two leaves at {:?}", leaf.origin));
+            return Err(Unwritable::TwoLeaves {
+                origin: leaf.origin,
+            });
         }
     }
     Ok(Tree {
@@ -128,7 +139,7 @@ pub(super) fn build_tree<V: VdbValue>(grid: &Grid<V>) -> Result<Tree<'_, V>, Str
 fn upper_of<'m, 'a, V>(
     root: &'m mut Root<'a, V>,
     origin: [i32; 3],
-) -> Result<&'m mut Upper<'a, V>, String> {
+) -> Result<&'m mut Upper<'a, V>, Unwritable> {
     let entry = root.entry(root_key(origin)).or_insert_with(|| {
         RootEntry::Child(Upper {
             children: BTreeMap::new(),
@@ -137,15 +148,13 @@ fn upper_of<'m, 'a, V>(
     });
     match entry {
         RootEntry::Child(u) => Ok(u),
-        RootEntry::Tile(_) => Err(format!("{origin:?} lies inside a 4096³ tile")),
+        RootEntry::Tile(_) => Err(Unwritable::InsideRootTile { origin }),
     }
 }
 
-fn check_aligned(origin: [i32; 3], size: i32, what: &str) -> Result<(), String> {
+fn check_aligned(origin: [i32; 3], size: i32, what: &'static str) -> Result<(), Unwritable> {
     if origin.iter().any(|v| v.rem_euclid(size) != 0) {
-        return Err(format!(
-            "{what} origin {origin:?} is not a multiple of {size}"
-        ));
+        return Err(Unwritable::Misaligned { what, origin, size });
     }
     Ok(())
 }
@@ -323,16 +332,25 @@ mod tests {
             leaves: vec![leaf([0, 0, 0]), leaf([0, 0, 0])],
             tiles: Vec::new(),
         };
-        assert!(build_tree(&g).is_err());
+        assert!(matches!(
+            build_tree(&g),
+            Err(Unwritable::TwoLeaves { origin: [0, 0, 0] })
+        ));
         g.leaves = vec![leaf([4, 0, 0])];
-        assert!(build_tree(&g).is_err());
+        assert!(matches!(
+            build_tree(&g),
+            Err(Unwritable::Misaligned { size: 8, .. })
+        ));
         g.leaves = vec![leaf([8, 0, 0])];
         g.tiles = vec![Tile {
             origin: [0, 0, 0],
             size: 128,
             value: 1.0,
         }];
-        assert!(build_tree(&g).is_err());
+        assert!(matches!(
+            build_tree(&g),
+            Err(Unwritable::InsideUpperTile { what: "leaf", .. })
+        ));
         g.tiles[0].origin = [128, 0, 0];
         assert!(build_tree(&g).is_ok());
     }
