@@ -19,6 +19,7 @@
 use format::BrickFile;
 use glam::DVec3;
 use serde::Serialize;
+use viewer::chart::{Line, LogLogChart, PlotError};
 use viewer::mesh::Meshes;
 use viewer::ray::RayCaster;
 use viewer::render::Scene;
@@ -577,6 +578,53 @@ pub fn accuracy(
     })
 }
 
+/// The relative RMS errors (stored Q, stored speed, reconstructed Q, Q near level
+/// boundaries, and the iso-surface position of `exact` hits in finest cells) against the
+/// finest cell width, both axes logarithmic.
+pub fn chart(report: &AccuracyReport) -> LogLogChart {
+    type Pick = fn(&ResolutionReport) -> &ErrorStats;
+    let series: [(&str, Pick, [u8; 3]); 5] = [
+        ("stored Q", |r| &r.stored_q, [31, 119, 180]),
+        ("stored speed", |r| &r.stored_speed, [255, 127, 14]),
+        ("reconstructed Q", |r| &r.reconstructed_q, [44, 160, 44]),
+        ("Q near level boundaries", |r| &r.boundary_q, [214, 39, 40]),
+        (
+            "iso-surface position (finest cells)",
+            |r| &r.surface.position,
+            [148, 103, 189],
+        ),
+    ];
+    let mut res: Vec<&ResolutionReport> = report.resolutions.iter().collect();
+    res.sort_by(|a, b| a.finest_width.total_cmp(&b.finest_width));
+    let lines = series
+        .into_iter()
+        .map(|(name, pick, colour)| Line {
+            name: name.to_string(),
+            colour,
+            points: res
+                .iter()
+                .filter(|r| pick(r).points > 0)
+                .map(|r| (r.finest_width, pick(r).rms_rel))
+                .collect(),
+        })
+        .collect();
+    LogLogChart {
+        title: format!("{} ({} stencil)", report.scene, report.stencil),
+        x_desc: "finest cell width",
+        y_desc: "RMS error / p99 |exact| (position: in finest cells)",
+        x_label: |v| format!("{v:.3}"),
+        lines,
+        rings: Vec::new(),
+        empty_range: [(0.01, 0.1), (1e-3, 1e-1)],
+        pad: 1.5,
+    }
+}
+
+/// Writes [`chart`] to `path` atomically, 800×560 pixels.
+pub fn save_plot(path: &std::path::Path, report: &AccuracyReport) -> Result<(), PlotError> {
+    chart(report).save(path, (800, 560))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -659,137 +707,4 @@ mod tests {
             Err(AccuracyError::UnknownScene(_))
         ));
     }
-}
-
-/// Name under which the embedded plot font is registered with plotters.
-const PLOT_FONT: &str = "qbricks-accuracy";
-
-/// PNG bytes of the relative RMS errors (stored Q, stored speed, reconstructed Q, Q near
-/// level boundaries, and the iso-surface position of `exact` hits in finest cells) against
-/// the finest cell width, both axes logarithmic.
-pub fn plot_png(report: &AccuracyReport, size: (u32, u32)) -> Result<Vec<u8>, String> {
-    use plotters::prelude::*;
-    // A font from a crate's bytes: no system fonts needed to draw text.
-    plotters::style::register_font(
-        PLOT_FONT,
-        FontStyle::Normal,
-        epaint_default_fonts::UBUNTU_LIGHT,
-    )
-    .map_err(|_| "embedded plot font is not a valid TTF".to_string())?;
-    type Pick = fn(&ResolutionReport) -> &ErrorStats;
-    let series: [(&str, Pick, RGBColor); 5] = [
-        ("stored Q", |r| &r.stored_q, RGBColor(31, 119, 180)),
-        ("stored speed", |r| &r.stored_speed, RGBColor(255, 127, 14)),
-        (
-            "reconstructed Q",
-            |r| &r.reconstructed_q,
-            RGBColor(44, 160, 44),
-        ),
-        (
-            "Q near level boundaries",
-            |r| &r.boundary_q,
-            RGBColor(214, 39, 40),
-        ),
-        (
-            "iso-surface position (finest cells)",
-            |r| &r.surface.position,
-            RGBColor(148, 103, 189),
-        ),
-    ];
-    let mut res: Vec<&ResolutionReport> = report.resolutions.iter().collect();
-    res.sort_by(|a, b| a.finest_width.total_cmp(&b.finest_width));
-    let ok = |v: f64| v > 0.0 && v.is_finite();
-    let (mut h0, mut h1, mut e0, mut e1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
-    for r in &res {
-        for (_, pick, _) in &series {
-            let s = pick(r);
-            if s.points > 0 && ok(s.rms_rel) && ok(r.finest_width) {
-                h0 = h0.min(r.finest_width);
-                h1 = h1.max(r.finest_width);
-                e0 = e0.min(s.rms_rel);
-                e1 = e1.max(s.rms_rel);
-            }
-        }
-    }
-    if h0 > h1 {
-        (h0, h1, e0, e1) = (0.01, 0.1, 1e-3, 1e-1);
-    }
-    let (h0, h1, e0, e1) = (h0 / 1.5, h1 * 1.5, e0 / 1.5, e1 * 1.5);
-    let (w, h) = size;
-    let mut buf = vec![255u8; w as usize * h as usize * 3];
-    {
-        let err = |e: &dyn std::fmt::Display| e.to_string();
-        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| err(&e))?;
-        let title = format!("{} ({} stencil)", report.scene, report.stencil);
-        let mut chart = ChartBuilder::on(&root)
-            .caption(title, (PLOT_FONT, 18))
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(60)
-            .build_cartesian_2d((h0..h1).log_scale(), (e0..e1).log_scale())
-            .map_err(|e| err(&e))?;
-        chart
-            .configure_mesh()
-            .x_desc("finest cell width")
-            .y_desc("RMS error / p99 |exact| (position: in finest cells)")
-            .x_label_formatter(&|v| format!("{v:.3}"))
-            .y_label_formatter(&|v| format!("{v:.0e}"))
-            .label_style((PLOT_FONT, 13))
-            .draw()
-            .map_err(|e| err(&e))?;
-        for (name, pick, colour) in series {
-            let pts: Vec<(f64, f64)> = res
-                .iter()
-                .filter(|r| pick(r).points > 0 && ok(pick(r).rms_rel))
-                .map(|r| (r.finest_width, pick(r).rms_rel))
-                .collect();
-            if pts.is_empty() {
-                continue;
-            }
-            chart
-                .draw_series(LineSeries::new(pts.clone(), colour.stroke_width(2)))
-                .map_err(|e| err(&e))?
-                .label(name)
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2))
-                });
-            chart
-                .draw_series(pts.iter().map(|&p| Circle::new(p, 3, colour.filled())))
-                .map_err(|e| err(&e))?;
-        }
-        chart
-            .configure_series_labels()
-            .label_font((PLOT_FONT, 13))
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
-            .map_err(|e| err(&e))?;
-        root.present().map_err(|e| err(&e))?;
-    }
-    let img = image::RgbImage::from_raw(w, h, buf)
-        .ok_or_else(|| "plot buffer does not match its size".to_string())?;
-    let mut out = std::io::Cursor::new(Vec::new());
-    img.write_to(&mut out, image::ImageFormat::Png)
-        .map_err(|e| e.to_string())?;
-    Ok(out.into_inner())
-}
-
-/// Why the plot could not be written.
-#[derive(Debug, thiserror::Error)]
-#[error("{path}: {message}")]
-pub struct PlotError {
-    pub path: String,
-    pub message: String,
-}
-
-/// Writes [`plot_png`] to `path` atomically.
-pub fn save_plot(path: &std::path::Path, report: &AccuracyReport) -> Result<(), PlotError> {
-    use std::io::Write;
-    let err = |message: String| PlotError {
-        path: path.display().to_string(),
-        message,
-    };
-    let bytes = plot_png(report, (800, 560)).map_err(err)?;
-    format::output::write_atomic(path, |f| f.write_all(&bytes)).map_err(|e| err(e.to_string()))
 }

@@ -10,12 +10,12 @@
 //! the reconstruction, not the analytic flow: what the data model costs is `accuracy`'s
 //! question.
 
-use std::io::Write;
 use std::path::Path;
 use std::time::Instant;
 
 use serde::Serialize;
 
+use crate::chart::{Line, LogLogChart, PlotError};
 use crate::mesh::Meshes;
 use crate::render::{Frame, Renderer, Scene};
 use crate::sampling::Strategy;
@@ -62,8 +62,8 @@ pub enum BenchError {
     ReferenceStep { step: f64 },
     #[error("steps must be positive numbers")]
     Steps,
-    #[error("{path}: {message}")]
-    Plot { path: String, message: String },
+    #[error(transparent)]
+    Plot(#[from] PlotError),
 }
 
 /// One strategy at one step.
@@ -304,21 +304,17 @@ pub fn bench(
     Ok((reference, runs))
 }
 
-/// Name under which the embedded plot font is registered with plotters.
-const PLOT_FONT: &str = "qbricks-plot";
-
 /// Colours of the strategies' lines (uniform, paper, bisect, exact; lighter when
 /// pre-integrated).
-fn strategy_colour(name: &str) -> plotters::style::RGBColor {
-    use plotters::style::RGBColor;
+fn strategy_colour(name: &str) -> [u8; 3] {
     match name {
-        "uniform" => RGBColor(31, 119, 180),
-        "paper" => RGBColor(255, 127, 14),
-        "bisect" => RGBColor(44, 160, 44),
-        "uniform+pre" => RGBColor(120, 180, 230),
-        "paper+pre" => RGBColor(250, 190, 120),
-        "bisect+pre" => RGBColor(130, 210, 130),
-        _ => RGBColor(214, 39, 40),
+        "uniform" => [31, 119, 180],
+        "paper" => [255, 127, 14],
+        "bisect" => [44, 160, 44],
+        "uniform+pre" => [120, 180, 230],
+        "paper+pre" => [250, 190, 120],
+        "bisect+pre" => [130, 210, 130],
+        _ => [214, 39, 40],
     }
 }
 
@@ -331,112 +327,48 @@ fn line_name(r: &Run) -> String {
     }
 }
 
-/// PNG bytes of RMSE against ms per frame, both axes logarithmic, one line per strategy
-/// through its steps; the view's default run is circled.
-pub fn plot_png(runs: &[Run], title: &str, size: (u32, u32)) -> Result<Vec<u8>, String> {
-    use plotters::prelude::*;
-    // The font comes from a crate's bytes, so drawing text needs no system fonts.
-    // Registering twice only replaces the same font.
-    plotters::style::register_font(
-        PLOT_FONT,
-        FontStyle::Normal,
-        epaint_default_fonts::UBUNTU_LIGHT,
-    )
-    .map_err(|_| "embedded plot font is not a valid TTF".to_string())?;
-    let (w, h) = size;
-    let mut buf = vec![255u8; w as usize * h as usize * 3];
-    let positive = |v: f64| v > 0.0 && v.is_finite();
-    let pts: Vec<&Run> = runs
-        .iter()
-        .filter(|r| positive(r.ms) && positive(r.rmse))
-        .collect();
-    let (mut t0, mut t1, mut e0, mut e1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
-    for r in &pts {
-        t0 = t0.min(r.ms);
-        t1 = t1.max(r.ms);
-        e0 = e0.min(r.rmse);
-        e1 = e1.max(r.rmse);
-    }
-    if pts.is_empty() {
-        (t0, t1, e0, e1) = (1.0, 10.0, 1e-3, 1e-1);
-    }
-    // Some room around the points on the log axes.
-    let (t0, t1, e0, e1) = (t0 / 1.3, t1 * 1.3, e0 / 1.3, e1 * 1.3);
-    {
-        let err = |e: &dyn std::fmt::Display| e.to_string();
-        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| err(&e))?;
-        let mut chart = ChartBuilder::on(&root)
-            .caption(title, (PLOT_FONT, 18))
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(60)
-            .build_cartesian_2d((t0..t1).log_scale(), (e0..e1).log_scale())
-            .map_err(|e| err(&e))?;
-        chart
-            .configure_mesh()
-            .x_desc("ms per frame")
-            .y_desc("RMSE vs reference")
-            .x_label_formatter(&|v| format!("{v:.0}"))
-            .y_label_formatter(&|v| format!("{v:.0e}"))
-            .label_style((PLOT_FONT, 13))
-            .draw()
-            .map_err(|e| err(&e))?;
-        let mut names: Vec<String> = Vec::new();
-        for r in &pts {
-            let n = line_name(r);
-            if !names.contains(&n) {
-                names.push(n);
-            }
+/// RMSE against ms per frame, both axes logarithmic, one line per strategy through its
+/// steps; the view's default run is circled.
+pub fn chart(runs: &[Run], title: &str) -> LogLogChart {
+    let mut names: Vec<String> = Vec::new();
+    for r in runs {
+        let n = line_name(r);
+        if !names.contains(&n) {
+            names.push(n);
         }
-        for name in names {
-            let colour = strategy_colour(&name);
+    }
+    let lines = names
+        .into_iter()
+        .map(|name| {
             // In step order (coarse to fine), so each line follows one strategy's steps.
-            let mut steps: Vec<&&Run> = pts.iter().filter(|r| line_name(r) == name).collect();
+            let mut steps: Vec<&Run> = runs.iter().filter(|r| line_name(r) == name).collect();
             steps.sort_by(|a, b| b.step.total_cmp(&a.step));
-            let line: Vec<(f64, f64)> = steps.iter().map(|r| (r.ms, r.rmse)).collect();
-            chart
-                .draw_series(LineSeries::new(line.clone(), colour.stroke_width(2)))
-                .map_err(|e| err(&e))?
-                .label(name)
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2))
-                });
-            chart
-                .draw_series(line.iter().map(|&p| Circle::new(p, 3, colour.filled())))
-                .map_err(|e| err(&e))?;
-        }
-        chart
-            .draw_series(
-                pts.iter()
-                    .filter(|r| r.is_default)
-                    .map(|r| Circle::new((r.ms, r.rmse), 8, BLACK.stroke_width(2))),
-            )
-            .map_err(|e| err(&e))?;
-        chart
-            .configure_series_labels()
-            .label_font((PLOT_FONT, 13))
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
-            .map_err(|e| err(&e))?;
-        root.present().map_err(|e| err(&e))?;
-    }
-    let rgb: Vec<[f32; 3]> = buf
-        .chunks_exact(3)
-        .map(|p| [p[0], p[1], p[2]].map(|v| f32::from(v) / 255.0))
+            Line {
+                colour: strategy_colour(&name),
+                points: steps.iter().map(|r| (r.ms, r.rmse)).collect(),
+                name,
+            }
+        })
         .collect();
-    crate::film::encode_png(w, h, &rgb).map_err(|e| e.to_string())
+    LogLogChart {
+        title: title.to_string(),
+        x_desc: "ms per frame",
+        y_desc: "RMSE vs reference",
+        x_label: |v| format!("{v:.0}"),
+        lines,
+        rings: runs
+            .iter()
+            .filter(|r| r.is_default)
+            .map(|r| (r.ms, r.rmse))
+            .collect(),
+        empty_range: [(1.0, 10.0), (1e-3, 1e-1)],
+        pad: 1.3,
+    }
 }
 
-/// Writes [`plot_png`] to `path` atomically.
+/// Writes [`chart`] to `path` atomically, 900×600 pixels.
 pub fn save_plot(path: &Path, runs: &[Run], title: &str) -> Result<(), BenchError> {
-    let err = |message: String| BenchError::Plot {
-        path: path.display().to_string(),
-        message,
-    };
-    let bytes = plot_png(runs, title, (900, 600)).map_err(err)?;
-    format::output::write_atomic(path, |f| f.write_all(&bytes)).map_err(|e| err(e.to_string()))
+    Ok(chart(runs, title).save(path, (900, 600))?)
 }
 
 #[cfg(test)]
@@ -525,7 +457,7 @@ mod tests {
             mk("uniform", 9.0, 0.02),
             mk("exact", 5.0, 0.01),
         ];
-        let png = plot_png(&runs, "test", (320, 200)).expect("plot");
+        let png = chart(&runs, "test").png((320, 200)).expect("plot");
         let img = image::load_from_memory(&png).expect("decodes").to_rgb8();
         assert_eq!(img.dimensions(), (320, 200));
         // Something besides the white background was drawn.

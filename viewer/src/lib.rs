@@ -11,6 +11,7 @@ pub mod app;
 pub mod bench;
 pub mod bvh;
 pub mod camera;
+pub mod chart;
 pub mod colormap;
 pub mod dataset;
 pub mod film;
