@@ -88,12 +88,64 @@ pub struct SourceGrid {
     pub level: u32,
 }
 
-/// Axis-aligned box in world units; `min <= max` on every axis.
+/// Axis-aligned box in world units, the one float box of every crate: the file's bounds
+/// and regions, the baker's brick supports and synthetic domains, the viewer's mesh BVH.
+/// Stored boxes have `min <= max` on every axis; `min > max` on some axis is an empty box
+/// (see [`Aabb::EMPTY`]). Everything is `f64`, so scenes placed far from the origin keep
+/// their precision. Methods do not change the archived layout.
 #[derive(Archive, Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
 #[rkyv(derive(Debug))]
 pub struct Aabb {
     pub min: [f64; 3],
     pub max: [f64; 3],
+}
+
+impl Aabb {
+    /// The box of no points, where [`Aabb::grow`] and [`Aabb::union`] start.
+    pub const EMPTY: Aabb = Aabb {
+        min: [f64::INFINITY; 3],
+        max: [f64::NEG_INFINITY; 3],
+    };
+
+    /// The box grown to hold `p`.
+    pub fn grow(self, p: [f64; 3]) -> Aabb {
+        Aabb {
+            min: std::array::from_fn(|a| self.min[a].min(p[a])),
+            max: std::array::from_fn(|a| self.max[a].max(p[a])),
+        }
+    }
+
+    /// The smallest box holding both.
+    pub fn union(self, o: Aabb) -> Aabb {
+        Aabb {
+            min: std::array::from_fn(|a| self.min[a].min(o.min[a])),
+            max: std::array::from_fn(|a| self.max[a].max(o.max[a])),
+        }
+    }
+
+    /// `min > max` on some axis (a NaN bound does not make a box empty).
+    pub fn is_empty(&self) -> bool {
+        (0..3).any(|a| self.min[a] > self.max[a])
+    }
+
+    /// Whether the open interiors intersect: boxes that only share a face do not overlap.
+    pub fn overlaps(&self, o: &Aabb) -> bool {
+        (0..3).all(|a| self.min[a] < o.max[a] && self.max[a] > o.min[a])
+    }
+
+    pub fn centre(&self) -> [f64; 3] {
+        std::array::from_fn(|a| 0.5 * (self.min[a] + self.max[a]))
+    }
+
+    /// Half the surface area (a surface area heuristic only needs ratios); 0 for an empty
+    /// box.
+    pub fn half_area(&self) -> f64 {
+        if self.is_empty() {
+            return 0.0;
+        }
+        let d: [f64; 3] = std::array::from_fn(|a| self.max[a] - self.min[a]);
+        d[0] * d[1] + d[1] * d[2] + d[2] * d[0]
+    }
 }
 
 /// A resolution level.

@@ -8,7 +8,10 @@ use rayon::prelude::*;
 
 use crate::cells::{CellSet, BLOCK_CELLS};
 
-/// A brick in index space of its grid.
+/// A brick in the integer cell-index space of its grid: a concept of its own, not a
+/// second float box. Bricks are cut from cells by index (exact, no rounding); world boxes
+/// (a brick's support, the regions) are [`format::Aabb`], made from this with the grid's
+/// cell width.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct BrickBox {
     /// Index of the cell set (grid) the brick belongs to.

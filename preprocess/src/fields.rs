@@ -5,7 +5,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::bricks::BrickBox;
-use crate::regions::Bbox;
+use format::Aabb;
 
 /// Bins of every field's histogram.
 pub(crate) const HISTOGRAM_BINS: usize = 64;
@@ -95,7 +95,7 @@ pub struct RangeInput<'a> {
     pub values: &'a [Vec<f32>],
 }
 
-pub fn region_ranges(input: &RangeInput, regions: &[(Bbox, Vec<u32>)]) -> Vec<[f32; 2]> {
+pub fn region_ranges(input: &RangeInput, regions: &[(Aabb, Vec<u32>)]) -> Vec<[f32; 2]> {
     let nf = input.values.len();
     let per_region: Vec<Vec<[f32; 2]>> = regions
         .par_iter()

@@ -4,10 +4,11 @@
 
 use format::KdNode;
 
-use crate::regions::{Bbox, RegionTree};
+use crate::regions::RegionTree;
+use format::Aabb;
 
 /// KD nodes and the regions (bounds, sorted brick ids) they reference.
-pub fn flatten(tree: &RegionTree) -> (Vec<KdNode>, Vec<(Bbox, Vec<u32>)>) {
+pub fn flatten(tree: &RegionTree) -> (Vec<KdNode>, Vec<(Aabb, Vec<u32>)>) {
     let mut nodes = Vec::new();
     let mut regions = Vec::new();
     if !matches!(tree, RegionTree::Empty) {
@@ -16,7 +17,7 @@ pub fn flatten(tree: &RegionTree) -> (Vec<KdNode>, Vec<(Bbox, Vec<u32>)>) {
     (nodes, regions)
 }
 
-fn emit(t: &RegionTree, nodes: &mut Vec<KdNode>, regions: &mut Vec<(Bbox, Vec<u32>)>) -> u32 {
+fn emit(t: &RegionTree, nodes: &mut Vec<KdNode>, regions: &mut Vec<(Aabb, Vec<u32>)>) -> u32 {
     let id = nodes.len() as u32;
     match t {
         RegionTree::Empty => nodes.push(KdNode::Leaf { region: None }),

@@ -22,6 +22,7 @@
 //! its centre (f32); leaves at box edges have partial active masks, inactive voxels hold the
 //! background (0, 0, 0). No tiles are written. Results are deterministic.
 
+use format::Aabb;
 use rayon::prelude::*;
 use thiserror::Error;
 
@@ -71,13 +72,6 @@ pub enum SynthError {
         bytes: u64,
         limit: u64,
     },
-}
-
-/// An axis-aligned box in world space.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Aabb {
-    pub min: [f64; 3],
-    pub max: [f64; 3],
 }
 
 const WAKE_DOMAIN: Aabb = Aabb {

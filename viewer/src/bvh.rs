@@ -6,88 +6,39 @@
 //! know what a triangle is. Everything is `f64`, so scenes placed at 1e6 from the origin
 //! keep their precision.
 
+use format::Aabb;
 use glam::DVec3;
 
 use crate::camera::Ray;
 
-/// Axis-aligned box; `min > max` on some axis means empty.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Aabb {
-    pub min: DVec3,
-    pub max: DVec3,
+/// The box around `points`.
+pub(crate) fn box_of(points: &[DVec3]) -> Aabb {
+    points.iter().fold(Aabb::EMPTY, |b, p| b.grow(p.to_array()))
 }
 
-impl Aabb {
-    pub(crate) const EMPTY: Aabb = Aabb {
-        min: DVec3::splat(f64::INFINITY),
-        max: DVec3::splat(f64::NEG_INFINITY),
-    };
-
-    pub(crate) fn from_points(points: &[DVec3]) -> Aabb {
-        points.iter().fold(Aabb::EMPTY, |b, p| b.grow(*p))
-    }
-
-    pub fn grow(self, p: DVec3) -> Aabb {
-        Aabb {
-            min: self.min.min(p),
-            max: self.max.max(p),
-        }
-    }
-
-    pub fn union(self, o: Aabb) -> Aabb {
-        Aabb {
-            min: self.min.min(o.min),
-            max: self.max.max(o.max),
-        }
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.min.cmpgt(self.max).any()
-    }
-
-    pub(crate) fn centroid(&self) -> DVec3 {
-        0.5 * (self.min + self.max)
-    }
-
-    /// Half the surface area (the SAH only needs ratios). 0 for an empty box.
-    pub(crate) fn half_area(&self) -> f64 {
-        if self.is_empty() {
-            return 0.0;
-        }
-        let d = self.max - self.min;
-        d.x * d.y + d.y * d.z + d.z * d.x
-    }
-
-    /// Parametric interval where the ray is inside the box, clipped to `[t_min, t_max]`.
-    ///
-    /// `inv_dir` is `1 / ray.dir` per component (±∞ for zero components; such a ray is
-    /// inside that slab if its origin is, boundary included). The far distance is
-    /// widened by `1 + 2γ₃` (Ize 2013) so rounding cannot make a ray slip between boxes.
-    pub fn clip(
-        &self,
-        origin: DVec3,
-        inv_dir: DVec3,
-        t_min: f64,
-        t_max: f64,
-    ) -> Option<(f64, f64)> {
-        const GAMMA3: f64 = 3.0 * f64::EPSILON / (1.0 - 3.0 * f64::EPSILON);
-        let mut near = t_min;
-        let mut far = t_max;
-        for a in 0..3 {
-            if inv_dir[a].is_infinite() {
-                // Ray parallel to this slab: inside it everywhere or nowhere.
-                if origin[a] < self.min[a] || origin[a] > self.max[a] {
-                    return None;
-                }
-                continue;
+/// Parametric interval where the ray is inside the box `b`, clipped to `[t_min, t_max]`.
+///
+/// `inv_dir` is `1 / ray.dir` per component (±∞ for zero components; such a ray is
+/// inside that slab if its origin is, boundary included). The far distance is
+/// widened by `1 + 2γ₃` (Ize 2013) so rounding cannot make a ray slip between boxes.
+fn clip(b: &Aabb, origin: DVec3, inv_dir: DVec3, t_min: f64, t_max: f64) -> Option<(f64, f64)> {
+    const GAMMA3: f64 = 3.0 * f64::EPSILON / (1.0 - 3.0 * f64::EPSILON);
+    let mut near = t_min;
+    let mut far = t_max;
+    for a in 0..3 {
+        if inv_dir[a].is_infinite() {
+            // Ray parallel to this slab: inside it everywhere or nowhere.
+            if origin[a] < b.min[a] || origin[a] > b.max[a] {
+                return None;
             }
-            let t0 = (self.min[a] - origin[a]) * inv_dir[a];
-            let t1 = (self.max[a] - origin[a]) * inv_dir[a];
-            near = near.max(t0.min(t1));
-            far = far.min(t0.max(t1) * (1.0 + 2.0 * GAMMA3));
+            continue;
         }
-        (near <= far).then_some((near, far))
+        let t0 = (b.min[a] - origin[a]) * inv_dir[a];
+        let t1 = (b.max[a] - origin[a]) * inv_dir[a];
+        near = near.max(t0.min(t1));
+        far = far.min(t0.max(t1) * (1.0 + 2.0 * GAMMA3));
     }
+    (near <= far).then_some((near, far))
 }
 
 /// Cost of one traversal step relative to one primitive test.
@@ -129,11 +80,11 @@ impl Bvh {
         let mut prims: Vec<BuildPrim> = bounds
             .iter()
             .enumerate()
-            .filter(|(_, b)| !b.is_empty() && b.min.is_finite() && b.max.is_finite())
+            .filter(|(_, b)| !b.is_empty() && b.min.iter().chain(&b.max).all(|v| v.is_finite()))
             .filter_map(|(i, b)| {
                 u32::try_from(i).ok().map(|index| BuildPrim {
                     bounds: *b,
-                    centroid: b.centroid(),
+                    centroid: DVec3::from_array(b.centre()),
                     index,
                 })
             })
@@ -172,8 +123,10 @@ impl Bvh {
 
     fn build_node(&mut self, prims: &mut [BuildPrim], depth: usize) -> usize {
         let bounds = prims.iter().fold(Aabb::EMPTY, |b, p| b.union(p.bounds));
-        let cbounds = prims.iter().fold(Aabb::EMPTY, |b, p| b.grow(p.centroid));
-        let extent = cbounds.max - cbounds.min;
+        let cbounds = prims
+            .iter()
+            .fold(Aabb::EMPTY, |b, p| b.grow(p.centroid.to_array()));
+        let extent = DVec3::from_array(cbounds.max) - DVec3::from_array(cbounds.min);
         if prims.len() <= 2 || depth >= MAX_DEPTH || extent.max_element() <= 0.0 {
             return self.push_leaf(bounds, prims);
         }
@@ -272,7 +225,7 @@ impl Bvh {
         // (node, entry distance): a node is only opened if it starts before the best hit.
         let mut stack = [(0u32, 0.0f64); MAX_DEPTH + 2];
         let root = self.nodes.first()?;
-        let (entry, _) = root.bounds.clip(ray.origin, inv, t_min, far)?;
+        let (entry, _) = clip(&root.bounds, ray.origin, inv, t_min, far)?;
         stack[0] = (0, entry);
         let mut sp = 1usize;
         while sp > 0 {
@@ -305,11 +258,11 @@ impl Bvh {
             let ta = self
                 .nodes
                 .get(a as usize)
-                .and_then(|n| n.bounds.clip(ray.origin, inv, t_min, far));
+                .and_then(|n| clip(&n.bounds, ray.origin, inv, t_min, far));
             let tb = self
                 .nodes
                 .get(b as usize)
-                .and_then(|n| n.bounds.clip(ray.origin, inv, t_min, far));
+                .and_then(|n| clip(&n.bounds, ray.origin, inv, t_min, far));
             let mut push = |n: u32, t: f64| {
                 if sp < stack.len() {
                     stack[sp] = (n, t);
@@ -356,7 +309,7 @@ impl Bvh {
             let Some(node) = self.nodes.get(idx) else {
                 continue;
             };
-            if node.bounds.clip(ray.origin, inv, t_min, t_max).is_none() {
+            if clip(&node.bounds, ray.origin, inv, t_min, t_max).is_none() {
                 continue;
             }
             if node.count > 0 {
@@ -482,7 +435,7 @@ mod tests {
     use proptest::prelude::*;
 
     fn tri_box(t: &[DVec3; 3]) -> Aabb {
-        Aabb::from_points(t)
+        box_of(t)
     }
 
     fn brute(tris: &[[DVec3; 3]], ray: &Ray, t_min: f64, t_max: f64) -> Option<(u32, f64)> {
@@ -532,8 +485,8 @@ mod tests {
         assert!(!bvh.any(&ray, 0.0, 1.0, |_, _, _| Some(0.5)));
         // Many primitives with the same centroid: must still build (one leaf).
         let b = Aabb {
-            min: DVec3::splat(-1.0),
-            max: DVec3::splat(1.0),
+            min: [-1.0; 3],
+            max: [1.0; 3],
         };
         let bvh = Bvh::build(&vec![b; 100]);
         assert_eq!(bvh.len(), 100);
@@ -545,8 +498,8 @@ mod tests {
         assert_eq!(seen, 100);
         // NaN boxes are dropped.
         let nan = Aabb {
-            min: DVec3::splat(f64::NAN),
-            max: DVec3::splat(f64::NAN),
+            min: [f64::NAN; 3],
+            max: [f64::NAN; 3],
         };
         assert_eq!(Bvh::build(&[nan, b]).len(), 1);
     }

@@ -6,7 +6,9 @@ use format::input::{read_whole, InputErrorKind, Limits};
 pub use glam::{DVec3, Vec3};
 use serde::{Deserialize, Serialize};
 
-use crate::bvh::{intersect_triangle, Aabb, Bvh, RayShear};
+use format::Aabb;
+
+use crate::bvh::{box_of, intersect_triangle, Bvh, RayShear};
 use crate::camera::Ray;
 
 /// How a mesh file is placed in the scene (part of the view state): a vertex `v` of the
@@ -364,7 +366,7 @@ impl Meshes {
                 });
             }
         }
-        let boxes: Vec<Aabb> = tris.iter().map(|t| Aabb::from_points(&t.v)).collect();
+        let boxes: Vec<Aabb> = tris.iter().map(|t| box_of(&t.v)).collect();
         let bvh = Bvh::build(&boxes);
         Meshes { tris, colours, bvh }
     }
@@ -654,8 +656,8 @@ mod tests {
         assert_eq!(h.colour, Vec3::new(1.0, 0.0, 0.0));
         assert!((h.t - 9.0).abs() < 0.02);
         let b = meshes.bounds().expect("bounds");
-        assert!((b.min - DVec3::new(-1.0, -1.0, -1.0)).length() < 1e-9);
-        assert!((b.max - DVec3::new(1.0, 1.0, 6.0)).length() < 1e-9);
+        assert!((DVec3::from_array(b.min) - DVec3::new(-1.0, -1.0, -1.0)).length() < 1e-9);
+        assert!((DVec3::from_array(b.max) - DVec3::new(1.0, 1.0, 6.0)).length() < 1e-9);
         assert!(Meshes::empty().bounds().is_none());
         assert!(Meshes::empty()
             .intersect(&down, 0.0, f64::INFINITY)

@@ -21,7 +21,7 @@ use crate::fields::{range_and_histogram, region_ranges, FieldKind, RangeInput};
 use crate::grid::{AnyGrid, Transform};
 use crate::levels::assign_levels;
 use crate::nonfinite::{self, CellValue};
-use crate::regions::{self, Bbox};
+use crate::regions;
 
 /// Re-exported from [`crate::error`], where it lives since [`crate::levels`] returns it too.
 pub use crate::error::BakeError;
@@ -594,7 +594,7 @@ fn build_regions(
     sets: &[CellSet],
     bricks: &Bricks,
     finest: f64,
-) -> (Option<Bbox>, regions::RegionTree) {
+) -> (Option<Aabb>, regions::RegionTree) {
     let supports = snapped_supports(sets, &bricks.boxes, finest);
     regions::build(&supports)
 }
@@ -603,7 +603,7 @@ fn build_regions(
 struct Kd {
     nodes: Vec<KdNode>,
     /// Bounds and brick ids of each region, in the order the nodes number them.
-    regions: Vec<(Bbox, Vec<u32>)>,
+    regions: Vec<(Aabb, Vec<u32>)>,
     /// `(min, max)` of each field over each region (see [`region_ranges`]).
     ranges: Vec<[f32; 2]>,
 }
@@ -640,7 +640,7 @@ fn assemble(
     bricks: &Bricks,
     fields: FieldValues,
     kd: Kd,
-    bounds: Option<Bbox>,
+    bounds: Option<Aabb>,
 ) -> (BrickFile, Vec<FieldSummary>) {
     let mut file_fields = Vec::with_capacity(fields.names.len());
     let mut field_summaries = Vec::with_capacity(fields.names.len());
@@ -696,17 +696,14 @@ fn assemble(
             .min()
             .unwrap_or(0);
         file_regions.push(Region {
-            bounds: Aabb {
-                min: rb.min,
-                max: rb.max,
-            },
+            bounds: *rb,
             bricks_start: region_bricks.len() as u32,
             bricks_len: ids.len() as u32,
             finest_level,
         });
         region_bricks.extend_from_slice(ids);
     }
-    let bounds = bounds.unwrap_or(Bbox {
+    let bounds = bounds.unwrap_or(Aabb {
         min: [0.0; 3],
         max: [0.0; 3],
     });
@@ -717,10 +714,7 @@ fn assemble(
             bake_options: serde_json::to_string(opts).unwrap_or_default(),
             tool_version: env!("CARGO_PKG_VERSION").to_string(),
         },
-        bounds: Aabb {
-            min: bounds.min,
-            max: bounds.max,
-        },
+        bounds,
         levels: file_levels,
         fields: file_fields,
         bricks: file_bricks,
@@ -768,14 +762,14 @@ fn per_brick(
 
 /// Brick supports (first centre − w .. first centre + dims·w), with coordinates that agree
 /// up to rounding across lattices snapped to one value, so that no sliver regions appear.
-fn snapped_supports(sets: &[CellSet], bricks: &[BrickBox], finest: f64) -> Vec<Bbox> {
-    let raw: Vec<Bbox> = bricks
+fn snapped_supports(sets: &[CellSet], bricks: &[BrickBox], finest: f64) -> Vec<Aabb> {
+    let raw: Vec<Aabb> = bricks
         .iter()
         .map(|b| {
             let s = &sets[b.set];
             let lo = [0, 1, 2].map(|a| b.lo[a] as i64 - 1);
             let hi = [0, 1, 2].map(|a| b.lo[a] as i64 + b.dims[a] as i64);
-            Bbox {
+            Aabb {
                 min: s.transform.index_to_world(lo.map(|c| c as f64)),
                 max: s.transform.index_to_world(hi.map(|c| c as f64)),
             }
@@ -807,7 +801,7 @@ fn snapped_supports(sets: &[CellSet], bricks: &[BrickBox], finest: f64) -> Vec<B
         }
     };
     raw.iter()
-        .map(|b| Bbox {
+        .map(|b| Aabb {
             min: [0, 1, 2].map(|a| snap(a, b.min[a])),
             max: [0, 1, 2].map(|a| snap(a, b.max[a])),
         })
