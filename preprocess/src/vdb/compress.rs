@@ -11,7 +11,7 @@ use std::io::Read;
 
 use super::codec::CompressionFlags;
 use super::cursor::Cursor;
-use super::error::{ErrorKind, RawError, RawResult};
+use super::error::{DecompressError, ErrorKind, Invalid, RawError, RawResult};
 
 /// One data chunk located in the file but not decoded yet, so that decoding can run in
 /// parallel once the sequential walk over the file has found every chunk.
@@ -40,7 +40,7 @@ impl<'a> LocatedChunk<'a> {
         };
         decoded
             .map(Cow::Owned)
-            .map_err(|msg| RawError::new(self.start, self.what, ErrorKind::Decompress(msg)))
+            .map_err(|error| RawError::new(self.start, self.what, ErrorKind::Decompress(error)))
     }
 }
 
@@ -65,10 +65,10 @@ pub(crate) fn locate_chunk<'a>(
             return Err(RawError::invalid(
                 start,
                 what,
-                format!(
-                    "expected an uncompressed chunk of {nbytes} bytes, found {} bytes",
-                    size.unsigned_abs()
-                ),
+                Invalid::ChunkSize {
+                    expected: nbytes,
+                    found: size.unsigned_abs(),
+                },
             ));
         }
         return Ok(located(Chunk::Raw(cur.take_as(nbytes, what, expected)?)));
@@ -92,18 +92,20 @@ pub(crate) fn locate_chunk<'a>(
     }))
 }
 
-fn zlib_decode(src: &[u8], nbytes: usize) -> Result<Vec<u8>, String> {
+fn zlib_decode(src: &[u8], nbytes: usize) -> Result<Vec<u8>, DecompressError> {
     let mut out = Vec::with_capacity(nbytes);
     // Read at most one byte more than expected so a zip bomb cannot grow the buffer.
     flate2::read::ZlibDecoder::new(src)
         .take(nbytes as u64 + 1)
         .read_to_end(&mut out)
-        .map_err(|e| format!("zip data does not decode: {e}"))?;
+        .map_err(|e| DecompressError::Zip {
+            message: e.to_string(),
+        })?;
     if out.len() != nbytes {
-        return Err(format!(
-            "zip data decodes to {} bytes, expected {nbytes}",
-            out.len()
-        ));
+        return Err(DecompressError::ZipSize {
+            found: out.len(),
+            expected: nbytes,
+        });
     }
     Ok(out)
 }
@@ -117,23 +119,20 @@ const BLOSC_LZ4: u8 = 1;
 const MAX_SPLITS: usize = 16;
 const MIN_BUFFERSIZE: usize = 128;
 
-fn le32(b: &[u8], at: usize) -> Result<usize, String> {
+fn le32(b: &[u8], at: usize) -> Result<usize, DecompressError> {
     b.get(at..at.saturating_add(4))
         .and_then(|s| s.try_into().ok())
         .map(|s: [u8; 4]| u32::from_le_bytes(s) as usize)
-        .ok_or_else(|| format!("blosc frame ends at byte {} of {}", at, b.len()))
+        .ok_or(DecompressError::BloscEnds { at, len: b.len() })
 }
 
 /// Decodes a blosc1 frame (LZ4 codec, optional byte shuffle, optional split blocks) into
 /// exactly `nbytes` bytes. Layout: 16-byte header (version, codec version, flags, type size,
 /// uncompressed size, block size, frame size), block start offsets, then per block one or
 /// `typesize` streams each prefixed by its i32 compressed length.
-pub(crate) fn blosc_decode(src: &[u8], nbytes: usize) -> Result<Vec<u8>, String> {
+pub(crate) fn blosc_decode(src: &[u8], nbytes: usize) -> Result<Vec<u8>, DecompressError> {
     if src.len() < BLOSC_HEADER {
-        return Err(format!(
-            "blosc frame of {} bytes is shorter than its 16-byte header",
-            src.len()
-        ));
+        return Err(DecompressError::BloscShort { len: src.len() });
     }
     let flags = src[2];
     let typesize = src[3] as usize;
@@ -141,53 +140,51 @@ pub(crate) fn blosc_decode(src: &[u8], nbytes: usize) -> Result<Vec<u8>, String>
     let blocksize = le32(src, 8)?;
     let cbytes = le32(src, 12)?;
     if total != nbytes {
-        return Err(format!(
-            "blosc frame holds {total} bytes, expected {nbytes}"
-        ));
+        return Err(DecompressError::BloscTotal {
+            total,
+            expected: nbytes,
+        });
     }
     if cbytes > src.len() {
-        return Err(format!(
-            "blosc frame claims {cbytes} bytes, chunk has {}",
-            src.len()
-        ));
+        return Err(DecompressError::BloscClaims {
+            claimed: cbytes,
+            len: src.len(),
+        });
     }
     // The frame size counts the header: a smaller one is corrupt, and the block-count
     // check below subtracts the header from it.
     if cbytes < BLOSC_HEADER {
-        return Err(format!(
-            "blosc frame claims {cbytes} bytes, shorter than its 16-byte header"
-        ));
+        return Err(DecompressError::BloscClaimsBelowHeader { claimed: cbytes });
     }
     let src = &src[..cbytes];
     if flags & BLOSC_MEMCPYED != 0 {
         return src
             .get(BLOSC_HEADER..BLOSC_HEADER + nbytes)
             .map(<[u8]>::to_vec)
-            .ok_or_else(|| "blosc frame marked uncompressed is too short".to_string());
+            .ok_or(DecompressError::BloscCopyShort);
     }
     if nbytes == 0 {
         return Ok(Vec::new());
     }
     let codec = flags >> 5;
     if codec != BLOSC_LZ4 {
-        return Err(format!(
-            "blosc codec {codec} is not supported (OpenVDB writes LZ4, codec 1)"
-        ));
+        return Err(DecompressError::BloscCodec { codec });
     }
     if flags & BLOSC_DOBITSHUFFLE != 0 && blocksize >= typesize {
-        return Err("blosc bit shuffle is not supported (OpenVDB writes byte shuffle)".into());
+        return Err(DecompressError::BloscBitShuffle);
     }
     if blocksize == 0 || typesize == 0 {
-        return Err(format!(
-            "blosc block size {blocksize} or type size {typesize} is zero"
-        ));
+        return Err(DecompressError::BloscZeroSize {
+            blocksize,
+            typesize,
+        });
     }
     let nblocks = nbytes.div_ceil(blocksize);
     if nblocks > (src.len() - BLOSC_HEADER) / 4 {
-        return Err(format!(
-            "blosc frame claims {nblocks} blocks, too many for {} bytes",
-            src.len()
-        ));
+        return Err(DecompressError::BloscBlocks {
+            blocks: nblocks,
+            len: src.len(),
+        });
     }
     let shuffle = flags & BLOSC_DOSHUFFLE != 0 && typesize > 1;
     let dont_split = flags & BLOSC_DONT_SPLIT != 0;
@@ -215,20 +212,26 @@ pub(crate) fn blosc_decode(src: &[u8], nbytes: usize) -> Result<Vec<u8>, String>
         let target: &mut [u8] = if shuffle { &mut tmp[..bsize] } else { dest };
         for split in target.chunks_mut(neblock).take(nsplits) {
             let n = le32(src, at)?;
-            let past_end = || format!("blosc block {b} runs past the frame end");
-            at = at.checked_add(4).ok_or_else(past_end)?;
+            let past_end = DecompressError::BloscPastEnd { block: b };
+            at = at.checked_add(4).ok_or(past_end.clone())?;
             let stream = src
-                .get(at..at.checked_add(n).ok_or_else(past_end)?)
-                .ok_or_else(past_end)?;
+                .get(at..at.checked_add(n).ok_or(past_end.clone())?)
+                .ok_or(past_end)?;
             if n == neblock {
                 split.copy_from_slice(stream);
             } else {
-                let got = lz4_flex::block::decompress_into(stream, split)
-                    .map_err(|e| format!("blosc block {b}: LZ4 data does not decode: {e}"))?;
+                let got = lz4_flex::block::decompress_into(stream, split).map_err(|e| {
+                    DecompressError::Lz4 {
+                        block: b,
+                        message: e.to_string(),
+                    }
+                })?;
                 if got != neblock {
-                    return Err(format!(
-                        "blosc block {b}: LZ4 data decodes to {got} bytes, expected {neblock}"
-                    ));
+                    return Err(DecompressError::Lz4Size {
+                        block: b,
+                        found: got,
+                        expected: neblock,
+                    });
                 }
             }
             at += n;
@@ -371,8 +374,11 @@ mod tests {
             frame.extend(cbytes.to_le_bytes());
             frame.extend([0u8; 16]);
             let err = blosc_decode(&frame, 8).unwrap_err();
-            assert!(
-                err.contains("shorter than its 16-byte header"),
+            assert_eq!(
+                err,
+                DecompressError::BloscClaimsBelowHeader {
+                    claimed: cbytes as usize
+                },
                 "cbytes {cbytes}: {err}"
             );
         }

@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 
 use super::cursor::Cursor;
-use super::error::{RawError, RawResult};
+use super::error::{Invalid, RawError, RawResult};
 
 /// One metadata value.
 #[derive(Debug, Clone, PartialEq)]
@@ -53,10 +53,11 @@ pub(crate) fn read_metadata(cur: &mut Cursor<'_>) -> RawResult<Metadata> {
             RawError::invalid(
                 entry,
                 WHAT,
-                format!(
-                    "entry \"{name}\" of type {type_name} has {} bytes",
-                    bytes.len()
-                ),
+                Invalid::MetadataSize {
+                    name: name.to_string(),
+                    type_name: type_name.to_string(),
+                    len: bytes.len(),
+                },
             )
         })?;
         out.insert(name, value);

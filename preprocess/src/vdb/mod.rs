@@ -35,7 +35,7 @@ use std::path::Path;
 use format::input::{read_whole, Limits};
 
 pub use codec::MAGIC;
-pub use error::{ErrorKind, VdbError};
+pub use error::{DecompressError, ErrorKind, Invalid, VdbError};
 pub use metadata::{MetaValue, Metadata};
 
 use crate::grid::{AnyGrid, Grid, Transform};
@@ -245,7 +245,10 @@ impl VdbFile {
             return Err(RawError::invalid(
                 count_at,
                 "grid count",
-                format!("{count} grids cannot fit in {} bytes", cur.left()),
+                Invalid::GridCount {
+                    count,
+                    left: cur.left(),
+                },
             ));
         }
         let mut parents = Vec::new();
@@ -272,7 +275,10 @@ impl VdbFile {
                             RawError::invalid(
                                 at,
                                 "grid descriptor",
-                                format!("offset {p} is outside the {}-byte file", data.len()),
+                                Invalid::Offset {
+                                    offset: p,
+                                    len: data.len(),
+                                },
                             )
                         })
                 };
@@ -293,9 +299,12 @@ impl VdbFile {
                 return Err(RawError::invalid(
                     at,
                     "grid descriptor",
-                    format!(
-                        "offsets grid {grid_pos}, buffers {block_pos}, end {end_pos} are out of order (descriptor ends at byte {here})"
-                    ),
+                    Invalid::OffsetOrder {
+                        grid: grid_pos,
+                        buffers: block_pos,
+                        end: end_pos,
+                        here,
+                    },
                 ));
             }
             let name = match unique_name.find('\u{1e}') {
@@ -335,7 +344,10 @@ impl VdbFile {
                 return Err(RawError::invalid(
                     g.grid_pos as usize,
                     "grid compression flags",
-                    format!("unknown flags {compression:#x} for grid {name:?}"),
+                    Invalid::CompressionFlags {
+                        flags: compression,
+                        grid: name.to_string(),
+                    },
                 ));
             }
             let meta = metadata::read_metadata(&mut cur)?;
@@ -366,7 +378,10 @@ impl VdbFile {
                         RawError::invalid(
                             g.grid_pos as usize,
                             "grid descriptor",
-                            format!("grid {name:?} is an instance of missing grid {:?}", parent),
+                            Invalid::MissingParent {
+                                grid: name.to_string(),
+                                parent: parent.to_string(),
+                            },
                         )
                     })?;
                 Some(p)
@@ -387,7 +402,9 @@ impl VdbFile {
                     return Err(RawError::invalid(
                         g.grid_pos as usize,
                         "grid descriptor",
-                        format!("grid {:?} is an instance of an instance", g.name),
+                        Invalid::NestedInstance {
+                            grid: g.name.to_string(),
+                        },
                     ));
                 }
             }
@@ -444,7 +461,7 @@ impl VdbFile {
                 return Err(RawError::invalid(
                     g.grid_pos as usize,
                     "transform",
-                    "missing",
+                    Invalid::MissingTransform,
                 ))
             }
         };
@@ -457,11 +474,10 @@ impl VdbFile {
             return Err(RawError::invalid(
                 g.grid_pos as usize,
                 "grid descriptor",
-                format!(
-                    "instance of a {} grid has type {}",
-                    tree_owner.value_type.name(),
-                    g.value_type.name()
-                ),
+                Invalid::InstanceType {
+                    parent: tree_owner.value_type.name().to_string(),
+                    own: g.value_type.name().to_string(),
+                },
             ));
         }
         if tree_owner.tree_pos == 0 {

@@ -2,7 +2,7 @@
 //! rotation or shear are accepted, since qbricks treats grids as axis-aligned boxes.
 
 use super::cursor::Cursor;
-use super::error::{ErrorKind, RawError, RawResult};
+use super::error::{ErrorKind, Invalid, RawError, RawResult};
 use crate::grid::Transform;
 
 /// Reads a transform. Unsupported map types give [`ErrorKind::UnsupportedTransform`].
@@ -38,9 +38,7 @@ pub(crate) fn read_transform(cur: &mut Cursor<'_>) -> RawResult<(String, Transfo
         return Err(RawError::invalid(
             start,
             what,
-            format!(
-                "voxel size {scale:?} / translation {translation:?} must be finite and positive"
-            ),
+            Invalid::Transform { scale, translation },
         ));
     }
     Ok((
@@ -95,9 +93,10 @@ mod tests {
         let mut v = vec![[0.0, 1.0, 1.0]];
         v.extend([[1.0; 3]; 4]);
         let b = bytes("ScaleMap", &v);
-        assert!(matches!(
-            read_transform(&mut Cursor::new(&b, 0)).unwrap_err().kind,
-            ErrorKind::Invalid(_)
-        ));
+        let e = read_transform(&mut Cursor::new(&b, 0)).unwrap_err();
+        assert!(
+            matches!(&e.kind, ErrorKind::Invalid(i) if matches!(**i, Invalid::Transform { .. })),
+            "{e:?}"
+        );
     }
 }

@@ -10,7 +10,7 @@ use rayon::prelude::*;
 
 use super::codec::VdbValue;
 use super::cursor::Cursor;
-use super::error::{ErrorKind, RawError, RawResult};
+use super::error::{ErrorKind, Invalid, RawError, RawResult};
 use super::values::{decode_values, locate_values, read_values, Codec};
 use crate::grid::{Leaf, Tile, LEAF_VOXELS};
 
@@ -134,7 +134,7 @@ pub(crate) fn read_tree<V: VdbValue>(
         return Err(RawError::invalid(
             start,
             "tree buffer count",
-            format!("expected 1 buffer per node, found {buffers}"),
+            Invalid::BufferCount { count: buffers },
         ));
     }
     let background = V::from_bytes(cur.take(V::SIZE, "background value")?);
@@ -173,7 +173,7 @@ pub(crate) fn read_tree<V: VdbValue>(
             return Err(RawError::invalid(
                 at,
                 "root tile",
-                format!("origin {origin:?} is not a multiple of 4096"),
+                Invalid::RootOrigin { origin },
             ));
         }
         keys.push((origin, at));
@@ -194,7 +194,7 @@ pub(crate) fn read_tree<V: VdbValue>(
             return Err(RawError::invalid(
                 at,
                 "root child",
-                format!("origin {origin:?} is not a multiple of 4096"),
+                Invalid::RootOrigin { origin },
             ));
         }
         keys.push((origin, at));
@@ -207,7 +207,7 @@ pub(crate) fn read_tree<V: VdbValue>(
         return Err(RawError::invalid(
             w[1].1,
             "root node",
-            format!("two entries at origin {:?}", w[1].0),
+            Invalid::DuplicateRootEntry { origin: w[1].0 },
         ));
     }
 

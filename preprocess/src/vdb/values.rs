@@ -10,7 +10,7 @@
 use super::codec::{mask_is_on, CompressionFlags, NodeMeta, VdbValue};
 use super::compress::{locate_chunk, LocatedChunk};
 use super::cursor::Cursor;
-use super::error::{RawError, RawResult};
+use super::error::{Invalid, RawError, RawResult};
 
 /// Decoding settings shared by every node of one grid.
 #[derive(Debug, Clone, Copy)]
@@ -43,13 +43,8 @@ pub(crate) fn locate_values<'a, V: VdbValue>(
 ) -> RawResult<ValuesFrame<'a, V>> {
     let start = cur.pos();
     let byte = cur.u8(what)?;
-    let meta = NodeMeta::from_byte(byte).ok_or_else(|| {
-        RawError::invalid(
-            start,
-            what,
-            format!("mask-compression code {byte} is not one of 0 to 6"),
-        )
-    })?;
+    let meta = NodeMeta::from_byte(byte)
+        .ok_or_else(|| RawError::invalid(start, what, Invalid::MaskCompression { code: byte }))?;
     // Inactive values not stored are −background, or +background when selected (or when
     // the node says they all are).
     let mut inactive0 = if meta == NodeMeta::NoMaskOrInactiveVals {
