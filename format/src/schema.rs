@@ -51,7 +51,9 @@ pub struct BrickFile {
     /// Exact value range of every field over every cell that can contribute to a region:
     /// entry `r * fields.len() + f` is field `f` of region `r`.
     pub region_ranges: Vec<ValueRange>,
-    /// KD-tree over the regions; node 0 is the root (absent when there are no regions).
+    /// KD-tree over the regions; node 0 is the root (absent when there are no regions),
+    /// and every node is stored before its children (depth first), which is what lets
+    /// validation check that it is a tree in one pass.
     pub kd_nodes: Vec<KdNode>,
     /// Value range of every field over every KD node's subtree: entry `n * fields.len() + f`
     /// is field `f` of node `n` (a region leaf: its region's range; an inner node: the

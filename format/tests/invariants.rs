@@ -146,6 +146,36 @@ fn each_broken_invariant_is_named() {
     let mut f = base();
     set_root(&mut f, Some(0), None);
     refused!(f, "reached twice", V::KdNotATree { child: 0, .. });
+    // Both children the same node: reached twice.
+    let mut f = base();
+    if let KdNode::Inner { right, .. } = f.kd_nodes[0] {
+        set_root(&mut f, Some(right), None);
+    }
+    refused!(f, "reached twice", V::KdNotATree { node: 0, .. });
+    // The same tree with nodes 1.. stored in reverse (the root stays at 0): every node
+    // below the root now comes after its children. It is still a tree, but refused:
+    // validation relies on the parent-first order.
+    let mut f = base();
+    let n = f.kd_nodes.len();
+    assert!(
+        f.kd_nodes[1..]
+            .iter()
+            .any(|k| matches!(k, KdNode::Inner { .. })),
+        "the base has an inner node below the root"
+    );
+    let moved = |i: u32| if i == 0 { 0 } else { n as u32 - i };
+    let mut reordered = f.kd_nodes.clone();
+    for (i, node) in f.kd_nodes.iter().enumerate() {
+        let mut node = *node;
+        if let KdNode::Inner { left, right, .. } = &mut node {
+            *left = moved(*left);
+            *right = moved(*right);
+        }
+        reordered[moved(i as u32) as usize] = node;
+    }
+    f.kd_nodes = reordered;
+    f.derive_kd_tables();
+    refused!(f, "stored before its parent", V::KdNotATree { .. });
     let mut f = base();
     set_root(&mut f, None, Some(3));
     refused!(f, "kd_nodes[0].axis", V::KdAxis { node: 0, axis: 3 });

@@ -56,38 +56,35 @@ enum Tmp {
 pub fn random_kd(rng: &mut Rng, root: Aabb, max_depth: u32) -> KdConfig {
     let mut regions = Vec::new();
     let tree = grow(rng, root, max_depth, &mut regions);
-    // Count nodes, then give them shuffled indices with the root at 0.
-    fn count(t: &Tmp) -> usize {
-        match t {
-            Tmp::Inner(_, _, l, r) => 1 + count(l) + count(r),
-            Tmp::Leaf(_) => 1,
+    // Give the nodes shuffled indices with the root at 0 and every node after its parent
+    // (the order a file must have): each next index goes to a random node among those
+    // whose parent is placed, so siblings, subtrees and levels interleave.
+    let mut nodes: Vec<KdNode> = Vec::new();
+    // (node, its index, the index of the parent slot to fill: (parent index, is left)).
+    let mut frontier: Vec<(&Tmp, Option<(usize, bool)>)> = vec![(&tree, None)];
+    while !frontier.is_empty() {
+        let k = rng.below(frontier.len() as u64) as usize;
+        let (t, parent) = frontier.swap_remove(k);
+        let id = nodes.len() as u32;
+        if let Some((p, is_left)) = parent {
+            if let KdNode::Inner { left, right, .. } = &mut nodes[p] {
+                *(if is_left { left } else { right }) = id;
+            }
         }
-    }
-    let n = count(&tree);
-    let mut ids: Vec<u32> = (1..n as u32).collect();
-    for i in (1..ids.len()).rev() {
-        let j = rng.below(i as u64 + 1) as usize;
-        ids.swap(i, j);
-    }
-    let mut nodes = vec![KdNode::Leaf { region: None }; n];
-    let mut next = ids.into_iter();
-    fn place(t: &Tmp, at: u32, nodes: &mut [KdNode], next: &mut impl Iterator<Item = u32>) {
         match t {
-            Tmp::Leaf(r) => nodes[at as usize] = KdNode::Leaf { region: *r },
+            Tmp::Leaf(r) => nodes.push(KdNode::Leaf { region: *r }),
             Tmp::Inner(axis, split, l, r) => {
-                let (li, ri) = (next.next().expect("id"), next.next().expect("id"));
-                nodes[at as usize] = KdNode::Inner {
+                nodes.push(KdNode::Inner {
                     axis: *axis,
                     split: *split,
-                    left: li,
-                    right: ri,
-                };
-                place(l, li, nodes, next);
-                place(r, ri, nodes, next);
+                    left: u32::MAX,
+                    right: u32::MAX,
+                });
+                frontier.push((l, Some((id as usize, true))));
+                frontier.push((r, Some((id as usize, false))));
             }
         }
     }
-    place(&tree, 0, &mut nodes, &mut next);
     KdConfig { regions, nodes }
 }
 
