@@ -1,0 +1,348 @@
+//! Cells of the input grids on their index lattices, and leaf-cell classification.
+//!
+//! A [`CellSet`] holds one grid's active cells as 8³ blocks (the VDB leaf layout) with an
+//! active mask and a leaf mask, so that neighbour lookups are one block-index probe
+//! ([`index`]) and a bit test.
+//! Values live beside it in a plain `Vec` indexed by the same slot (`block * 512 + offset`).
+//!
+//! A cell is a *leaf cell* when its box is not fully covered by active cells of finer grids
+//! (smaller voxel size); [`classify_leaves`] finds them.
+
+use crate::grid::{leaf_offset, Grid, Transform, LEAF_VOXELS};
+
+mod classify;
+mod index;
+
+pub(crate) use classify::classify_leaves;
+use index::{BlockIndex, BlockMap};
+
+/// Cells per block (one VDB leaf).
+pub(crate) const BLOCK_CELLS: usize = LEAF_VOXELS;
+
+/// Index coordinate of the block holding `ijk`.
+fn block_origin(ijk: [i32; 3]) -> [i32; 3] {
+    [ijk[0] & !7, ijk[1] & !7, ijk[2] & !7]
+}
+
+fn offset_in_block(ijk: [i32; 3]) -> usize {
+    leaf_offset(
+        (ijk[0] & 7) as usize,
+        (ijk[1] & 7) as usize,
+        (ijk[2] & 7) as usize,
+    )
+}
+
+fn bit(mask: &[u64; 8], n: usize) -> bool {
+    (mask[n >> 6] >> (n & 63)) & 1 == 1
+}
+
+/// One input grid's cells on its lattice.
+#[derive(Debug, Clone)]
+pub struct CellSet {
+    /// Grid name (for messages).
+    pub name: String,
+    pub transform: Transform,
+    /// Cell edge length (the grid's voxel size; cells are cubes).
+    pub width: f64,
+    /// Level of this grid (0 = finest).
+    pub level: u32,
+    /// Block origins (multiples of 8 in index space), sorted.
+    pub blocks: Vec<[i32; 3]>,
+    index: BlockIndex,
+    /// Active mask per block (bit `n` = offset `n`, see [`leaf_offset`]).
+    pub active: Vec<[u64; 8]>,
+    /// Leaf mask per block (active and not covered by finer cells); equals `active` until
+    /// [`classify_leaves`] runs.
+    pub leaf: Vec<[u64; 8]>,
+}
+
+impl CellSet {
+    /// Builds the cell set of `grid` and its values converted by `conv`, one per slot.
+    /// Tiles are expanded to cells; the caller bounds the total beforehand.
+    pub(crate) fn from_grid<V: Copy, T: Copy + Default>(
+        grid: &Grid<V>,
+        level: u32,
+        conv: impl Fn(V) -> T,
+    ) -> (CellSet, Vec<T>) {
+        let mut map: BlockMap = BlockMap::default();
+        let mut masks: Vec<[u64; 8]> = Vec::new();
+        let mut vals: Vec<T> = Vec::new();
+        let mut origins: Vec<[i32; 3]> = Vec::new();
+        let mut put = |ijk: [i32; 3], v: T| {
+            let bo = block_origin(ijk);
+            let b = *map.entry(bo).or_insert_with(|| {
+                origins.push(bo);
+                masks.push([0; 8]);
+                vals.extend(std::iter::repeat_n(T::default(), BLOCK_CELLS));
+                (origins.len() - 1) as u32
+            }) as usize;
+            let n = offset_in_block(ijk);
+            masks[b][n >> 6] |= 1 << (n & 63);
+            vals[b * BLOCK_CELLS + n] = v;
+        };
+        // Tiles first, so that leaf voxels win where a (malformed) file has both.
+        for t in &grid.tiles {
+            let lo = t.origin.map(|c| c as i64);
+            let hi = lo.map(|c| (c + t.size as i64).min(i32::MAX as i64 + 1));
+            let v = conv(t.value);
+            for z in lo[2]..hi[2] {
+                for y in lo[1]..hi[1] {
+                    for x in lo[0]..hi[0] {
+                        put([x as i32, y as i32, z as i32], v);
+                    }
+                }
+            }
+        }
+        for leaf in &grid.leaves {
+            for (ijk, v) in leaf.active_voxels() {
+                put(ijk, conv(v));
+            }
+        }
+        // Sort blocks by origin so that nothing depends on the order of leaves in the file.
+        let mut order: Vec<usize> = (0..origins.len()).collect();
+        order.sort_by_key(|&b| (origins[b][2], origins[b][1], origins[b][0]));
+        let mut blocks = Vec::with_capacity(order.len());
+        let mut active = Vec::with_capacity(order.len());
+        let mut values = Vec::with_capacity(vals.len());
+        for &b in &order {
+            blocks.push(origins[b]);
+            active.push(masks[b]);
+            values.extend_from_slice(&vals[b * BLOCK_CELLS..(b + 1) * BLOCK_CELLS]);
+        }
+        let index = BlockIndex::new(&blocks);
+        let set = CellSet {
+            name: grid.name.clone(),
+            transform: grid.transform,
+            width: grid.transform.voxel_size[0],
+            level,
+            blocks,
+            index,
+            leaf: active.clone(),
+            active,
+        };
+        (set, values)
+    }
+
+    /// Slot of `ijk` when its block exists (the cell may be inactive).
+    pub(crate) fn slot(&self, ijk: [i32; 3]) -> Option<usize> {
+        let b = self.index.get(block_origin(ijk))? as usize;
+        Some(b * BLOCK_CELLS + offset_in_block(ijk))
+    }
+
+    /// Active slot of the neighbour `d` cells (|d| <= 8) along `axis` of cell `ijk`
+    /// (held in `slot`): in-block arithmetic when the neighbour shares the block.
+    pub(crate) fn active_neighbour(
+        &self,
+        slot: usize,
+        ijk: [i32; 3],
+        axis: usize,
+        d: i32,
+    ) -> Option<usize> {
+        let local = (ijk[axis] & 7) + d;
+        if (0..8).contains(&local) {
+            let stride = [64i64, 8, 1][axis];
+            let s = (slot as i64 + stride * d as i64) as usize;
+            return self.is_active(s).then_some(s);
+        }
+        let mut q = ijk;
+        q[axis] = q[axis].checked_add(d)?;
+        self.active_slot(q)
+    }
+
+    /// Slot of `ijk` when that cell is active.
+    pub(crate) fn active_slot(&self, ijk: [i32; 3]) -> Option<usize> {
+        self.slot(ijk).filter(|&s| self.is_active(s))
+    }
+
+    /// Slot of `ijk` when that cell is a leaf cell.
+    pub(crate) fn leaf_slot(&self, ijk: [i32; 3]) -> Option<usize> {
+        self.slot(ijk).filter(|&s| self.is_leaf(s))
+    }
+
+    pub fn is_active(&self, slot: usize) -> bool {
+        bit(&self.active[slot / BLOCK_CELLS], slot % BLOCK_CELLS)
+    }
+
+    pub(crate) fn is_leaf(&self, slot: usize) -> bool {
+        bit(&self.leaf[slot / BLOCK_CELLS], slot % BLOCK_CELLS)
+    }
+
+    /// Index coordinate of a slot.
+    pub fn ijk(&self, slot: usize) -> [i32; 3] {
+        let o = self.blocks[slot / BLOCK_CELLS];
+        let n = slot % BLOCK_CELLS;
+        [
+            o[0] + (n >> 6) as i32,
+            o[1] + ((n >> 3) & 7) as i32,
+            o[2] + (n & 7) as i32,
+        ]
+    }
+
+    /// World-space centre of cell `ijk`.
+    pub fn centre(&self, ijk: [i32; 3]) -> [f64; 3] {
+        self.transform.index_to_world(ijk.map(|c| c as f64))
+    }
+
+    /// Whether every cell of the index box `lo..=hi` is active; None when the box spans
+    /// more than `max_blocks` blocks.
+    pub(crate) fn all_active_in(
+        &self,
+        lo: [i32; 3],
+        hi: [i32; 3],
+        max_blocks: i64,
+    ) -> Option<bool> {
+        self.visit_box(lo, hi, max_blocks, |mask, part| {
+            mask.is_some_and(|m| m.iter().zip(part).all(|(m, p)| m & p == *p))
+        })
+    }
+
+    /// Whether some cell of the index box `lo..=hi` is active; None when the box spans
+    /// more than `max_blocks` blocks.
+    pub(crate) fn any_active_in(
+        &self,
+        lo: [i32; 3],
+        hi: [i32; 3],
+        max_blocks: i64,
+    ) -> Option<bool> {
+        let none = self.visit_box(lo, hi, max_blocks, |mask, part| {
+            mask.is_none_or(|m| m.iter().zip(part).all(|(m, p)| m & p == 0))
+        });
+        none.map(|none| !none)
+    }
+
+    /// Calls `visit` for every block position overlapping the index box `lo..=hi` with the
+    /// block's active mask (None where there is no block) and the mask of the box's cells
+    /// in it, until `visit` returns false. Returns whether it never did, or None (without
+    /// calling it) when the box spans more than `max_blocks` blocks.
+    fn visit_box(
+        &self,
+        lo: [i32; 3],
+        hi: [i32; 3],
+        max_blocks: i64,
+        mut visit: impl FnMut(Option<&[u64; 8]>, &[u64; 8]) -> bool,
+    ) -> Option<bool> {
+        let blo = lo.map(|c| i64::from(c >> 3));
+        let bhi = hi.map(|c| i64::from(c >> 3));
+        let mut count = 1i64;
+        for a in 0..3 {
+            count = count.saturating_mul((bhi[a] - blo[a] + 1).max(0));
+        }
+        if count > max_blocks {
+            return None;
+        }
+        for bz in blo[2]..=bhi[2] {
+            for by in blo[1]..=bhi[1] {
+                for bx in blo[0]..=bhi[0] {
+                    // Block coordinates come from i32 >> 3, so `* 8` fits in i32.
+                    let origin = [bx, by, bz].map(|c| (c * 8) as i32);
+                    let part = box_part(origin, lo, hi);
+                    let mask = self.index.get(origin).map(|b| &self.active[b as usize]);
+                    if !visit(mask, &part) {
+                        return Some(false);
+                    }
+                }
+            }
+        }
+        Some(true)
+    }
+
+    #[cfg(test)]
+    pub(crate) fn active_count(&self) -> u64 {
+        self.active
+            .iter()
+            .flatten()
+            .map(|w| w.count_ones() as u64)
+            .sum()
+    }
+
+    pub(crate) fn leaf_count(&self) -> u64 {
+        self.leaf
+            .iter()
+            .flatten()
+            .map(|w| w.count_ones() as u64)
+            .sum()
+    }
+
+    /// Active slots in slot order.
+    pub(crate) fn active_slots(&self) -> impl Iterator<Item = usize> + '_ {
+        self.active.iter().enumerate().flat_map(|(b, m)| {
+            (0..BLOCK_CELLS)
+                .filter(move |&n| bit(m, n))
+                .map(move |n| b * BLOCK_CELLS + n)
+        })
+    }
+}
+
+/// Mask of the cells of the index box `lo..=hi` inside the block at `origin` (see
+/// [`leaf_offset`]: x selects the word, y and z the bits).
+fn box_part(origin: [i32; 3], lo: [i32; 3], hi: [i32; 3]) -> [u64; 8] {
+    let r = |a: usize| {
+        let l = (i64::from(lo[a]) - i64::from(origin[a])).clamp(0, 7);
+        let h = (i64::from(hi[a]) - i64::from(origin[a])).clamp(0, 7);
+        (l as usize, h as usize)
+    };
+    let ((x0, x1), (y0, y1), (z0, z1)) = (r(0), r(1), r(2));
+    let row = ((1u64 << (z1 - z0 + 1)) - 1) << z0;
+    let word = (y0..=y1).fold(0u64, |w, y| w | row << (8 * y));
+    std::array::from_fn(|x| if (x0..=x1).contains(&x) { word } else { 0 })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::grid::{Leaf, Tile};
+
+    pub(super) fn grid(name: &str, w: f64, t: f64, cells: &[[i32; 3]]) -> Grid<f32> {
+        let mut leaves: Vec<Leaf<f32>> = Vec::new();
+        for &c in cells {
+            let o = block_origin(c);
+            let idx = match leaves.iter().position(|l| l.origin == o) {
+                Some(i) => i,
+                None => {
+                    leaves.push(Leaf {
+                        origin: o,
+                        active: [0; 8],
+                        values: Box::new([0.0; LEAF_VOXELS]),
+                    });
+                    leaves.len() - 1
+                }
+            };
+            let n = offset_in_block(c);
+            leaves[idx].active[n >> 6] |= 1 << (n & 63);
+            leaves[idx].values[n] = 1.0;
+        }
+        Grid {
+            name: name.into(),
+            transform: Transform {
+                voxel_size: [w; 3],
+                translation: [t; 3],
+            },
+            background: 0.0,
+            leaves,
+            tiles: vec![],
+        }
+    }
+
+    #[test]
+    fn tiles_expand() {
+        let g = Grid {
+            name: "t".into(),
+            transform: Transform {
+                voxel_size: [1.0; 3],
+                translation: [0.0; 3],
+            },
+            background: 0.0f32,
+            leaves: vec![],
+            tiles: vec![Tile {
+                origin: [-8, 0, 8],
+                size: 8,
+                value: 2.0,
+            }],
+        };
+        let (s, v) = CellSet::from_grid(&g, 0, |x| x);
+        assert_eq!(s.active_count(), 512);
+        let slot = s.active_slot([-1, 7, 15]).expect("inside tile");
+        assert_eq!(v[slot], 2.0);
+        assert!(s.active_slot([0, 0, 8]).is_none());
+    }
+}
