@@ -7,6 +7,7 @@
 use rayon::prelude::*;
 
 use crate::cells::{CellSet, BLOCK_CELLS};
+use crate::grid::leaf_offset;
 
 /// A brick in the integer cell-index space of its grid: a concept of its own, not a
 /// second float box. Bricks are cut from cells by index (exact, no rounding); world boxes
@@ -27,20 +28,36 @@ impl BrickBox {
         self.dims.iter().map(|&d| d as u64).product()
     }
 
-    /// Cell coordinates in brick order (x fastest).
-    pub(crate) fn cell_coords(&self) -> impl Iterator<Item = [i32; 3]> + '_ {
-        let d = self.dims;
-        (0..d[2]).flat_map(move |z| {
-            (0..d[1]).flat_map(move |y| {
-                (0..d[0]).map(move |x| {
-                    [
+    /// Calls `visit` with the number (brick order, x fastest), coordinate and slot in `set`
+    /// (None where `set` has no block) of every cell. Cells are visited z fastest, the
+    /// order of a block's slots, so that reading their values (and their neighbours')
+    /// walks memory forward; along z the slot steps by one instead of being looked up
+    /// again.
+    pub(crate) fn for_each_cell(
+        &self,
+        set: &CellSet,
+        mut visit: impl FnMut(usize, [i32; 3], Option<usize>),
+    ) {
+        let [nx, ny, nz] = self.dims.map(|d| d as usize);
+        for x in 0..nx {
+            for y in 0..ny {
+                let mut slot = None;
+                for z in 0..nz {
+                    let ijk = [
                         self.lo[0] + x as i32,
                         self.lo[1] + y as i32,
                         self.lo[2] + z as i32,
-                    ]
-                })
-            })
-        })
+                    ];
+                    // Same block as the previous cell unless z starts a new one.
+                    slot = if z > 0 && ijk[2] & 7 != 0 {
+                        slot.map(|s| s + 1)
+                    } else {
+                        set.slot(ijk)
+                    };
+                    visit(x + nx * (y + ny * z), ijk, slot);
+                }
+            }
+        }
     }
 }
 
@@ -67,22 +84,13 @@ fn bricks_of(s: usize, set: &CellSet, max: u32) -> Vec<BrickBox> {
             (free[b][n >> 6] >> (n & 63)) & 1 == 1
         })
     };
-    let mut cells: Vec<[i32; 3]> = (0..set.blocks.len())
-        .flat_map(|b| {
-            (0..BLOCK_CELLS)
-                .filter(move |&n| (set.leaf[b][n >> 6] >> (n & 63)) & 1 == 1)
-                .map(move |n| set.ijk(b * BLOCK_CELLS + n))
-        })
-        .collect();
-    // Millions of cells on a dense level: sorting them is a visible share of the bake, and
-    // the order is total (no equal keys), so the parallel sort gives the same order.
-    cells.par_sort_unstable_by_key(|c| (c[2], c[1], c[0]));
     let max = max as i64;
     let inside = |c: i32, d: i64| (c as i64 + d) <= i32::MAX as i64;
     let mut out = Vec::new();
-    for c in cells {
-        if !is_free(&free, c) {
-            continue;
+    for_each_leaf_zyx(set, |c, slot| {
+        let (b, n) = (slot / BLOCK_CELLS, slot % BLOCK_CELLS);
+        if (free[b][n >> 6] >> (n & 63)) & 1 == 0 {
+            return;
         }
         // Grow along x.
         let mut nx = 1i64;
@@ -111,13 +119,47 @@ fn bricks_of(s: usize, set: &CellSet, max: u32) -> Vec<BrickBox> {
             lo: c,
             dims: [nx as u32, ny as u32, nz as u32],
         };
-        for q in b.cell_coords() {
-            if let Some(sl) = set.slot(q) {
+        b.for_each_cell(set, |_, _, slot| {
+            if let Some(sl) = slot {
                 let (bb, n) = (sl / BLOCK_CELLS, sl % BLOCK_CELLS);
                 free[bb][n >> 6] &= !(1u64 << (n & 63));
             }
-        }
+        });
         out.push(b);
-    }
+    });
     out
+}
+
+/// Calls `visit` with the coordinate and slot of every leaf cell of `set` in (z, y, x)
+/// order. Blocks are sorted by origin (z, y, x), so walking each slab of blocks (same z
+/// origin) plane by plane, and each run of blocks in the slab with the same y origin row
+/// by row, yields that order without sorting the cells (millions on a dense level).
+fn for_each_leaf_zyx(set: &CellSet, mut visit: impl FnMut([i32; 3], usize)) {
+    let blocks = &set.blocks;
+    let mut slab = 0;
+    while slab < blocks.len() {
+        let oz = blocks[slab][2];
+        let slab_end = slab + blocks[slab..].partition_point(|o| o[2] == oz);
+        for z in 0..8 {
+            let mut run = slab;
+            while run < slab_end {
+                let oy = blocks[run][1];
+                let run_end = run + blocks[run..slab_end].partition_point(|o| o[1] == oy);
+                for y in 0..8 {
+                    for (b, o) in blocks.iter().enumerate().take(run_end).skip(run) {
+                        let leaf = &set.leaf[b];
+                        for x in 0..8 {
+                            let n = leaf_offset(x, y, z);
+                            if (leaf[n >> 6] >> (n & 63)) & 1 == 1 {
+                                let c = [o[0] + x as i32, oy + y as i32, oz + z as i32];
+                                visit(c, b * BLOCK_CELLS + n);
+                            }
+                        }
+                    }
+                }
+                run = run_end;
+            }
+        }
+        slab = slab_end;
+    }
 }

@@ -189,22 +189,38 @@ fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
-/// Velocity gradient `g[i][j] = ∂uᵢ/∂xⱼ` at cell `ijk` of grid `s`.
-pub fn gradient(f: &VelocityField, s: usize, ijk: [i32; 3], stencil: Stencil) -> [[f64; 3]; 3] {
+/// Velocity gradient `g[i][j] = ∂uᵢ/∂xⱼ` at the active cell `ijk` of grid `s`, held in
+/// `slot` (the caller has looked it up already).
+pub fn gradient(
+    f: &VelocityField,
+    s: usize,
+    ijk: [i32; 3],
+    slot: usize,
+    stencil: Stencil,
+) -> [[f64; 3]; 3] {
     let set = &f.sets[s];
     let vals = &f.values[s];
     let h = set.width;
-    let Some(slot) = set.active_slot(ijk) else {
-        return [[0.0; 3]; 3];
-    };
     let u0 = vals[slot];
     let at = |a: usize, d: i32| set.active_neighbour(slot, ijk, a, d).map(|t| vals[t]);
-    let centre = set.centre(ijk);
     let mut g = [[0.0; 3]; 3];
     for a in 0..3 {
-        let mut plus = at(a, 1);
-        let mut minus = at(a, -1);
+        let up = set.active_neighbour(slot, ijk, a, 1);
+        let down = set.active_neighbour(slot, ijk, a, -1);
+        if let (Some(p), Some(m)) = (up, down) {
+            // Interior cell (nearly all of them): the central difference straight from the
+            // value array, without the `Option` copies of the general case below, which
+            // cost more than the arithmetic.
+            let (p, m) = (&vals[p], &vals[m]);
+            for i in 0..3 {
+                g[i][a] = (p[i] - m[i]) / (2.0 * h);
+            }
+            continue;
+        }
+        let mut plus = up.map(|t| vals[t]);
+        let mut minus = down.map(|t| vals[t]);
         if stencil == Stencil::CrossLevel && (plus.is_none() || minus.is_none()) {
+            let centre = set.centre(ijk);
             let mut p = centre;
             if plus.is_none() {
                 p[a] = centre[a] + h;

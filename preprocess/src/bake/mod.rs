@@ -16,7 +16,7 @@ use format::{
 
 use crate::bricks::{make_bricks, BrickBox};
 use crate::cells::{classify_leaves, CellSet};
-use crate::derive::{centre_from_faces, gradient, q_from_gradient, speed, Stencil, VelocityField};
+use crate::derive::{centre_from_faces, Stencil};
 use crate::fields::{range_and_histogram, region_ranges, FieldKind, RangeInput};
 use crate::grid::{AnyGrid, Transform};
 use crate::levels::assign_levels;
@@ -27,9 +27,11 @@ use crate::regions;
 pub use crate::error::BakeError;
 pub use select::{select_grids, GridKind};
 
+mod derived;
 mod extra;
 mod select;
 
+use derived::{derive_fields, FieldValues};
 use extra::{extra_fields, ExtraGrid};
 use select::select;
 
@@ -484,69 +486,6 @@ fn brick(sets: &[CellSet], max_brick: u32) -> Bricks {
     }
 }
 
-/// Baked fields: names, and the values of each (brick after brick, x fastest).
-struct FieldValues {
-    names: Vec<String>,
-    values: Vec<Vec<f32>>,
-}
-
-/// Field stage: the value of every field at every cell of every brick, derived from the
-/// velocity (Q, speed, velocity components) or resampled from an extra scalar grid; a
-/// scalar grid baked on its own is its only field. Cells of a brick that are not leaf
-/// cells read as zero.
-fn derive_fields(cells: &Cells, bricks: &Bricks, opts: &BakeOptions) -> FieldValues {
-    match &cells.input {
-        Input::Vector(sets, vals, faces) => {
-            let kinds = opts
-                .fields
-                .clone()
-                .unwrap_or(vec![FieldKind::Q, FieldKind::Speed]);
-            let names: Vec<String> = kinds.iter().flat_map(FieldKind::names).collect();
-            let field = VelocityField {
-                sets,
-                values: vals,
-                faces,
-            };
-            let values = per_brick(&bricks.boxes, names.len(), |b, out| {
-                let set = &sets[b.set];
-                let v = &vals[b.set];
-                for ijk in b.cell_coords() {
-                    let u = set.slot(ijk).map(|s| v[s]).unwrap_or_default();
-                    for k in &kinds {
-                        match k {
-                            FieldKind::Q => {
-                                let g = gradient(&field, b.set, ijk, opts.stencil);
-                                out.push(q_from_gradient(&g) as f32);
-                            }
-                            FieldKind::Speed => out.push(speed(&u) as f32),
-                            FieldKind::Velocity => out.extend(u.map(|c| c as f32)),
-                            FieldKind::Scalar(n) => {
-                                let e = cells.extras.iter().find(|e| &e.name == n);
-                                let p = set.centre(ijk);
-                                out.push(e.map_or(0.0, |e| e.sample(p)) as f32);
-                            }
-                        }
-                    }
-                }
-            });
-            FieldValues { names, values }
-        }
-        Input::Scalar(sets, vals, name) => {
-            let values = per_brick(&bricks.boxes, 1, |b, out| {
-                let set = &sets[b.set];
-                let v = &vals[b.set];
-                for ijk in b.cell_coords() {
-                    out.push(set.slot(ijk).map(|s| v[s]).unwrap_or_default() as f32);
-                }
-            });
-            FieldValues {
-                names: vec![name.clone()],
-                values,
-            }
-        }
-    }
-}
-
 /// Values that overflowed f32 (or were NaN): counted, refused with `strict`, otherwise
 /// clamped (see [`clamp_nonfinite`]) with one warning per field naming the first cell.
 /// Returns how many there were.
@@ -731,33 +670,6 @@ fn assemble(
     };
     file.derive_kd_tables();
     (file, field_summaries)
-}
-
-/// Computes `nf` values per cell for every brick (in parallel, collected in brick order)
-/// and returns them as one array per field, brick after brick, x fastest.
-fn per_brick(
-    bricks: &[BrickBox],
-    nf: usize,
-    cell_values: impl Fn(&BrickBox, &mut Vec<f32>) + Sync,
-) -> Vec<Vec<f32>> {
-    let chunks: Vec<Vec<f32>> = bricks
-        .par_iter()
-        .map(|b| {
-            let mut out = Vec::with_capacity(b.cells() as usize * nf);
-            cell_values(b, &mut out);
-            out
-        })
-        .collect();
-    let total: usize = bricks.iter().map(|b| b.cells() as usize).sum();
-    let mut fields: Vec<Vec<f32>> = (0..nf).map(|_| Vec::with_capacity(total)).collect();
-    for c in &chunks {
-        for cell in c.chunks_exact(nf) {
-            for (f, v) in cell.iter().enumerate() {
-                fields[f].push(*v);
-            }
-        }
-    }
-    fields
 }
 
 /// Brick supports (first centre − w .. first centre + dims·w), with coordinates that agree

@@ -20,10 +20,12 @@ use index::{BlockIndex, BlockMap};
 pub(crate) const BLOCK_CELLS: usize = LEAF_VOXELS;
 
 /// Index coordinate of the block holding `ijk`.
+#[inline]
 fn block_origin(ijk: [i32; 3]) -> [i32; 3] {
     [ijk[0] & !7, ijk[1] & !7, ijk[2] & !7]
 }
 
+#[inline]
 fn offset_in_block(ijk: [i32; 3]) -> usize {
     leaf_offset(
         (ijk[0] & 7) as usize,
@@ -32,6 +34,7 @@ fn offset_in_block(ijk: [i32; 3]) -> usize {
     )
 }
 
+#[inline]
 fn bit(mask: &[u64; 8], n: usize) -> bool {
     (mask[n >> 6] >> (n & 63)) & 1 == 1
 }
@@ -124,6 +127,7 @@ impl CellSet {
     }
 
     /// Slot of `ijk` when its block exists (the cell may be inactive).
+    #[inline]
     pub(crate) fn slot(&self, ijk: [i32; 3]) -> Option<usize> {
         let b = self.index.get(block_origin(ijk))? as usize;
         Some(b * BLOCK_CELLS + offset_in_block(ijk))
@@ -131,6 +135,7 @@ impl CellSet {
 
     /// Active slot of the neighbour `d` cells (|d| <= 8) along `axis` of cell `ijk`
     /// (held in `slot`): in-block arithmetic when the neighbour shares the block.
+    #[inline]
     pub(crate) fn active_neighbour(
         &self,
         slot: usize,
@@ -150,19 +155,23 @@ impl CellSet {
     }
 
     /// Slot of `ijk` when that cell is active.
+    #[inline]
     pub(crate) fn active_slot(&self, ijk: [i32; 3]) -> Option<usize> {
         self.slot(ijk).filter(|&s| self.is_active(s))
     }
 
     /// Slot of `ijk` when that cell is a leaf cell.
+    #[inline]
     pub(crate) fn leaf_slot(&self, ijk: [i32; 3]) -> Option<usize> {
         self.slot(ijk).filter(|&s| self.is_leaf(s))
     }
 
+    #[inline]
     pub fn is_active(&self, slot: usize) -> bool {
         bit(&self.active[slot / BLOCK_CELLS], slot % BLOCK_CELLS)
     }
 
+    #[inline]
     pub(crate) fn is_leaf(&self, slot: usize) -> bool {
         bit(&self.leaf[slot / BLOCK_CELLS], slot % BLOCK_CELLS)
     }

@@ -1,0 +1,128 @@
+//! Field stage: the value of every baked field at every cell of every brick.
+//!
+//! Bricks are computed in parallel, each writing straight into its own slice of every
+//! field array (bricks lie one after the other, x fastest), so there are no per-brick
+//! buffers to interleave afterwards; the values do not depend on the thread count.
+
+use rayon::prelude::*;
+
+use crate::bricks::BrickBox;
+use crate::derive::{gradient, q_from_gradient, speed, VelocityField};
+use crate::fields::FieldKind;
+
+use super::extra::ExtraGrid;
+use super::{BakeOptions, Bricks, Cells, Input};
+
+/// Baked fields: names, and the values of each (brick after brick, x fastest).
+pub(super) struct FieldValues {
+    pub(super) names: Vec<String>,
+    pub(super) values: Vec<Vec<f32>>,
+}
+
+/// The value of every field at every cell of every brick, derived from the velocity (Q,
+/// speed, velocity components) or resampled from an extra scalar grid; a scalar grid baked
+/// on its own is its only field. Cells of a brick that are not leaf cells read as zero.
+pub(super) fn derive_fields(cells: &Cells, bricks: &Bricks, opts: &BakeOptions) -> FieldValues {
+    match &cells.input {
+        Input::Vector(sets, vals, faces) => {
+            let kinds = opts
+                .fields
+                .clone()
+                .unwrap_or(vec![FieldKind::Q, FieldKind::Speed]);
+            let names: Vec<String> = kinds.iter().flat_map(FieldKind::names).collect();
+            let field = VelocityField {
+                sets,
+                values: vals,
+                faces,
+            };
+            // The grid of each extra scalar field, looked up once rather than per cell.
+            let extras: Vec<Option<&ExtraGrid>> = kinds
+                .iter()
+                .map(|k| match k {
+                    FieldKind::Scalar(n) => cells.extras.iter().find(|e| &e.name == n),
+                    _ => None,
+                })
+                .collect();
+            let values = per_brick(&bricks.boxes, names.len(), |b, out| {
+                let set = &sets[b.set];
+                let v = &vals[b.set];
+                b.for_each_cell(set, |i, ijk, slot| {
+                    let u = slot.map(|s| v[s]).unwrap_or_default();
+                    let mut f = 0;
+                    for (k, extra) in kinds.iter().zip(&extras) {
+                        match k {
+                            FieldKind::Q => {
+                                let g = match slot.filter(|&s| set.is_active(s)) {
+                                    Some(s) => gradient(&field, b.set, ijk, s, opts.stencil),
+                                    None => [[0.0; 3]; 3],
+                                };
+                                out[f][i] = q_from_gradient(&g) as f32;
+                                f += 1;
+                            }
+                            FieldKind::Speed => {
+                                out[f][i] = speed(&u) as f32;
+                                f += 1;
+                            }
+                            FieldKind::Velocity => {
+                                for c in u {
+                                    out[f][i] = c as f32;
+                                    f += 1;
+                                }
+                            }
+                            FieldKind::Scalar(_) => {
+                                let p = set.centre(ijk);
+                                out[f][i] = extra.map_or(0.0, |e| e.sample(p)) as f32;
+                                f += 1;
+                            }
+                        }
+                    }
+                });
+            });
+            FieldValues { names, values }
+        }
+        Input::Scalar(sets, vals, name) => {
+            let values = per_brick(&bricks.boxes, 1, |b, out| {
+                let set = &sets[b.set];
+                let v = &vals[b.set];
+                b.for_each_cell(set, |i, _, slot| {
+                    out[0][i] = slot.map(|s| v[s]).unwrap_or_default() as f32;
+                });
+            });
+            FieldValues {
+                names: vec![name.clone()],
+                values,
+            }
+        }
+    }
+}
+
+/// Runs `cell_values` on every brick in parallel with the brick's slice of each of the `nf`
+/// field arrays (which it must fill), and returns the arrays: brick after brick, x fastest.
+fn per_brick(
+    bricks: &[BrickBox],
+    nf: usize,
+    cell_values: impl Fn(&BrickBox, &mut [&mut [f32]]) + Sync,
+) -> Vec<Vec<f32>> {
+    let total: usize = bricks.iter().map(|b| b.cells() as usize).sum();
+    let mut fields: Vec<Vec<f32>> = (0..nf).map(|_| vec![0.0; total]).collect();
+    // Cut every field into the bricks' slices, then regroup them per brick.
+    let mut rest: Vec<&mut [f32]> = fields.iter_mut().map(Vec::as_mut_slice).collect();
+    let mut slices: Vec<Vec<&mut [f32]>> = Vec::with_capacity(bricks.len());
+    for b in bricks {
+        let n = b.cells() as usize;
+        slices.push(
+            rest.iter_mut()
+                .map(|r| {
+                    let (head, tail) = std::mem::take(r).split_at_mut(n);
+                    *r = tail;
+                    head
+                })
+                .collect(),
+        );
+    }
+    slices
+        .into_par_iter()
+        .zip(bricks)
+        .for_each(|(mut out, b)| cell_values(b, &mut out));
+    fields
+}
