@@ -14,7 +14,7 @@ mod classify;
 mod index;
 
 pub(crate) use classify::classify_leaves;
-use index::{BlockIndex, BlockMap};
+use index::BlockIndex;
 
 /// Cells per block (one VDB leaf).
 pub(crate) const BLOCK_CELLS: usize = LEAF_VOXELS;
@@ -23,6 +23,11 @@ pub(crate) const BLOCK_CELLS: usize = LEAF_VOXELS;
 #[inline]
 fn block_origin(ijk: [i32; 3]) -> [i32; 3] {
     [ijk[0] & !7, ijk[1] & !7, ijk[2] & !7]
+}
+
+/// Whether `o` is a block origin (all coordinates multiples of 8).
+fn is_block_origin(o: [i32; 3]) -> bool {
+    o.iter().all(|c| c & 7 == 0)
 }
 
 #[inline]
@@ -67,52 +72,87 @@ impl CellSet {
         level: u32,
         conv: impl Fn(V) -> T,
     ) -> (CellSet, Vec<T>) {
-        let mut map: BlockMap = BlockMap::default();
-        let mut masks: Vec<[u64; 8]> = Vec::new();
-        let mut vals: Vec<T> = Vec::new();
-        let mut origins: Vec<[i32; 3]> = Vec::new();
-        let mut put = |ijk: [i32; 3], v: T| {
-            let bo = block_origin(ijk);
-            let b = *map.entry(bo).or_insert_with(|| {
-                origins.push(bo);
-                masks.push([0; 8]);
-                vals.extend(std::iter::repeat_n(T::default(), BLOCK_CELLS));
-                (origins.len() - 1) as u32
-            }) as usize;
-            let n = offset_in_block(ijk);
-            masks[b][n >> 6] |= 1 << (n & 63);
-            vals[b * BLOCK_CELLS + n] = v;
-        };
-        // Tiles first, so that leaf voxels win where a (malformed) file has both.
-        for t in &grid.tiles {
-            let lo = t.origin.map(|c| c as i64);
-            let hi = lo.map(|c| (c + t.size as i64).min(i32::MAX as i64 + 1));
-            let v = conv(t.value);
-            for z in lo[2]..hi[2] {
-                for y in lo[1]..hi[1] {
-                    for x in lo[0]..hi[0] {
-                        put([x as i32, y as i32, z as i32], v);
+        let tile_ranges: Vec<([i64; 3], [i64; 3])> = grid
+            .tiles
+            .iter()
+            .map(|t| {
+                let lo = t.origin.map(|c| c as i64);
+                let hi = lo.map(|c| (c + t.size as i64).min(i32::MAX as i64 + 1));
+                (lo, hi)
+            })
+            .collect();
+        // The blocks first (every block a tile or an active leaf voxel falls in), sorted by
+        // origin so that nothing depends on the order of leaves in the file; then the values
+        // go straight to their place.
+        let mut blocks: Vec<[i32; 3]> = Vec::with_capacity(grid.leaves.len());
+        for (lo, hi) in &tile_ranges {
+            if (0..3).any(|a| lo[a] >= hi[a]) {
+                continue;
+            }
+            let first = lo.map(|c| c & !7);
+            for z in (first[2]..hi[2]).step_by(8) {
+                for y in (first[1]..hi[1]).step_by(8) {
+                    for x in (first[0]..hi[0]).step_by(8) {
+                        blocks.push([x as i32, y as i32, z as i32]);
                     }
                 }
             }
         }
         for leaf in &grid.leaves {
-            for (ijk, v) in leaf.active_voxels() {
-                put(ijk, conv(v));
+            if is_block_origin(leaf.origin) {
+                if leaf.active != [0; 8] {
+                    blocks.push(leaf.origin);
+                }
+            } else {
+                blocks.extend(leaf.active_voxels().map(|(ijk, _)| block_origin(ijk)));
             }
         }
-        // Sort blocks by origin so that nothing depends on the order of leaves in the file.
-        let mut order: Vec<usize> = (0..origins.len()).collect();
-        order.sort_by_key(|&b| (origins[b][2], origins[b][1], origins[b][0]));
-        let mut blocks = Vec::with_capacity(order.len());
-        let mut active = Vec::with_capacity(order.len());
-        let mut values = Vec::with_capacity(vals.len());
-        for &b in &order {
-            blocks.push(origins[b]);
-            active.push(masks[b]);
-            values.extend_from_slice(&vals[b * BLOCK_CELLS..(b + 1) * BLOCK_CELLS]);
-        }
+        blocks.sort_unstable_by_key(|o| (o[2], o[1], o[0]));
+        blocks.dedup();
         let index = BlockIndex::new(&blocks);
+        let mut active = vec![[0u64; 8]; blocks.len()];
+        let mut values = vec![T::default(); blocks.len() * BLOCK_CELLS];
+        let put = |active: &mut [[u64; 8]], values: &mut [T], ijk: [i32; 3], v: T| {
+            if let Some(b) = index.get(block_origin(ijk)) {
+                let n = offset_in_block(ijk);
+                active[b as usize][n >> 6] |= 1 << (n & 63);
+                values[b as usize * BLOCK_CELLS + n] = v;
+            }
+        };
+        // Tiles first, so that leaf voxels win where a (malformed) file has both.
+        for (t, (lo, hi)) in grid.tiles.iter().zip(&tile_ranges) {
+            let v = conv(t.value);
+            for z in lo[2]..hi[2] {
+                for y in lo[1]..hi[1] {
+                    for x in lo[0]..hi[0] {
+                        put(&mut active, &mut values, [x as i32, y as i32, z as i32], v);
+                    }
+                }
+            }
+        }
+        for leaf in &grid.leaves {
+            if !is_block_origin(leaf.origin) {
+                for (ijk, v) in leaf.active_voxels() {
+                    put(&mut active, &mut values, ijk, conv(v));
+                }
+                continue;
+            }
+            // A leaf on the block lattice is one block with the same voxel layout.
+            let Some(b) = index.get(leaf.origin) else {
+                continue;
+            };
+            let b = b as usize;
+            let out = &mut values[b * BLOCK_CELLS..(b + 1) * BLOCK_CELLS];
+            for (w, &word) in leaf.active.iter().enumerate() {
+                let mut bits = word;
+                while bits != 0 {
+                    let n = w * 64 + bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    out[n] = conv(leaf.values[n]);
+                }
+                active[b][w] |= word;
+            }
+        }
         let set = CellSet {
             name: grid.name.clone(),
             transform: grid.transform,
@@ -330,6 +370,44 @@ mod tests {
             leaves,
             tiles: vec![],
         }
+    }
+
+    #[test]
+    fn leaf_off_the_block_lattice_overrides_a_tile() {
+        // A (malformed) leaf at x = 4 straddles two blocks; its active voxels win over the
+        // tile's values where both are given, and the other tile cells keep theirs.
+        let mut leaf = Leaf {
+            origin: [4, 0, 0],
+            active: [0; 8],
+            values: Box::new([0.0f32; LEAF_VOXELS]),
+        };
+        for (x, v) in [(0, 5.0), (7, 6.0)] {
+            let n = leaf_offset(x, 0, 0);
+            leaf.active[n >> 6] |= 1 << (n & 63);
+            leaf.values[n] = v;
+        }
+        let g = Grid {
+            name: "t".into(),
+            transform: Transform {
+                voxel_size: [1.0; 3],
+                translation: [0.0; 3],
+            },
+            background: 0.0f32,
+            leaves: vec![leaf],
+            tiles: vec![Tile {
+                origin: [0, 0, 0],
+                size: 8,
+                value: 2.0,
+            }],
+        };
+        let (s, v) = CellSet::from_grid(&g, 0, |x| x);
+        assert_eq!(s.blocks, vec![[0, 0, 0], [8, 0, 0]]);
+        assert_eq!(s.active_count(), 513);
+        let at = |ijk| s.active_slot(ijk).map(|slot| v[slot]);
+        assert_eq!(at([4, 0, 0]), Some(5.0));
+        assert_eq!(at([11, 0, 0]), Some(6.0));
+        assert_eq!(at([5, 0, 0]), Some(2.0));
+        assert_eq!(at([12, 0, 0]), None);
     }
 
     #[test]
