@@ -6,7 +6,6 @@
 //! `io/Compression.cc`, `bloscCompress`), which takes ~100 lines to decode, and a pure-Rust
 //! decoder keeps the build free of a C toolchain and is fuzzable like the rest of the reader.
 
-use std::borrow::Cow;
 use std::io::Read;
 
 use super::codec::CompressionFlags;
@@ -30,16 +29,29 @@ pub(crate) struct LocatedChunk<'a> {
     pub what: &'static str,
 }
 
+/// Decoding state one decoding thread keeps across chunks: a zlib decoder (setting one up,
+/// with its state, window and 32 KiB input buffer, costs about as much as inflating a
+/// leaf's few KiB) and the buffer the decoded bytes go to.
+#[derive(Default)]
+pub(crate) struct Inflater<'a> {
+    zlib: Option<flate2::read::ZlibDecoder<&'a [u8]>>,
+    buf: Vec<u8>,
+}
+
 impl<'a> LocatedChunk<'a> {
-    /// The chunk's `nbytes` decoded bytes.
-    pub fn decode(&self) -> RawResult<Cow<'a, [u8]>> {
+    /// The chunk's `nbytes` decoded bytes: the chunk itself when stored raw, otherwise
+    /// `inflater`'s buffer.
+    pub fn decode<'s>(&self, inflater: &'s mut Inflater<'a>) -> RawResult<&'s [u8]>
+    where
+        'a: 's,
+    {
         let decoded = match self.chunk {
-            Chunk::Raw(b) => return Ok(Cow::Borrowed(b)),
-            Chunk::Zip(src, n) => zlib_decode(src, n),
-            Chunk::Blosc(src, n) => blosc_decode(src, n),
+            Chunk::Raw(b) => return Ok(b),
+            Chunk::Zip(src, n) => zlib_decode(src, n, &mut inflater.zlib, &mut inflater.buf),
+            Chunk::Blosc(src, n) => blosc_decode(src, n).map(|b| inflater.buf = b),
         };
         decoded
-            .map(Cow::Owned)
+            .map(|()| &inflater.buf[..])
             .map_err(|error| RawError::new(self.start, self.what, ErrorKind::Decompress(error)))
     }
 }
@@ -92,12 +104,27 @@ pub(crate) fn locate_chunk<'a>(
     }))
 }
 
-fn zlib_decode(src: &[u8], nbytes: usize) -> Result<Vec<u8>, DecompressError> {
-    let mut out = Vec::with_capacity(nbytes);
+/// Inflates `src` into `out`, which must come to exactly `nbytes` bytes, with `decoder`
+/// (reset to `src`, or made on first use).
+fn zlib_decode<'a>(
+    src: &'a [u8],
+    nbytes: usize,
+    decoder: &mut Option<flate2::read::ZlibDecoder<&'a [u8]>>,
+    out: &mut Vec<u8>,
+) -> Result<(), DecompressError> {
+    out.clear();
+    out.reserve(nbytes);
+    let decoder = match decoder {
+        Some(d) => {
+            d.reset(src);
+            d
+        }
+        None => decoder.insert(flate2::read::ZlibDecoder::new(src)),
+    };
     // Read at most one byte more than expected so a zip bomb cannot grow the buffer.
-    flate2::read::ZlibDecoder::new(src)
+    decoder
         .take(nbytes as u64 + 1)
-        .read_to_end(&mut out)
+        .read_to_end(out)
         .map_err(|e| DecompressError::Zip {
             message: e.to_string(),
         })?;
@@ -107,7 +134,7 @@ fn zlib_decode(src: &[u8], nbytes: usize) -> Result<Vec<u8>, DecompressError> {
             expected: nbytes,
         });
     }
-    Ok(out)
+    Ok(())
 }
 
 const BLOSC_HEADER: usize = 16;
@@ -390,8 +417,25 @@ mod tests {
         let mut enc = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
         enc.write_all(&[7u8; 100]).unwrap();
         let z = enc.finish().unwrap();
-        assert_eq!(zlib_decode(&z, 100).unwrap(), vec![7u8; 100]);
-        assert!(zlib_decode(&z, 99).is_err());
-        assert!(zlib_decode(&z, 101).is_err());
+        // One decoder for every call, as a decoding thread reuses it: a failed or
+        // corrupt stream must not leak into the next one.
+        let mut corrupt = z.clone();
+        corrupt[3] ^= 0xff;
+        let (mut decoder, mut out) = (None, Vec::new());
+        let calls: [(&[u8], usize, bool); 6] = [
+            (&z, 100, true),
+            (&z, 99, false),
+            (&z, 101, false),
+            (&z[..z.len() / 2], 100, false),
+            (&corrupt, 100, false),
+            (&z, 100, true),
+        ];
+        for (src, n, ok) in calls {
+            let r = zlib_decode(src, n, &mut decoder, &mut out);
+            assert_eq!(r.is_ok(), ok, "{n} bytes from {} : {r:?}", src.len());
+            if ok {
+                assert_eq!(out, vec![7u8; 100]);
+            }
+        }
     }
 }

@@ -9,6 +9,7 @@
 use rayon::prelude::*;
 
 use super::codec::VdbValue;
+use super::compress::Inflater;
 use super::cursor::Cursor;
 use super::error::{ErrorKind, Invalid, RawError, RawResult};
 use super::values::{decode_values, locate_values, read_values, Codec};
@@ -234,9 +235,9 @@ pub(crate) fn read_tree<V: VdbValue>(
     // Decoding (decompression, half floats, inactive values) is independent per leaf.
     let leaves = frames
         .par_iter()
-        .map(|(t, frame)| {
+        .map_init(Inflater::default, |inflater, (t, frame)| {
             let mut values = Box::new([V::default(); LEAF_VOXELS]);
-            decode_values(frame, codec, &t.mask, &mut values[..])?;
+            decode_values(frame, codec, &t.mask, &mut values[..], inflater)?;
             Ok(Leaf {
                 origin: t.origin,
                 active: t.mask,

@@ -8,7 +8,7 @@
 //! walks the file, [`decode_values`] needs only what it located.
 
 use super::codec::{mask_is_on, CompressionFlags, NodeMeta, VdbValue};
-use super::compress::{locate_chunk, LocatedChunk};
+use super::compress::{locate_chunk, Inflater, LocatedChunk};
 use super::cursor::Cursor;
 use super::error::{Invalid, RawError, RawResult};
 
@@ -97,16 +97,18 @@ pub(crate) fn locate_values<'a, V: VdbValue>(
     })
 }
 
-/// Second half: decodes a located frame into `out` (one value per node entry).
-pub(crate) fn decode_values<V: VdbValue>(
-    frame: &ValuesFrame<'_, V>,
+/// Second half: decodes a located frame into `out` (one value per node entry), with the
+/// decoding state `inflater` (see [`Inflater`]).
+pub(crate) fn decode_values<'a, V: VdbValue>(
+    frame: &ValuesFrame<'a, V>,
     codec: Codec,
     value_mask: &[u64],
     out: &mut [V],
+    inflater: &mut Inflater<'a>,
 ) -> RawResult<()> {
     let bytes = match &frame.chunk {
-        Some(c) => c.decode()?,
-        None => std::borrow::Cow::Borrowed(&[][..]),
+        Some(c) => c.decode(inflater)?,
+        None => &[][..],
     };
     let value_size = if codec.half { V::HALF_SIZE } else { V::SIZE };
     let decode = |i: usize| -> V {
@@ -147,5 +149,5 @@ pub(crate) fn read_values<V: VdbValue>(
     what: &'static str,
 ) -> RawResult<()> {
     let frame = locate_values(cur, codec, background, value_mask, out.len(), what)?;
-    decode_values(&frame, codec, value_mask, out)
+    decode_values(&frame, codec, value_mask, out, &mut Inflater::default())
 }
