@@ -165,6 +165,44 @@ fn render_errors_are_one_line_with_exit_code_2() {
     assert!(!dir.path().join("x.png").exists());
 }
 
+/// One value's lowest mantissa bit flipped: the archive is still valid, but the payload
+/// checksum no longer matches. `render` refuses the file by default and renders it with
+/// `--no-checksum`.
+#[test]
+fn render_no_checksum_opens_a_file_whose_payload_checksum_fails() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let good = std::fs::read(sample(dir.path())).expect("read");
+    let view = format::BrickFileView::from_bytes(Path::new("good.qbk"), &good).expect("valid");
+    let values = &view.file().fields[0].values;
+    let probe = values[values.len() / 2].to_native().to_le_bytes();
+    let at = good
+        .windows(4)
+        .position(|w| w == probe)
+        .expect("the value's bytes are in the file");
+    let mut flipped = good.clone();
+    flipped[at] ^= 1;
+    std::fs::write(dir.path().join("flipped.qbk"), &flipped).expect("write");
+
+    let args = [
+        "render",
+        "flipped.qbk",
+        "-o",
+        "x.png",
+        "--width",
+        "16",
+        "--height",
+        "16",
+    ];
+    let (code, _, stderr) = run(&args, dir.path());
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("checksum"), "{stderr}");
+    assert!(!dir.path().join("x.png").exists());
+
+    let (code, _, stderr) = run(&[&args[..], &["--no-checksum"]].concat(), dir.path());
+    assert_eq!(code, 0, "{stderr}");
+    assert!(dir.path().join("x.png").exists());
+}
+
 #[test]
 fn probe_prints_fields_and_gradients() {
     let dir = tempfile::tempdir().expect("tempdir");

@@ -83,7 +83,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     let size = args.size.as_deref().map(parse_size).transpose()?;
-    let view = open_volume(&path)?;
+    let view = open_volume(&path, true)?;
     let vol = Volume::new(&view).with_context(|| format!("{}", path.display()))?;
     let mut state = match &args.state {
         Some(s) => ViewState::load(s)?,

@@ -66,6 +66,10 @@ pub struct Args {
     /// Render only pixel X,Y and print its rays' region segments, samples and hits.
     #[arg(long)]
     pub pixel: Option<String>,
+    /// Skip the payload checksum when opening (faster on huge files; the archive is still
+    /// validated, so a damaged file is refused, but a flipped value bit would not be).
+    #[arg(long)]
+    pub no_checksum: bool,
 }
 
 /// The file argument, or the bundled sample when it exists.
@@ -85,8 +89,12 @@ pub fn resolve_file(file: Option<PathBuf>) -> anyhow::Result<PathBuf> {
     }
 }
 
-pub fn open_volume(path: &Path) -> anyhow::Result<format::BrickFileView> {
-    format::BrickFileView::open(path).map_err(anyhow::Error::from)
+/// Opens and validates a `.qbk` file; `checksum`: verify the payload checksum too.
+pub fn open_volume(path: &Path, checksum: bool) -> anyhow::Result<format::BrickFileView> {
+    let options = format::OpenOptions {
+        verify_checksum: checksum,
+    };
+    format::BrickFileView::open_with(path, &options).map_err(anyhow::Error::from)
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -117,7 +125,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     // Open.
     let t_open = Instant::now();
-    let view = open_volume(&path)?;
+    let view = open_volume(&path, !args.no_checksum)?;
     let vol = Volume::new(&view).with_context(|| format!("{}", path.display()))?;
     let open_ms = t_open.elapsed().as_secs_f64() * 1e3;
 

@@ -168,7 +168,10 @@ fn render_one(
         bail!("{}: no such file", input.display());
     }
     check_files(input, Some(out), args, state)?;
-    let data = Dataset::open(input)?;
+    let options = format::OpenOptions {
+        verify_checksum: !args.no_checksum,
+    };
+    let data = Dataset::open_with(input, &options)?;
     let scene =
         Scene::new(data.volume(), state, meshes).with_context(|| input.display().to_string())?;
     let (frame, ms) = render_frame(renderer, &scene, args);
