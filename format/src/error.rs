@@ -12,7 +12,7 @@ pub struct FormatError {
 }
 
 impl FormatError {
-    pub fn new(path: impl Into<PathBuf>, kind: FormatErrorKind) -> Self {
+    pub(crate) fn new(path: impl Into<PathBuf>, kind: FormatErrorKind) -> Self {
         Self {
             path: path.into(),
             kind,

@@ -164,7 +164,7 @@ impl Header {
 
     /// The payload of `file` after checking its length against the header (and, when
     /// `verify_checksum`, its checksum).
-    pub fn payload<'a>(
+    pub(crate) fn payload<'a>(
         &self,
         file: &'a [u8],
         verify_checksum: bool,

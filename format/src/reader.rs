@@ -142,7 +142,7 @@ impl BrickFileView {
 
     /// Reads `path` into memory (no mapping) and validates it. Immune to the file being
     /// truncated later, at the cost of reading and holding the whole file.
-    pub fn open_in_memory(path: &Path, options: &OpenOptions) -> Result<Self, FormatError> {
+    pub(crate) fn open_in_memory(path: &Path, options: &OpenOptions) -> Result<Self, FormatError> {
         let data = read_whole(path, Limits::memory())
             .map_err(|e| FormatError::new(path, FormatErrorKind::Input(e.kind)))?;
         Self::from_bytes_with(path, &data, options)

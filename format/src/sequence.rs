@@ -254,7 +254,7 @@ impl Manifest {
     }
 
     /// Reads and checks a manifest (at most [`MAX_MANIFEST_BYTES`]).
-    pub fn load(path: &Path) -> Result<Manifest, ManifestError> {
+    pub(crate) fn load(path: &Path) -> Result<Manifest, ManifestError> {
         let err = |kind| ManifestError {
             path: path.to_path_buf(),
             kind,

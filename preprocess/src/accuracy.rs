@@ -581,7 +581,7 @@ pub fn accuracy(
 /// The relative RMS errors (stored Q, stored speed, reconstructed Q, Q near level
 /// boundaries, and the iso-surface position of `exact` hits in finest cells) against the
 /// finest cell width, both axes logarithmic.
-pub fn chart(report: &AccuracyReport) -> LogLogChart {
+pub(crate) fn chart(report: &AccuracyReport) -> LogLogChart {
     type Pick = fn(&ResolutionReport) -> &ErrorStats;
     let series: [(&str, Pick, [u8; 3]); 5] = [
         ("stored Q", |r| &r.stored_q, [31, 119, 180]),

@@ -14,7 +14,7 @@ use crate::grid::leaf_offset;
 /// (a brick's support, the regions) are [`format::Aabb`], made from this with the grid's
 /// cell width.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct BrickBox {
+pub(crate) struct BrickBox {
     /// Index of the cell set (grid) the brick belongs to.
     pub set: usize,
     pub level: u32,
@@ -24,7 +24,7 @@ pub struct BrickBox {
 }
 
 impl BrickBox {
-    pub fn cells(&self) -> u64 {
+    pub(crate) fn cells(&self) -> u64 {
         self.dims.iter().map(|&d| d as u64).product()
     }
 

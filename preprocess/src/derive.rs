@@ -56,7 +56,7 @@ pub fn speed(u: &[f64; 3]) -> f64 {
 }
 
 /// Velocity grids with their values (one per slot).
-pub struct VelocityField<'a> {
+pub(crate) struct VelocityField<'a> {
     pub sets: &'a [CellSet],
     /// Cell-centred velocity per slot (for a staggered grid: [`centre_from_faces`]).
     pub values: &'a [Vec<[f64; 3]>],
@@ -135,7 +135,7 @@ pub enum CellChoice {
 /// Multi-level reconstruction `B(P) = Σ H_C(P) v_C / Σ H_C(P)` over the chosen cells of
 /// all grids, with tents `H_C(P) = Π max(0, 1 − |P − c| / w)`. `None` where no tent
 /// reaches P.
-pub fn reconstruct(f: &VelocityField, p: [f64; 3], choice: CellChoice) -> Option<[f64; 3]> {
+pub(crate) fn reconstruct(f: &VelocityField, p: [f64; 3], choice: CellChoice) -> Option<[f64; 3]> {
     let mut sum = [0.0; 3];
     let mut wsum = 0.0;
     for (set, vals) in f.sets.iter().zip(f.values) {
@@ -191,7 +191,7 @@ fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
 
 /// Velocity gradient `g[i][j] = ∂uᵢ/∂xⱼ` at the active cell `ijk` of grid `s`, held in
 /// `slot` (the caller has looked it up already).
-pub fn gradient(
+pub(crate) fn gradient(
     f: &VelocityField,
     s: usize,
     ijk: [i32; 3],

@@ -28,7 +28,7 @@ pub enum FieldKind {
 impl FieldKind {
     /// `q`, `speed`, `velocity`, or `None` for any other name (a scalar grid's, for callers
     /// that take extra fields: see [`FieldKind::parse_or_grid`]).
-    pub fn parse(s: &str) -> Option<FieldKind> {
+    pub(crate) fn parse(s: &str) -> Option<FieldKind> {
         match s.trim().to_ascii_lowercase().as_str() {
             "q" => Some(FieldKind::Q),
             "speed" => Some(FieldKind::Speed),
@@ -48,7 +48,7 @@ impl FieldKind {
     }
 
     /// Names of the file fields this kind produces.
-    pub fn names(&self) -> Vec<String> {
+    pub(crate) fn names(&self) -> Vec<String> {
         match self {
             FieldKind::Q => vec!["q".into()],
             FieldKind::Speed => vec!["speed".into()],
@@ -87,7 +87,7 @@ pub(crate) fn range_and_histogram(values: &[f32]) -> (f32, f32, Vec<u64>) {
 /// `(c − w, c + w)` reaches into the region box; conservative by a hair at the edges.
 /// `values[f]` is field `f` brick after brick; `first[b]` is brick `b`'s first value;
 /// `origins[b]`, `widths[b]` its first cell centre and cell width.
-pub struct RangeInput<'a> {
+pub(crate) struct RangeInput<'a> {
     pub bricks: &'a [BrickBox],
     pub origins: &'a [[f64; 3]],
     pub widths: &'a [f64],
@@ -95,7 +95,7 @@ pub struct RangeInput<'a> {
     pub values: &'a [Vec<f32>],
 }
 
-pub fn region_ranges(input: &RangeInput, regions: &[(Aabb, Vec<u32>)]) -> Vec<[f32; 2]> {
+pub(crate) fn region_ranges(input: &RangeInput, regions: &[(Aabb, Vec<u32>)]) -> Vec<[f32; 2]> {
     let nf = input.values.len();
     let per_region: Vec<Vec<[f32; 2]>> = regions
         .par_iter()

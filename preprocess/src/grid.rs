@@ -96,7 +96,7 @@ impl<V: Copy> Grid<V> {
 }
 
 /// Vector value of a vec3 grid (single precision on disk or widened from double).
-pub type Vec3 = [f32; 3];
+pub(crate) type Vec3 = [f32; 3];
 
 /// A grid of any supported value type, as read from a file.
 #[derive(Debug, Clone, PartialEq)]
@@ -121,16 +121,16 @@ macro_rules! with_grid {
 }
 
 impl AnyGrid {
-    pub fn name(&self) -> &str {
+    pub(crate) fn name(&self) -> &str {
         with_grid!(self, g => &g.name)
     }
 
-    pub fn transform(&self) -> Transform {
+    pub(crate) fn transform(&self) -> Transform {
         with_grid!(self, g => g.transform)
     }
 
     /// Active voxels, tiles counted as the voxels they cover.
-    pub fn active_voxel_count(&self) -> u64 {
+    pub(crate) fn active_voxel_count(&self) -> u64 {
         with_grid!(self, g => g.active_voxel_count())
     }
 
@@ -149,7 +149,7 @@ impl AnyGrid {
 
     /// Gives the grid another name and transform, keeping its tree: how an instanced grid
     /// (one that shares another grid's tree in the file) is made from its parent.
-    pub fn rename(&mut self, name: &str, transform: Transform) {
+    pub(crate) fn rename(&mut self, name: &str, transform: Transform) {
         with_grid!(self, g => {
             g.name = name.to_string();
             g.transform = transform;

@@ -216,7 +216,7 @@ fn widen(g: AnyGrid) -> Grid<f64> {
 
 /// One velocity candidate of a file.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub enum Velocity {
+pub(crate) enum Velocity {
     /// Every vec3 grid with this name (file indices).
     Vector { name: String, grids: Vec<usize> },
     /// Three scalar grids (x, y, z components, file indices) taken as one grid `name`.
@@ -224,7 +224,7 @@ pub enum Velocity {
 }
 
 impl Velocity {
-    pub fn name(&self) -> &str {
+    pub(crate) fn name(&self) -> &str {
         match self {
             Velocity::Vector { name, .. } | Velocity::Split { name, .. } => name,
         }

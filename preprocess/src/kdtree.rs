@@ -8,7 +8,7 @@ use crate::regions::RegionTree;
 use format::Aabb;
 
 /// KD nodes and the regions (bounds, sorted brick ids) they reference.
-pub fn flatten(tree: &RegionTree) -> (Vec<KdNode>, Vec<(Aabb, Vec<u32>)>) {
+pub(crate) fn flatten(tree: &RegionTree) -> (Vec<KdNode>, Vec<(Aabb, Vec<u32>)>) {
     let mut nodes = Vec::new();
     let mut regions = Vec::new();
     if !matches!(tree, RegionTree::Empty) {
@@ -49,6 +49,6 @@ fn emit(t: &RegionTree, nodes: &mut Vec<KdNode>, regions: &mut Vec<(Aabb, Vec<u3
 
 /// Region containing `p` by descending the nodes (for tests and the baker's self-check):
 /// the file's own descent, [`format::kd::locate`].
-pub fn locate(nodes: &[KdNode], p: [f64; 3]) -> Option<u32> {
+pub(crate) fn locate(nodes: &[KdNode], p: [f64; 3]) -> Option<u32> {
     format::kd::locate(nodes, p, [0.0; 3])
 }

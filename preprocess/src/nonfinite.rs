@@ -7,7 +7,7 @@ use rayon::prelude::*;
 use crate::cells::CellSet;
 
 /// A cell value: a scalar or a velocity vector.
-pub trait CellValue: Copy + Default + Send + Sync {
+pub(crate) trait CellValue: Copy + Default + Send + Sync {
     fn is_finite(&self) -> bool;
     fn add(self, o: Self) -> Self;
     fn scale(self, s: f64) -> Self;
@@ -39,13 +39,13 @@ impl CellValue for [f64; 3] {
 
 /// First non-finite cell of a grid, for messages.
 #[derive(Debug, Clone, PartialEq)]
-pub struct NonFiniteReport {
+pub(crate) struct NonFiniteReport {
     pub count: u64,
     pub first: Option<[i32; 3]>,
 }
 
 /// Counts the non-finite active values of `set` (first one in slot order).
-pub fn count<T: CellValue>(set: &CellSet, values: &[T]) -> NonFiniteReport {
+pub(crate) fn count<T: CellValue>(set: &CellSet, values: &[T]) -> NonFiniteReport {
     let bad: Vec<usize> = set
         .active_slots()
         .filter(|&s| !values[s].is_finite())
@@ -58,7 +58,7 @@ pub fn count<T: CellValue>(set: &CellSet, values: &[T]) -> NonFiniteReport {
 
 /// Replaces every non-finite active value by the mean of its finite active face
 /// neighbours (zero when none). Returns how many values were replaced.
-pub fn replace<T: CellValue>(set: &CellSet, values: &mut [T]) -> u64 {
+pub(crate) fn replace<T: CellValue>(set: &CellSet, values: &mut [T]) -> u64 {
     let bad: Vec<usize> = set
         .active_slots()
         .filter(|&s| !values[s].is_finite())

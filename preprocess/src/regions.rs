@@ -14,7 +14,7 @@ use format::Aabb;
 
 /// The region tree before serialisation.
 #[derive(Debug, Clone, PartialEq)]
-pub enum RegionTree {
+pub(crate) enum RegionTree {
     /// Space inside the global bounds that no support reaches.
     Empty,
     /// A region with its sorted brick ids.
@@ -30,7 +30,7 @@ pub enum RegionTree {
 
 /// Builds the region tree over `supports` (indexed by brick id). Returns the union box of
 /// all supports (None when there are none) and the tree.
-pub fn build(supports: &[Aabb]) -> (Option<Aabb>, RegionTree) {
+pub(crate) fn build(supports: &[Aabb]) -> (Option<Aabb>, RegionTree) {
     let Some(first) = supports.first() else {
         return (None, RegionTree::Empty);
     };
@@ -138,7 +138,8 @@ fn choose_split(sup: &[Aabb], b: &Aabb, ids: &[u32]) -> Option<(u8, f64)> {
 }
 
 /// Regions (bounds, bricks) of a tree in depth-first, left-first order.
-pub fn leaves(tree: &RegionTree) -> Vec<(Aabb, &[u32])> {
+#[cfg(test)]
+pub(crate) fn leaves(tree: &RegionTree) -> Vec<(Aabb, &[u32])> {
     let mut out = Vec::new();
     fn walk<'t>(t: &'t RegionTree, out: &mut Vec<(Aabb, &'t [u32])>) {
         match t {

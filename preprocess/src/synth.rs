@@ -39,7 +39,7 @@ use crate::vdb::write::{
 /// memory until the file is written. 4 GiB of leaves is a peak of about 10 GB once the
 /// writer's buffers are added, well past any scene the tests or the README use (the largest,
 /// `wake --n0 160 --levels 3`, takes 140 MB) and below what the project's machines have.
-pub const MAX_LEAF_BYTES: u64 = 4 << 30;
+pub(crate) const MAX_LEAF_BYTES: u64 = 4 << 30;
 
 /// Bytes one leaf of `V` takes: the struct in the grid's leaf list and its boxed values.
 fn leaf_bytes<V>() -> u64 {
@@ -119,7 +119,7 @@ impl GridLayout {
         }))
     }
 
-    pub fn transform(&self) -> Transform {
+    pub(crate) fn transform(&self) -> Transform {
         Transform {
             voxel_size: [self.voxel_size; 3],
             translation: [0.5 * self.voxel_size; 3],
@@ -127,7 +127,7 @@ impl GridLayout {
     }
 
     /// World-space centre of voxel `ijk`.
-    pub fn centre(&self, ijk: [i64; 3]) -> [f64; 3] {
+    pub(crate) fn centre(&self, ijk: [i64; 3]) -> [f64; 3] {
         ijk.map(|i| (i as f64 + 0.5) * self.voxel_size)
     }
 }

@@ -73,7 +73,7 @@ impl ActiveTree {
     /// the field's packed KD-tree (its per-node ranges prune whole subtrees). `None` when
     /// the file's tree cannot be walked as a tree (the caller then walks the file's
     /// tree itself).
-    pub(crate) fn build(vol: &Volume, field: usize, value: f64) -> Option<ActiveTree> {
+    pub fn build(vol: &Volume, field: usize, value: f64) -> Option<ActiveTree> {
         let tree = vol.packed(field)?;
         let holds = |mn: f32, mx: f32| mn as f64 <= value && value <= mx as f64;
         let mut nodes: Vec<ActiveNode> = Vec::new();

@@ -111,7 +111,7 @@ fn shows(hit_samples: u32, spp: u32) -> bool {
 
 /// Strategies that make sense in `mode`: `exact` only finds iso-surfaces (in dvr it would
 /// sample as `uniform` or `bisect`, a duplicate run).
-pub fn strategies(mode: Mode) -> Vec<Strategy> {
+pub(crate) fn strategies(mode: Mode) -> Vec<Strategy> {
     Strategy::ALL
         .into_iter()
         .filter(|s| mode == Mode::Iso || *s != Strategy::Exact)
@@ -161,7 +161,7 @@ fn render_median(
 
 /// Renders the reference: `uniform` at `opts.reference_step` with `opts.reference_spp`
 /// samples per pixel (default: the view's), once.
-pub fn reference(
+pub(crate) fn reference(
     renderer: &Renderer,
     vol: &Volume,
     state: &ViewState,
@@ -190,7 +190,11 @@ pub fn reference(
 
 /// Colour and coverage differences of `frame` (rendered with `spp` samples per pixel)
 /// against the reference: (rmse, psnr, miss rate, false-hit rate).
-pub fn compare(reference: &Reference, frame: &Frame, spp: u32) -> (f64, Option<f64>, f64, f64) {
+pub(crate) fn compare(
+    reference: &Reference,
+    frame: &Frame,
+    spp: u32,
+) -> (f64, Option<f64>, f64, f64) {
     let r = &reference.frame;
     let n = r.rgb.len().min(frame.rgb.len());
     let mut se = 0.0f64;
@@ -329,7 +333,7 @@ fn line_name(r: &Run) -> String {
 
 /// RMSE against ms per frame, both axes logarithmic, one line per strategy through its
 /// steps; the view's default run is circled.
-pub fn chart(runs: &[Run], title: &str) -> LogLogChart {
+pub(crate) fn chart(runs: &[Run], title: &str) -> LogLogChart {
     let mut names: Vec<String> = Vec::new();
     for r in runs {
         let n = line_name(r);

@@ -106,7 +106,8 @@ impl Bvh {
     }
 
     /// Bounds of everything in the tree (empty box for an empty tree).
-    pub fn bounds(&self) -> Aabb {
+    #[cfg(test)]
+    pub(crate) fn bounds(&self) -> Aabb {
         self.nodes.first().map_or(Aabb::EMPTY, |n| n.bounds)
     }
 
@@ -212,7 +213,7 @@ impl Bvh {
 
     /// Nearest primitive hit: `hit(prim, t_min, t_max)` returns the primitive's hit
     /// distance in `(t_min, t_max)`, if any. Returns the primitive and distance.
-    pub fn nearest(
+    pub(crate) fn nearest(
         &self,
         ray: &Ray,
         t_min: f64,
@@ -288,7 +289,7 @@ impl Bvh {
     }
 
     /// Whether any primitive is hit in `(t_min, t_max)`; `hit` as for [`Bvh::nearest`].
-    pub fn any(
+    pub(crate) fn any(
         &self,
         ray: &Ray,
         t_min: f64,
@@ -354,7 +355,7 @@ pub(crate) struct RayShear {
 }
 
 impl RayShear {
-    pub fn new(ray: &Ray) -> RayShear {
+    pub(crate) fn new(ray: &Ray) -> RayShear {
         let a = ray.dir.abs();
         let kz = if a.x >= a.y && a.x >= a.z {
             0

@@ -17,7 +17,7 @@ pub struct Ray {
 
 impl Ray {
     /// Point at parameter `t`.
-    pub fn at(&self, t: f64) -> DVec3 {
+    pub(crate) fn at(&self, t: f64) -> DVec3 {
         self.origin + t * self.dir
     }
 }
@@ -46,7 +46,7 @@ pub(crate) const DEFAULT_FOV_DEG: f64 = 35.0;
 /// Orthonormal camera basis: `forward` points from the eye into the scene, `right` and
 /// `up` span the image plane (x to the right, y up on screen).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Basis {
+pub(crate) struct Basis {
     pub(crate) forward: DVec3,
     pub right: DVec3,
     pub up: DVec3,
@@ -67,7 +67,7 @@ pub struct RayGen {
 impl RayGen {
     /// Ray through image position (`x`, `y`) in pixels, as [`Camera::ray`].
     #[inline]
-    pub fn ray(&self, x: f64, y: f64) -> Ray {
+    pub(crate) fn ray(&self, x: f64, y: f64) -> Ray {
         let b = &self.basis;
         // Normalised device coordinates in [-1, 1], y up.
         let sx = 2.0 * x / self.w - 1.0;
@@ -98,7 +98,7 @@ impl Camera {
     /// Fallbacks: if `eye == look_at` (or either is not finite) the camera looks along
     /// −z; if `up` is zero, not finite or parallel to the view direction, the world axis
     /// least aligned with the view direction is used as `up` instead.
-    pub fn basis(&self) -> Basis {
+    pub(crate) fn basis(&self) -> Basis {
         let forward = match (finite_vec(self.eye), finite_vec(self.look_at)) {
             (Some(e), Some(l)) => (l - e).try_normalize().unwrap_or(DVec3::NEG_Z),
             _ => DVec3::NEG_Z,
@@ -132,7 +132,8 @@ impl Camera {
     /// the eye perpendicular to the view direction (so a camera inside the volume sees
     /// what is in front of that plane) and all share the view direction. For many rays
     /// use [`Camera::ray_generator`], which computes the basis once (same rays).
-    pub fn ray(&self, x: f64, y: f64, width: u32, height: u32) -> Ray {
+    #[cfg(test)]
+    pub(crate) fn ray(&self, x: f64, y: f64, width: u32, height: u32) -> Ray {
         self.ray_generator(width, height).ray(x, y)
     }
 

@@ -14,7 +14,8 @@ use plotters::prelude::*;
 const FONT: &str = "qbricks-plot";
 
 /// What plotters' bitmap drawing fails with.
-pub type DrawError = DrawingAreaErrorKind<<BitMapBackend<'static> as DrawingBackend>::ErrorType>;
+pub(crate) type DrawError =
+    DrawingAreaErrorKind<<BitMapBackend<'static> as DrawingBackend>::ErrorType>;
 
 /// One series: a named line through its points, in the order given.
 #[derive(Debug, Clone, PartialEq)]
@@ -72,7 +73,7 @@ fn drawable(p: &(f64, f64)) -> bool {
 
 impl LogLogChart {
     /// PNG bytes of the chart, `size` pixels.
-    pub fn png(&self, size: (u32, u32)) -> Result<Vec<u8>, ChartError> {
+    pub(crate) fn png(&self, size: (u32, u32)) -> Result<Vec<u8>, ChartError> {
         // Registering twice only replaces the same font.
         plotters::style::register_font(FONT, FontStyle::Normal, epaint_default_fonts::UBUNTU_LIGHT)
             .map_err(|_| ChartError::Font)?;

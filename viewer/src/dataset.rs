@@ -72,8 +72,4 @@ impl Dataset {
     pub fn view(&self) -> &BrickFileView {
         self.cell.borrow_owner()
     }
-
-    pub fn path(&self) -> &Path {
-        self.view().path()
-    }
 }

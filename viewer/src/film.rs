@@ -23,7 +23,7 @@ pub(crate) struct Film {
 }
 
 impl Film {
-    pub fn new(width: u32, height: u32) -> Film {
+    pub(crate) fn new(width: u32, height: u32) -> Film {
         let n = width as usize * height as usize;
         Film {
             width,
@@ -35,7 +35,7 @@ impl Film {
     }
 
     /// Adds a rendered tile (its pixels' sums over its sample range).
-    pub fn add(&mut self, r: &TileResult) {
+    pub(crate) fn add(&mut self, r: &TileResult) {
         let Tile { x0, y0, x1, y1 } = r.tile;
         let n = r.samples.len() as u32;
         let tw = (x1 - x0) as usize;
@@ -63,7 +63,7 @@ impl Film {
 
     /// Mean colour of pixel `i` (row-major), `None` before its first sample.
     #[inline]
-    pub fn pixel(&self, i: usize) -> Option<[f32; 3]> {
+    pub(crate) fn pixel(&self, i: usize) -> Option<[f32; 3]> {
         let n = self.samples[i];
         (n > 0).then(|| self.sum[i].map(|c| (c / n as f64) as f32))
     }

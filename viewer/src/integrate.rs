@@ -35,7 +35,7 @@ impl Default for Accum {
 impl Accum {
     /// Adds a sample of colour `c` and (corrected) opacity `alpha` behind what is there.
     #[inline]
-    pub fn add(&mut self, c: [f64; 3], alpha: f64) {
+    pub(crate) fn add(&mut self, c: [f64; 3], alpha: f64) {
         let w = self.transmittance * alpha;
         for a in 0..3 {
             self.rgb[a] += w * c[a];
@@ -45,7 +45,7 @@ impl Accum {
 
     /// Opacity reached; nothing behind can show.
     #[inline]
-    pub fn done(&self) -> bool {
+    pub(crate) fn done(&self) -> bool {
         self.transmittance < EARLY_TERMINATION
     }
 
@@ -54,7 +54,7 @@ impl Accum {
     }
 
     /// Composites over a background colour.
-    pub fn over(&self, bg: [f64; 3]) -> [f64; 3] {
+    pub(crate) fn over(&self, bg: [f64; 3]) -> [f64; 3] {
         std::array::from_fn(|a| self.rgb[a] + self.transmittance * bg[a])
     }
 }

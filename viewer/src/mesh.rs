@@ -37,7 +37,7 @@ impl MeshInstance {
     }
 
     /// Parses the CLI form `PATH[@x,y,z,scale]`, e.g. `data/sphere.obj@0,0,0,1`.
-    pub fn parse(spec: &str) -> Result<MeshInstance, MeshSpecError> {
+    pub(crate) fn parse(spec: &str) -> Result<MeshInstance, MeshSpecError> {
         let Some((path, place)) = spec.rsplit_once('@') else {
             return Ok(MeshInstance::at_origin(spec));
         };
@@ -65,7 +65,7 @@ impl MeshInstance {
     }
 
     /// Finite translation, finite positive scale, colour components in 0..=1.
-    pub fn validate(&self) -> Result<(), MeshError> {
+    pub(crate) fn validate(&self) -> Result<(), MeshError> {
         let err = |kind| Err(MeshError::new(&self.path, kind));
         if self.translation.iter().any(|x| !x.is_finite()) {
             return err(MeshErrorKind::Translation {
@@ -379,7 +379,7 @@ impl Meshes {
         }
     }
 
-    pub fn is_empty(&self) -> bool {
+    pub(crate) fn is_empty(&self) -> bool {
         self.tris.is_empty()
     }
 
@@ -388,7 +388,8 @@ impl Meshes {
     }
 
     /// Bounds of all triangles, `None` without triangles.
-    pub fn bounds(&self) -> Option<Aabb> {
+    #[cfg(test)]
+    pub(crate) fn bounds(&self) -> Option<Aabb> {
         let b = self.bvh.bounds();
         (!b.is_empty()).then_some(b)
     }
@@ -465,7 +466,7 @@ pub struct MeshError {
 }
 
 impl MeshError {
-    pub fn new(path: impl Into<PathBuf>, kind: MeshErrorKind) -> Self {
+    pub(crate) fn new(path: impl Into<PathBuf>, kind: MeshErrorKind) -> Self {
         Self {
             path: path.into(),
             kind,

@@ -231,11 +231,6 @@ impl Progressive {
         generation
     }
 
-    /// Generation of the newest submitted job.
-    pub fn generation(&self) -> u64 {
-        self.shared.lock().generation
-    }
-
     /// The newest image, if one has come since the last call. Generations never go
     /// back: an image is never older than one returned before.
     pub fn latest(&self) -> Option<Update> {

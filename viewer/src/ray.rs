@@ -82,7 +82,7 @@ impl<'s> RayCaster<'s> {
     }
 
     /// Work counters of every ray cast so far (camera and shadow rays).
-    pub fn stats(&self) -> Stats {
+    pub(crate) fn stats(&self) -> Stats {
         let mut s = self.main.stats;
         s += self.shadow.stats;
         s
@@ -103,13 +103,13 @@ impl<'s> RayCaster<'s> {
 
     /// Colour of sample `s` of pixel (`x`, `y`).
     #[inline]
-    pub fn sample(&mut self, x: u32, y: u32, s: u32) -> [f64; 3] {
+    pub(crate) fn sample(&mut self, x: u32, y: u32, s: u32) -> [f64; 3] {
         let (ray, jit) = self.camera_ray(x, y, s);
         self.trace(&ray, jit)
     }
 
     /// Colour seen along one camera ray.
-    pub fn trace(&mut self, ray: &Ray, jit: f64) -> [f64; 3] {
+    pub(crate) fn trace(&mut self, ray: &Ray, jit: f64) -> [f64; 3] {
         let scene = self.scene;
         let st = scene.state;
         let vol = scene.vol;

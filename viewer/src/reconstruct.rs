@@ -11,7 +11,7 @@
 use crate::volume::{BrickN, Volume};
 
 /// Below this weight sum a point is treated as outside the data (outer support boundary).
-pub const MIN_WEIGHT: f64 = 1e-9;
+pub(crate) const MIN_WEIGHT: f64 = 1e-9;
 
 /// Reconstruction of the iso field (value and gradient) and optionally a colour field.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -81,7 +81,7 @@ fn brick_axes(b: &BrickN, p: &[f64; 3]) -> Option<[Axis; 3]> {
 /// ray over an interval lying in one dual cell of every lattice of the region — there `g`
 /// is a cubic. `g` and `B - iso` have the same sign and the same roots where `Σ H > 0`.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Cubic {
+pub(crate) struct Cubic {
     pub c: [f64; 4],
     /// `Σ H_C` along the same interval (zero on the outer support boundary).
     pub weight: [f64; 4],
@@ -93,13 +93,13 @@ pub struct Cubic {
 
 impl Cubic {
     #[inline]
-    pub fn eval(&self, x: f64) -> f64 {
+    pub(crate) fn eval(&self, x: f64) -> f64 {
         ((self.c[3] * x + self.c[2]) * x + self.c[1]) * x + self.c[0]
     }
 
     /// `dg/dx`.
     #[inline]
-    pub fn slope(&self, x: f64) -> f64 {
+    pub(crate) fn slope(&self, x: f64) -> f64 {
         (3.0 * self.c[3] * x + 2.0 * self.c[2]) * x + self.c[1]
     }
 
@@ -287,7 +287,7 @@ impl Volume<'_> {
     /// valid when `[ta, tb]` lies inside one dual cell of every lattice of region `r`
     /// (cells are collected at the interval's midpoint).
     #[allow(clippy::too_many_arguments)]
-    pub fn cubic(
+    pub(crate) fn cubic(
         &self,
         r: usize,
         o: &[f64; 3],

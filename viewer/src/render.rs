@@ -197,7 +197,7 @@ impl CancelToken {
 /// each finished tile to `sink` (from the worker threads, in any order). Tiles check
 /// `cancel` before every pixel row: a cancelled frame stops within one row per worker,
 /// and the unfinished tiles are not delivered. Returns whether every tile was delivered.
-pub fn render_tiles(
+pub(crate) fn render_tiles(
     scene: &Scene,
     tiles: &[Tile],
     samples: Range<u32>,
@@ -252,7 +252,7 @@ pub struct Counts {
 }
 
 impl Counts {
-    pub fn add(&mut self, r: &TileResult) {
+    pub(crate) fn add(&mut self, r: &TileResult) {
         self.stats += r.stats;
         self.rays += r.rays;
         self.hits += r.hits;
@@ -519,7 +519,7 @@ pub struct RayTrace {
 
 /// Renders one pixel and records its rays' region segments, samples and hits
 /// (`t` along each unit-length ray from its origin).
-pub fn trace_pixel(scene: &Scene, x: u32, y: u32) -> PixelTrace {
+pub(crate) fn trace_pixel(scene: &Scene, x: u32, y: u32) -> PixelTrace {
     let spp = scene.state.spp.max(1);
     let mut caster = RayCaster::new(scene);
     let mut rays = Vec::new();

@@ -67,7 +67,7 @@ pub enum ShadingError {
 
 impl Material {
     /// Checks finite, non-negative coefficients.
-    pub fn validate(&self) -> Result<(), ShadingError> {
+    pub(crate) fn validate(&self) -> Result<(), ShadingError> {
         for (name, v) in [
             ("ambient", self.ambient),
             ("diffuse", self.diffuse),
@@ -87,7 +87,7 @@ impl Light {
     ///
     /// A zero direction (or a point light at `p`) gives +z at distance 0 for a point
     /// light and ∞ for a directional one, so callers never see NaN.
-    pub fn towards(&self, p: DVec3) -> (DVec3, f64) {
+    pub(crate) fn towards(&self, p: DVec3) -> (DVec3, f64) {
         match *self {
             Light::Directional { direction, .. } => (
                 (-DVec3::from_array(direction))
@@ -120,7 +120,7 @@ impl Light {
     }
 
     /// Checks finite numbers, a non-zero direction and non-negative colour/intensity.
-    pub fn validate(&self) -> Result<(), ShadingError> {
+    pub(crate) fn validate(&self) -> Result<(), ShadingError> {
         let (v, name, colour, intensity) = match *self {
             Light::Directional {
                 direction,

@@ -18,7 +18,7 @@ pub enum Mode {
 
 impl Mode {
     pub(crate) const ALL: [Mode; 2] = [Mode::Iso, Mode::Dvr];
-    pub fn as_str(self) -> &'static str {
+    pub(crate) fn as_str(self) -> &'static str {
         match self {
             Mode::Iso => "iso",
             Mode::Dvr => "dvr",
@@ -66,7 +66,7 @@ impl Band {
 
 /// Where a value lies relative to the transfer function's non-zero band.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Class {
+pub(crate) enum Class {
     Below,
     Inside,
     Above,
@@ -95,7 +95,7 @@ impl Default for Transfer {
 
 impl Transfer {
     /// The non-zero band `[lo, hi]` (the iso value alone in iso mode).
-    pub fn band(&self) -> (f64, f64) {
+    pub(crate) fn band(&self) -> (f64, f64) {
         match self.mode {
             Mode::Iso => (self.iso, self.iso),
             Mode::Dvr => (
@@ -107,7 +107,7 @@ impl Transfer {
 
     /// Opacity per reference length at value `v` (dvr).
     #[inline]
-    pub fn opacity(&self, v: f64) -> f64 {
+    pub(crate) fn opacity(&self, v: f64) -> f64 {
         let (lo, hi) = self.band();
         if !(v >= lo && v <= hi) {
             return 0.0;
@@ -117,7 +117,7 @@ impl Transfer {
     }
 
     #[inline]
-    pub fn classify(&self, v: f64) -> Class {
+    pub(crate) fn classify(&self, v: f64) -> Class {
         let (lo, hi) = self.band();
         if v < lo {
             Class::Below
@@ -197,7 +197,7 @@ impl PreIntegrated {
 
     /// Extinction per world length at value `v`.
     #[inline]
-    pub fn extinction(&self, v: f64) -> f64 {
+    pub(crate) fn extinction(&self, v: f64) -> f64 {
         let a = self.tf.opacity(v).min(PRE_MAX_ALPHA);
         -(1.0 - a).ln() / self.delta0
     }

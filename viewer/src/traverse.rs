@@ -34,7 +34,7 @@ pub(crate) struct PackedNode {
 pub(crate) struct Packed(Vec<PackedNode>);
 
 impl Packed {
-    pub(crate) fn build(file: &format::ArchivedBrickFile, field: usize) -> Packed {
+    pub fn build(file: &format::ArchivedBrickFile, field: usize) -> Packed {
         let stored = format::kd::FileNodes::new(file, field);
         let nodes = file.kd_nodes.as_slice();
         Packed(

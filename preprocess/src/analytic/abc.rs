@@ -18,7 +18,7 @@ pub struct Abc {
 impl Abc {
     /// The `abc` scene: classical A = 1, B = √(2/3), C = √(1/3), k = π (one period over the
     /// domain [-1, 1]³), amplitude 0.2.
-    pub fn sample_scene() -> Self {
+    pub(crate) fn sample_scene() -> Self {
         Abc {
             a: 1.0,
             b: (2.0f64 / 3.0).sqrt(),

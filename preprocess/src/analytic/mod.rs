@@ -27,7 +27,7 @@ pub use vortex::{Burgers, LambOseen};
 pub use wake::{Ring, Wake};
 
 /// Velocity gradient: `g[i][j] = ∂u_i/∂x_j`.
-pub type Gradient = [[f64; 3]; 3];
+pub(crate) type Gradient = [[f64; 3]; 3];
 
 /// A steady velocity field given in closed form.
 pub trait Flow: Send + Sync {
@@ -121,10 +121,10 @@ pub(crate) mod testutil {
     use super::{Flow, Gradient};
 
     /// Deterministic pseudo-random numbers in [0, 1) (xorshift64*).
-    pub struct Rng(u64);
+    pub(crate) struct Rng(u64);
 
     impl Rng {
-        pub fn new(seed: u64) -> Self {
+        pub(crate) fn new(seed: u64) -> Self {
             Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
         }
         pub(crate) fn next_f64(&mut self) -> f64 {
@@ -134,7 +134,7 @@ pub(crate) mod testutil {
             let v = self.0.wrapping_mul(0x2545_F491_4F6C_DD1D);
             (v >> 11) as f64 / (1u64 << 53) as f64
         }
-        pub fn point(&mut self, lo: [f64; 3], hi: [f64; 3]) -> [f64; 3] {
+        pub(crate) fn point(&mut self, lo: [f64; 3], hi: [f64; 3]) -> [f64; 3] {
             [
                 lo[0] + (hi[0] - lo[0]) * self.next_f64(),
                 lo[1] + (hi[1] - lo[1]) * self.next_f64(),

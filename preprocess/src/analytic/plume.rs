@@ -50,7 +50,7 @@ impl RingPlume {
     /// Smoke density at `p`: a Gaussian tube around the ring's core circle (width 1.5 σ)
     /// plus a trail of half that density along the axis from the source up to the ring
     /// (width 0.4 R, fading in over the lowest 0.2). Values in [0, ≈ 1.5].
-    pub fn density(&self, p: [f64; 3]) -> f64 {
+    pub(crate) fn density(&self, p: [f64; 3]) -> f64 {
         let r = &self.ring;
         let d = [p[0] - r.centre[0], p[1] - r.centre[1], p[2] - r.centre[2]];
         let n = r.normal;

@@ -18,7 +18,7 @@ pub struct LambOseen {
 
 impl LambOseen {
     /// The `lamb-oseen` scene: r_c = 0.25, ω₀ = 0.7 (axis Q = 0.49), domain [-1, 1]³.
-    pub fn sample_scene() -> Self {
+    pub(crate) fn sample_scene() -> Self {
         let core_radius = 0.25;
         LambOseen {
             circulation: 2.0 * PI * core_radius * core_radius * 0.7,
@@ -81,7 +81,7 @@ pub struct Burgers {
 
 impl Burgers {
     /// The `burgers` scene: the `lamb-oseen` swirl with α = 0.2, domain [-1, 1]³.
-    pub fn sample_scene() -> Self {
+    pub(crate) fn sample_scene() -> Self {
         Burgers {
             swirl: LambOseen::sample_scene(),
             strain: 0.2,

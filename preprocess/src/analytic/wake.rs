@@ -95,7 +95,7 @@ pub struct Wake {
 }
 
 impl Wake {
-    pub fn new(
+    pub(crate) fn new(
         free_stream: f64,
         sphere_centre: [f64; 3],
         sphere_radius: f64,

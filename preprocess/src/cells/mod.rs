@@ -46,7 +46,7 @@ fn bit(mask: &[u64; 8], n: usize) -> bool {
 
 /// One input grid's cells on its lattice.
 #[derive(Debug, Clone)]
-pub struct CellSet {
+pub(crate) struct CellSet {
     /// Grid name (for messages).
     pub name: String,
     pub transform: Transform,
@@ -209,7 +209,7 @@ impl CellSet {
     }
 
     #[inline]
-    pub fn is_active(&self, slot: usize) -> bool {
+    pub(crate) fn is_active(&self, slot: usize) -> bool {
         bit(&self.active[slot / BLOCK_CELLS], slot % BLOCK_CELLS)
     }
 
@@ -219,7 +219,7 @@ impl CellSet {
     }
 
     /// Index coordinate of a slot.
-    pub fn ijk(&self, slot: usize) -> [i32; 3] {
+    pub(crate) fn ijk(&self, slot: usize) -> [i32; 3] {
         let o = self.blocks[slot / BLOCK_CELLS];
         let n = slot % BLOCK_CELLS;
         [
@@ -230,7 +230,7 @@ impl CellSet {
     }
 
     /// World-space centre of cell `ijk`.
-    pub fn centre(&self, ijk: [i32; 3]) -> [f64; 3] {
+    pub(crate) fn centre(&self, ijk: [i32; 3]) -> [f64; 3] {
         self.transform.index_to_world(ijk.map(|c| c as f64))
     }
 

@@ -11,10 +11,10 @@ pub const MAGIC: u64 = 0x5644_4220;
 /// A grid's compression flags (OpenVDB `io::COMPRESS_*`), stored as a `u32` in front of the
 /// grid's metadata. They apply to every node of the grid.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct CompressionFlags(pub u32);
+pub(crate) struct CompressionFlags(pub u32);
 
 impl CompressionFlags {
-    pub const NONE: Self = Self(0);
+    pub(crate) const NONE: Self = Self(0);
     /// zlib over each block of node values (`COMPRESS_ZIP`).
     pub(crate) const ZIP: Self = Self(0x1);
     /// Inactive node values left out where the node's metadata byte (see [`NodeMeta`])
@@ -24,12 +24,12 @@ impl CompressionFlags {
     pub(crate) const BLOSC: Self = Self(0x4);
 
     /// Both sets of flags.
-    pub const fn union(self, other: Self) -> Self {
+    pub(crate) const fn union(self, other: Self) -> Self {
         Self(self.0 | other.0)
     }
 
     /// Every flag of `other` is set.
-    pub fn contains(self, other: Self) -> bool {
+    pub(crate) fn contains(self, other: Self) -> bool {
         self.0 & other.0 == other.0
     }
 
@@ -39,7 +39,7 @@ impl CompressionFlags {
     }
 
     /// Names of the set flags, for reports.
-    pub fn names(self) -> Vec<&'static str> {
+    pub(crate) fn names(self) -> Vec<&'static str> {
         [
             (Self::ZIP, "zip"),
             (Self::BLOSC, "blosc"),

@@ -41,7 +41,7 @@ pub(crate) struct Inflater<'a> {
 impl<'a> LocatedChunk<'a> {
     /// The chunk's `nbytes` decoded bytes: the chunk itself when stored raw, otherwise
     /// `inflater`'s buffer.
-    pub fn decode<'s>(&self, inflater: &'s mut Inflater<'a>) -> RawResult<&'s [u8]>
+    pub(crate) fn decode<'s>(&self, inflater: &'s mut Inflater<'a>) -> RawResult<&'s [u8]>
     where
         'a: 's,
     {

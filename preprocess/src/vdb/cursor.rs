@@ -10,19 +10,19 @@ pub(crate) struct Cursor<'a> {
 }
 
 impl<'a> Cursor<'a> {
-    pub fn new(data: &'a [u8], pos: usize) -> Self {
+    pub(crate) fn new(data: &'a [u8], pos: usize) -> Self {
         Cursor { data, pos }
     }
 
-    pub fn pos(&self) -> usize {
+    pub(crate) fn pos(&self) -> usize {
         self.pos
     }
 
-    pub fn left(&self) -> usize {
+    pub(crate) fn left(&self) -> usize {
         self.data.len().saturating_sub(self.pos)
     }
 
-    pub fn truncated(&self, what: &'static str, expected: String) -> RawError {
+    pub(crate) fn truncated(&self, what: &'static str, expected: String) -> RawError {
         RawError::new(
             self.pos,
             what,
@@ -48,11 +48,11 @@ impl<'a> Cursor<'a> {
         Ok(out)
     }
 
-    pub fn take(&mut self, n: usize, what: &'static str) -> RawResult<&'a [u8]> {
+    pub(crate) fn take(&mut self, n: usize, what: &'static str) -> RawResult<&'a [u8]> {
         self.take_as(n, what, || format!("{n} bytes"))
     }
 
-    pub fn skip(&mut self, n: usize, what: &'static str) -> RawResult<()> {
+    pub(crate) fn skip(&mut self, n: usize, what: &'static str) -> RawResult<()> {
         self.take(n, what).map(|_| ())
     }
 
@@ -63,31 +63,31 @@ impl<'a> Cursor<'a> {
         Ok(out)
     }
 
-    pub fn u8(&mut self, what: &'static str) -> RawResult<u8> {
+    pub(crate) fn u8(&mut self, what: &'static str) -> RawResult<u8> {
         Ok(self.array::<1>(what)?[0])
     }
 
-    pub fn u32(&mut self, what: &'static str) -> RawResult<u32> {
+    pub(crate) fn u32(&mut self, what: &'static str) -> RawResult<u32> {
         Ok(u32::from_le_bytes(self.array(what)?))
     }
 
-    pub fn i32(&mut self, what: &'static str) -> RawResult<i32> {
+    pub(crate) fn i32(&mut self, what: &'static str) -> RawResult<i32> {
         Ok(i32::from_le_bytes(self.array(what)?))
     }
 
-    pub fn i64(&mut self, what: &'static str) -> RawResult<i64> {
+    pub(crate) fn i64(&mut self, what: &'static str) -> RawResult<i64> {
         Ok(i64::from_le_bytes(self.array(what)?))
     }
 
-    pub fn f64(&mut self, what: &'static str) -> RawResult<f64> {
+    pub(crate) fn f64(&mut self, what: &'static str) -> RawResult<f64> {
         Ok(f64::from_le_bytes(self.array(what)?))
     }
 
-    pub fn vec3i(&mut self, what: &'static str) -> RawResult<[i32; 3]> {
+    pub(crate) fn vec3i(&mut self, what: &'static str) -> RawResult<[i32; 3]> {
         Ok([self.i32(what)?, self.i32(what)?, self.i32(what)?])
     }
 
-    pub fn vec3d(&mut self, what: &'static str) -> RawResult<[f64; 3]> {
+    pub(crate) fn vec3d(&mut self, what: &'static str) -> RawResult<[f64; 3]> {
         Ok([self.f64(what)?, self.f64(what)?, self.f64(what)?])
     }
 
@@ -105,12 +105,12 @@ impl<'a> Cursor<'a> {
         self.take(len, what)
     }
 
-    pub fn string(&mut self, what: &'static str) -> RawResult<String> {
+    pub(crate) fn string(&mut self, what: &'static str) -> RawResult<String> {
         Ok(String::from_utf8_lossy(self.bytes_with_len(what)?).into_owned())
     }
 
     /// A node mask of `bits` bits (a multiple of 64), as little-endian words.
-    pub fn mask(&mut self, bits: usize, what: &'static str) -> RawResult<Vec<u64>> {
+    pub(crate) fn mask(&mut self, bits: usize, what: &'static str) -> RawResult<Vec<u64>> {
         let bytes = self.take(bits / 8, what)?;
         Ok(bytes
             .chunks_exact(8)

@@ -172,7 +172,7 @@ pub(crate) struct RawError {
 }
 
 impl RawError {
-    pub fn new(offset: usize, what: &'static str, kind: ErrorKind) -> Self {
+    pub(crate) fn new(offset: usize, what: &'static str, kind: ErrorKind) -> Self {
         RawError {
             offset: offset as u64,
             what,
@@ -180,11 +180,11 @@ impl RawError {
         }
     }
 
-    pub fn invalid(offset: usize, what: &'static str, invalid: Invalid) -> Self {
+    pub(crate) fn invalid(offset: usize, what: &'static str, invalid: Invalid) -> Self {
         Self::new(offset, what, ErrorKind::Invalid(Box::new(invalid)))
     }
 
-    pub fn locate(self, file: &str, grid: Option<&str>) -> VdbError {
+    pub(crate) fn locate(self, file: &str, grid: Option<&str>) -> VdbError {
         VdbError {
             file: file.to_string(),
             grid: grid.map(str::to_string),

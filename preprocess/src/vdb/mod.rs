@@ -121,7 +121,7 @@ pub struct GridDescriptor {
 impl GridDescriptor {
     /// The grid class (metadata `class`: `unknown`, `level set`, `fog volume`,
     /// `staggered`); `unknown` when the entry is missing or not a string, as in OpenVDB.
-    pub fn class(&self) -> &str {
+    pub(crate) fn class(&self) -> &str {
         match self.metadata.get("class") {
             Some(MetaValue::String(s)) => s,
             _ => "unknown",
@@ -191,15 +191,6 @@ impl VdbFile {
     /// The file name given at open.
     pub fn name(&self) -> &str {
         &self.name
-    }
-
-    /// Size of the file in bytes.
-    pub fn len(&self) -> usize {
-        self.data.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.data.is_empty()
     }
 
     /// Grid descriptors in file order.

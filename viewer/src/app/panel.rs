@@ -13,7 +13,7 @@ use crate::sampling::Strategy;
 use crate::transfer::Mode;
 use crate::view_state::MAX_SPP;
 
-pub fn show(app: &mut ViewerApp, ui: &mut egui::Ui) {
+pub(crate) fn show(app: &mut ViewerApp, ui: &mut egui::Ui) {
     ui.add_space(4.0);
     files(app, ui);
     if let Some(msg) = &app.error {

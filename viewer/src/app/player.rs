@@ -25,7 +25,7 @@ pub struct Player {
 
 impl Player {
     /// A stopped player on the first frame, at 4 frames per second.
-    pub fn new(pattern: String, frames: Vec<(u64, PathBuf)>) -> Player {
+    pub(crate) fn new(pattern: String, frames: Vec<(u64, PathBuf)>) -> Player {
         Player {
             pattern,
             frames,
@@ -41,12 +41,12 @@ impl Player {
         self.frames.get(self.index).map_or(0, |f| f.0)
     }
 
-    pub fn path(&self) -> Option<&Path> {
+    pub(crate) fn path(&self) -> Option<&Path> {
         self.frames.get(self.index).map(|f| f.1.as_path())
     }
 
     /// Goes to frame index `i` (clamped); returns whether it changed.
-    pub fn seek(&mut self, i: usize) -> bool {
+    pub(crate) fn seek(&mut self, i: usize) -> bool {
         let i = i.min(self.frames.len().saturating_sub(1));
         let changed = i != self.index;
         self.index = i;

@@ -87,7 +87,7 @@ fn median(v: &mut [f64]) -> f64 {
 }
 
 impl ScriptRunner {
-    pub fn new(script: Script) -> ScriptRunner {
+    pub(crate) fn new(script: Script) -> ScriptRunner {
         let phase = match &script {
             Script::Orbit { .. } => Phase::Orbiting { frame: 0 },
             Script::Screenshot { .. } => Phase::Screenshot {

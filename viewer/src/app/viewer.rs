@@ -25,7 +25,7 @@ use crate::view_state::{ViewState, MAX_IMAGE_SIDE};
 use format::sequence::FramePattern;
 
 /// The bundled sample, opened when no file is given.
-pub const DEFAULT_FILE: &str = "data/wake_small.qbk";
+pub(crate) const DEFAULT_FILE: &str = "data/wake_small.qbk";
 
 /// Samples per pixel the window refines to when the view state does not say.
 const WINDOW_SPP: u32 = 4;
@@ -41,7 +41,7 @@ pub(crate) struct Doc {
     pub fields: Vec<FieldSummary>,
 }
 
-pub(crate) struct FieldSummary {
+pub struct FieldSummary {
     pub name: String,
     pub min: f32,
     pub max: f32,
@@ -72,7 +72,7 @@ impl Doc {
         }
     }
 
-    pub fn field(&self, name: &str) -> Option<&FieldSummary> {
+    pub(crate) fn field(&self, name: &str) -> Option<&FieldSummary> {
         self.fields.iter().find(|f| f.name == name)
     }
 }
@@ -149,7 +149,7 @@ pub struct ViewerApp {
 impl ViewerApp {
     /// A window on `options.file` (or the bundled sample). A file that fails to open is
     /// reported in the window, not as an error: the window still opens.
-    pub fn new(
+    pub(crate) fn new(
         ctx: egui::Context,
         options: WindowOptions,
         outcome: Arc<Mutex<Option<anyhow::Result<Option<OrbitReport>>>>>,

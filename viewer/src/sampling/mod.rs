@@ -34,7 +34,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::reconstruct::Eval;
 use crate::transfer::PreIntegrated;
-use crate::transfer::{Mode, Transfer};
+use crate::transfer::Transfer;
 use crate::volume::Volume;
 
 mod dvr;
@@ -67,7 +67,7 @@ impl Strategy {
         Strategy::Bisect,
         Strategy::Exact,
     ];
-    pub fn as_str(self) -> &'static str {
+    pub(crate) fn as_str(self) -> &'static str {
         match self {
             Strategy::Uniform => "uniform",
             Strategy::Paper => "paper",
@@ -116,10 +116,6 @@ pub struct Params {
 }
 
 impl Params {
-    pub fn mode(&self) -> Mode {
-        self.tf.mode
-    }
-
     /// Sets [`Params::clip`] to the bounding box of the regions whose value range can
     /// contribute (contains iso / meets the band). Everything outside it is skipped anyway;
     /// the strategies that track the side of skipped space take an entry sample in the first

@@ -186,7 +186,7 @@ pub enum InvalidViewState {
 /// The iso value and dvr band width a field starts with: 10 % of its positive maximum
 /// (where the vortex cores of Q stand out), else the middle of its range; σ at 8 % of the
 /// iso value as in the seed report, never zero.
-pub fn default_iso(f: &FieldRange) -> (f64, f64) {
+pub(crate) fn default_iso(f: &FieldRange) -> (f64, f64) {
     let (iso, span) = if f.min.is_finite() && f.max.is_finite() {
         let (lo, hi) = (f64::from(f.min.min(f.max)), f64::from(f.min.max(f.max)));
         let iso = if hi > 0.0 && lo < 0.1 * hi {
@@ -241,7 +241,7 @@ impl ViewState {
     /// box `min..max`, the iso field is `q` (else the first field), the iso value is
     /// 10 % of its positive maximum (else the middle of its range), colour by `speed`
     /// (else the second field, else the iso field) over that field's range.
-    pub fn default_for(min: [f64; 3], max: [f64; 3], fields: &[FieldRange]) -> ViewState {
+    pub(crate) fn default_for(min: [f64; 3], max: [f64; 3], fields: &[FieldRange]) -> ViewState {
         let camera = Camera::frame(min, max);
         let iso_range = fields
             .iter()

@@ -67,7 +67,7 @@ pub enum Compression {
 
 impl Compression {
     /// The flags written into the file.
-    pub fn flags(self) -> CompressionFlags {
+    pub(crate) fn flags(self) -> CompressionFlags {
         match self {
             Compression::None => CompressionFlags::NONE,
             Compression::ActiveMask => CompressionFlags::ACTIVE_MASK,
