@@ -417,7 +417,6 @@ fn check_kd(file: &ArchivedBrickFile) -> Result<(), ValidationError> {
     let mut reached = vec![false; nodes.len()];
     reached[0] = true;
     let mut region_in_leaf = vec![false; n_regions];
-    let ranges = file.kd_ranges.as_slice();
     let full = file.kd_full.as_slice();
     for (n, node) in nodes.iter().enumerate() {
         if !reached[n] {
@@ -453,14 +452,7 @@ fn check_kd(file: &ArchivedBrickFile) -> Result<(), ValidationError> {
                         return Err(ValidationError::KdNotATree { node: i, child });
                     }
                     reached[c] = true;
-                    let outer = &ranges[n * nf..(n + 1) * nf];
-                    let inner = &ranges[c * nf..(c + 1) * nf];
-                    if outer.iter().zip(inner).any(|(o, r)| {
-                        !holds(
-                            (o.min.to_native(), o.max.to_native()),
-                            (r.min.to_native(), r.max.to_native()),
-                        )
-                    }) {
+                    if (0..nf).any(|f| !holds(range(n, f), range(c, f))) {
                         return Err(ValidationError::KdRangeNotHeld { node: i, child });
                     }
                     if full[n] && !full[c] {

@@ -50,6 +50,13 @@ struct ActiveNode {
     lattices: u8,
 }
 
+/// Whether the range `[mn, mx]` holds `value`: the one test of which regions `exact`
+/// searches, whether it walks the active tree or the file's.
+#[inline]
+pub(crate) fn range_holds(mn: f32, mx: f32, value: f64) -> bool {
+    mn as f64 <= value && value <= mx as f64
+}
+
 /// The regions whose range of one field holds one value, in the file's tree order.
 pub(crate) struct ActiveTree {
     field: usize,
@@ -75,7 +82,7 @@ impl ActiveTree {
     /// tree itself).
     pub fn build(vol: &Volume, field: usize, value: f64) -> Option<ActiveTree> {
         let tree = vol.packed(field)?;
-        let holds = |mn: f32, mx: f32| mn as f64 <= value && value <= mx as f64;
+        let holds = |mn: f32, mx: f32| range_holds(mn, mx, value);
         let mut nodes: Vec<ActiveNode> = Vec::new();
         let mut lattices: Vec<Lattice> = Vec::new();
         // Post-order without recursion (a valid tree may still be deep): `(node, expanded)`.
@@ -372,11 +379,11 @@ mod tests {
         let mut file = Vec::new();
         let skip = Skip {
             field: 0,
-            keep: |a: f32, b: f32| a as f64 <= iso && iso <= b as f64,
+            keep: |a: f32, b: f32| range_holds(a, b, iso),
             across_gaps: true,
         };
         vol.segments_skipping(o, d, t.0, t.1, &mut stack, &skip, |s| {
-            if s.region != SKIPPED && s.min as f64 <= iso && iso <= s.max as f64 {
+            if s.region != SKIPPED && range_holds(s.min, s.max, iso) {
                 file.push((s.region, s.t0.to_bits(), s.t1.to_bits()));
             }
             true

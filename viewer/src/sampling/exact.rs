@@ -3,6 +3,7 @@
 //! such interval whose cells straddle the iso value is solved for its first root.
 
 use super::{Event, Tracer, MAX_LATTICES};
+use crate::active::range_holds;
 use crate::reconstruct::Cubic;
 use crate::traverse::{inverse, ray_box, Segment, Skip, SKIPPED};
 use crate::volume::Volume;
@@ -54,12 +55,11 @@ impl Tracer<'_> {
             None => {
                 let skip = Skip {
                     field,
-                    keep: |a: f32, b: f32| a as f64 <= iso && iso <= b as f64,
+                    keep: |a: f32, b: f32| range_holds(a, b, iso),
                     across_gaps: true,
                 };
                 vol.segments_skipping(o, d, t0, t1, &mut stack, &skip, |seg| {
-                    let skipped =
-                        seg.region == SKIPPED || !(seg.min as f64 <= iso && iso <= seg.max as f64);
+                    let skipped = seg.region == SKIPPED || !range_holds(seg.min, seg.max, iso);
                     self.enter_segment(&seg, skipped);
                     if skipped {
                         return true;
