@@ -15,9 +15,10 @@ use std::process::Command;
 use std::time::Instant;
 
 use qbricks_format::header::{checksum, HEADER_LEN};
+use qbricks_format::kd::BuildNode;
 use qbricks_format::{
     query, validate, writer, Aabb, ArchivedBrickFile, Brick, BrickFile, BrickFileView, Field,
-    KdNode, Level, OpenOptions, Provenance, Region, ValueRange,
+    Level, OpenOptions, Provenance, Region, ValueRange,
 };
 
 const DIM: u32 = 8; // cells per brick axis
@@ -33,6 +34,7 @@ fn build(gib: f64) -> BrickFile {
     let w = 1.0;
     let mut bricks = Vec::new();
     let mut regions = Vec::new();
+    let mut boxes = Vec::new();
     let mut first_value = 0u64;
     for z in 0..m {
         for y in 0..n {
@@ -47,14 +49,13 @@ fn build(gib: f64) -> BrickFile {
                     first_value,
                 });
                 let lo = origin.map(|c| c - 0.5 * w);
+                boxes.push(Aabb {
+                    min: lo,
+                    max: lo.map(|c| c + f64::from(DIM) * w),
+                });
                 regions.push(Region {
-                    bounds: Aabb {
-                        min: lo,
-                        max: lo.map(|c| c + f64::from(DIM) * w),
-                    },
                     bricks_start: regions.len() as u32,
                     bricks_len: 1,
-                    finest_level: 0,
                 });
                 first_value += cells_per_brick;
             }
@@ -66,9 +67,10 @@ fn build(gib: f64) -> BrickFile {
             .map(|i| ((i as f32) * 1e-3 + f as f32).sin())
             .collect()
     };
-    let mut kd_nodes = Vec::new();
+    let mut built = Vec::new();
     let ids: Vec<u32> = (0..n_bricks as u32).collect();
-    build_kd(&regions, ids, &mut kd_nodes);
+    build_kd(&boxes, ids, &mut built);
+    let (kd_root, kd_nodes, kd_axes) = qbricks_format::kd::pack(&built);
     let extent = [n, n, m].map(|c| f64::from(c * DIM) * w - 0.5 * w);
     BrickFile {
         provenance: Provenance {
@@ -105,24 +107,23 @@ fn build(gib: f64) -> BrickFile {
         ],
         bricks,
         regions,
+        kd_root,
         kd_nodes,
-        kd_ranges: Vec::new(),
-        kd_full: Vec::new(),
+        kd_axes,
     }
-    .with_kd_tables()
 }
 
 /// Median split on the widest axis of the region centres; returns the node index.
-fn build_kd(regions: &[Region], mut ids: Vec<u32>, nodes: &mut Vec<KdNode>) -> u32 {
+fn build_kd(boxes: &[Aabb], mut ids: Vec<u32>, nodes: &mut Vec<BuildNode>) -> u32 {
     let at = nodes.len() as u32;
-    nodes.push(KdNode::Leaf { region: None });
+    nodes.push(BuildNode::Leaf { region: None });
     if ids.len() == 1 {
-        nodes[at as usize] = KdNode::Leaf {
+        nodes[at as usize] = BuildNode::Leaf {
             region: Some(ids[0]),
         };
         return at;
     }
-    let lo = |i: u32, a: usize| regions[i as usize].bounds.min[a];
+    let lo = |i: u32, a: usize| boxes[i as usize].min[a];
     let spread = |a: usize| {
         let (mn, mx) = ids.iter().fold((f64::MAX, f64::MIN), |(mn, mx), &i| {
             (mn.min(lo(i, a)), mx.max(lo(i, a)))
@@ -136,9 +137,9 @@ fn build_kd(regions: &[Region], mut ids: Vec<u32>, nodes: &mut Vec<KdNode>) -> u
     let mid = ids.len() / 2;
     let split = lo(ids[mid], axis);
     let right_ids = ids.split_off(mid);
-    let left = build_kd(regions, ids, nodes);
-    let right = build_kd(regions, right_ids, nodes);
-    nodes[at as usize] = KdNode::Inner {
+    let left = build_kd(boxes, ids, nodes);
+    let right = build_kd(boxes, right_ids, nodes);
+    nodes[at as usize] = BuildNode::Inner {
         axis: axis as u8,
         split,
         left,

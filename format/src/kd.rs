@@ -7,6 +7,9 @@
 //! data placed at 1e6 keeps sub-cell precision) and passes the frame's origin; callers in
 //! world coordinates pass `[0.0; 3]`. The edge rules are the same everywhere:
 //! - a box is half-open, `[min, max)`: a point on a split plane goes right (`>= split`);
+//! - a region's box is its leaf's cell: the file's bounds cut by the splits on the way
+//!   down (format 3 stores no region boxes), so a walk's interval in a leaf *is* the
+//!   ray's part of the region;
 //! - a ray visits the child it meets first as `t` grows; a plane crossed exactly at an
 //!   end of the ray's interval in a node sends the whole interval to one child (the other
 //!   part would be empty), so the walk works for any `t` range, also negative ones;
@@ -19,7 +22,24 @@
 
 use crate::schema::{ArchivedBrickFile, ArchivedKdNode, KdNode};
 
-/// A KD node as the descent sees it.
+/// Bit of a child reference that makes it a leaf: `LEAF | region` holds a region.
+pub const LEAF: u32 = 1 << 31;
+/// The child reference of an empty leaf (space no support reaches).
+pub const EMPTY: u32 = u32::MAX;
+/// Largest region index a leaf reference can hold.
+pub const MAX_REGION: u32 = EMPTY - LEAF - 1;
+
+/// The child reference of a leaf holding `region` (`None`: empty space).
+#[inline]
+pub fn leaf_ref(region: Option<u32>) -> u32 {
+    match region {
+        Some(r) => LEAF | r,
+        None => EMPTY,
+    }
+}
+
+/// A KD node as the descent sees it, its children as references (which the same tree's
+/// [`KdTree::node`] resolves).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Node {
     Inner {
@@ -31,65 +51,166 @@ pub enum Node {
     Leaf(Option<u32>),
 }
 
-/// A KD-tree as stored: native while baking, archived when reading a file.
+/// A KD-tree: node references resolved to nodes.
 pub trait KdTree {
+    /// Number of stored nodes (a walk visits at most about twice as many).
     fn node_count(&self) -> usize;
+    /// Reference of the root.
+    fn root(&self) -> u32;
     fn node(&self, i: u32) -> Option<Node>;
 }
 
-impl KdTree for [KdNode] {
-    fn node_count(&self) -> usize {
-        self.len()
-    }
-    #[inline]
-    fn node(&self, i: u32) -> Option<Node> {
-        Some(match self.get(i as usize)? {
-            KdNode::Inner {
-                axis,
-                split,
-                left,
-                right,
-            } => Node::Inner {
-                axis: usize::from(*axis),
-                split: *split,
-                left: *left,
-                right: *right,
-            },
-            KdNode::Leaf { region } => Node::Leaf(*region),
-        })
+/// A tree as a file stores it (format 3): a root reference, the inner nodes, their axes.
+/// `N` is the native node while baking and the archived one when reading a file.
+#[derive(Debug)]
+pub struct Stored<'a, N> {
+    pub root: u32,
+    pub nodes: &'a [N],
+    pub axes: &'a [u8],
+}
+
+impl<N> Clone for Stored<'_, N> {
+    fn clone(&self) -> Self {
+        *self
     }
 }
 
-impl KdTree for [ArchivedKdNode] {
+impl<N> Copy for Stored<'_, N> {}
+
+/// The archived file's tree.
+pub fn file_tree(file: &ArchivedBrickFile) -> Stored<'_, ArchivedKdNode> {
+    Stored {
+        root: file.kd_root.to_native(),
+        nodes: file.kd_nodes.as_slice(),
+        axes: file.kd_axes.as_slice(),
+    }
+}
+
+/// What [`Stored`] reads of a node, native or archived.
+pub trait SplitNode {
+    fn parts(&self) -> (f64, u32, u32);
+}
+
+impl SplitNode for KdNode {
+    #[inline]
+    fn parts(&self) -> (f64, u32, u32) {
+        (self.split, self.left, self.right)
+    }
+}
+
+impl SplitNode for ArchivedKdNode {
+    #[inline]
+    fn parts(&self) -> (f64, u32, u32) {
+        (
+            self.split.to_native(),
+            self.left.to_native(),
+            self.right.to_native(),
+        )
+    }
+}
+
+/// Resolves a reference of a stored tree: leaves from the reference alone, inner nodes
+/// from `nodes` and `axes`.
+#[inline]
+pub fn resolve<N: SplitNode>(nodes: &[N], axes: &[u8], i: u32) -> Option<Node> {
+    if i & LEAF != 0 {
+        return Some(Node::Leaf((i != EMPTY).then_some(i & !LEAF)));
+    }
+    let (split, left, right) = nodes.get(i as usize)?.parts();
+    Some(Node::Inner {
+        axis: usize::from(*axes.get(i as usize)?),
+        split,
+        left,
+        right,
+    })
+}
+
+impl<N: SplitNode> KdTree for Stored<'_, N> {
     fn node_count(&self) -> usize {
-        self.len()
+        self.nodes.len()
+    }
+    fn root(&self) -> u32 {
+        self.root
     }
     #[inline]
     fn node(&self, i: u32) -> Option<Node> {
-        Some(match self.get(i as usize)? {
-            ArchivedKdNode::Inner {
+        resolve(self.nodes, self.axes, i)
+    }
+}
+
+/// A KD node as a writer builds it: leaves are nodes too, node 0 is the root and every
+/// node is stored before its children. [`pack`] turns such a list into the stored form.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum BuildNode {
+    Inner {
+        axis: u8,
+        split: f64,
+        left: u32,
+        right: u32,
+    },
+    Leaf {
+        region: Option<u32>,
+    },
+}
+
+/// The stored form of a tree: root reference, inner nodes and their axes.
+pub type Packed = (u32, Vec<KdNode>, Vec<u8>);
+
+/// Stores a built tree (node 0 is the root; an empty list is an empty tree): inner nodes
+/// in depth-first, left-first order (parent before children), leaves as references.
+/// A node reached a second time, or a child out of range, becomes an empty leaf, so any
+/// list packs into a tree.
+pub fn pack(built: &[BuildNode]) -> Packed {
+    let mut nodes: Vec<KdNode> = Vec::new();
+    let mut axes: Vec<u8> = Vec::new();
+    let mut seen = vec![false; built.len()];
+    // (built node, stored parent and side to patch; `None` for the root)
+    let mut todo: Vec<(u32, Option<(usize, bool)>)> = vec![(0, None)];
+    let mut root = EMPTY;
+    while let Some((b, parent)) = todo.pop() {
+        let r = match built.get(b as usize) {
+            Some(_) if seen[b as usize] => EMPTY,
+            None => EMPTY,
+            Some(BuildNode::Leaf { region }) => {
+                seen[b as usize] = true;
+                leaf_ref(*region)
+            }
+            Some(BuildNode::Inner {
                 axis,
                 split,
                 left,
                 right,
-            } => Node::Inner {
-                axis: usize::from(*axis),
-                split: split.to_native(),
-                left: left.to_native(),
-                right: right.to_native(),
-            },
-            ArchivedKdNode::Leaf { region } => Node::Leaf(region.as_ref().map(|r| r.to_native())),
-        })
+            }) => {
+                seen[b as usize] = true;
+                let i = nodes.len();
+                nodes.push(KdNode {
+                    split: *split,
+                    left: EMPTY,
+                    right: EMPTY,
+                });
+                axes.push(*axis);
+                // Left first: popped first, so it is stored right after its parent.
+                todo.push((*right, Some((i, false))));
+                todo.push((*left, Some((i, true))));
+                i as u32
+            }
+        };
+        match parent {
+            None => root = r,
+            Some((p, true)) => nodes[p].left = r,
+            Some((p, false)) => nodes[p].right = r,
+        }
     }
+    (root, nodes, axes)
 }
 
 /// The leaf's region reached from the root by the point `p` (`p[axis] < split - shift[axis]`
-/// goes left); `None` for an empty leaf. The caller checks that `p` lies in the region's
-/// box when leaves may be larger than their regions.
+/// goes left); `None` for an empty leaf. The leaf's cell is the region's box only inside
+/// the file's bounds: the caller checks that `p` lies in them.
 #[inline]
 pub fn locate<T: KdTree + ?Sized>(tree: &T, p: [f64; 3], shift: [f64; 3]) -> Option<u32> {
-    let mut n = 0u32;
-    for _ in 0..tree.node_count() {
+    let mut n = tree.root();
+    for _ in 0..=tree.node_count() {
         match tree.node(n)? {
             Node::Inner {
                 axis,
@@ -104,6 +225,47 @@ pub fn locate<T: KdTree + ?Sized>(tree: &T, p: [f64; 3], shift: [f64; 3]) -> Opt
         }
     }
     None
+}
+
+/// Calls `f(region, min, max)` for every leaf holding a region, with its cell (the box
+/// `min..max` cut by the splits on the way down, every number minus `shift`), in
+/// depth-first, left-first order. A malformed tree yields fewer leaves (the walk stops
+/// after as many steps as a tree of that many nodes takes).
+pub fn leaf_cells<T: KdTree + ?Sized, F: FnMut(u32, [f64; 3], [f64; 3])>(
+    tree: &T,
+    min: [f64; 3],
+    max: [f64; 3],
+    shift: [f64; 3],
+    mut f: F,
+) {
+    let lo: [f64; 3] = std::array::from_fn(|a| min[a] - shift[a]);
+    let hi: [f64; 3] = std::array::from_fn(|a| max[a] - shift[a]);
+    let mut budget = tree.node_count().saturating_mul(2).saturating_add(1);
+    let mut stack = vec![(tree.root(), lo, hi)];
+    while let Some((n, lo, hi)) = stack.pop() {
+        if budget == 0 {
+            return;
+        }
+        budget -= 1;
+        match tree.node(n) {
+            Some(Node::Inner {
+                axis,
+                split,
+                left,
+                right,
+            }) => {
+                let a = axis.min(2);
+                let s = split - shift[a];
+                let (mut lhi, mut rlo) = (hi, lo);
+                lhi[a] = s;
+                rlo[a] = s;
+                stack.push((right, rlo, hi));
+                stack.push((left, lo, lhi));
+            }
+            Some(Node::Leaf(Some(r))) => f(r, lo, hi),
+            _ => {}
+        }
+    }
 }
 
 /// `1/d` per axis, infinite for a zero component.
@@ -183,19 +345,20 @@ pub fn keep_all() -> Skip<fn(f32, f32) -> bool> {
     }
 }
 
-/// A node with the walk's field's range over its subtree (`None`: no ranges, skip
+/// A node with the walk's field's range over its subtree (`None`: no range, skip
 /// nothing) and whether it is full.
 pub type NodeEntry = (Node, Option<(f32, f32)>, bool);
 
 /// What the ray walk reads per node: the node, and the walk's field's range and fullness
 /// over its subtree. The file's own tables ([`FileNodes`]) are one store; a reader may
-/// pack them per field for speed (the viewer does: node and range in one cache line) and
-/// walk the same way with [`segments`].
+/// pack them per field for speed (the viewer does: node and subtree range in one cache
+/// line) and walk the same way with [`segments`].
 pub trait WalkNodes {
     fn node_count(&self) -> usize;
+    fn root(&self) -> u32;
     fn node(&self, n: u32) -> Option<Node>;
     /// Range of the walk's field over node `n`'s subtree; `None` when the store has no
-    /// ranges (nothing is skipped).
+    /// range for it (nothing is skipped there).
     fn range(&self, n: u32) -> Option<(f32, f32)>;
     /// Every leaf below `n` holds a region.
     fn full(&self, n: u32) -> bool;
@@ -206,54 +369,130 @@ pub trait WalkNodes {
     }
 }
 
-/// The archived tree with field `field`'s ranges, as stored in the file.
+/// The archived tree with field `field`'s region ranges at its leaves. The file stores no
+/// ranges of inner nodes (format 3), so walking it skips no subtree; the viewer derives
+/// them once per field ([`subtree_ranges`]).
 #[derive(Clone, Copy)]
 pub struct FileNodes<'a> {
     file: &'a ArchivedBrickFile,
+    tree: Stored<'a, ArchivedKdNode>,
     field: usize,
     fields: usize,
-    ranges: bool,
 }
 
 impl<'a> FileNodes<'a> {
     pub fn new(file: &'a ArchivedBrickFile, field: usize) -> Self {
-        let (n, nf) = (file.kd_nodes.len(), file.fields.len());
         Self {
             file,
+            tree: file_tree(file),
             field,
-            fields: nf,
-            ranges: field < nf && file.kd_ranges.len() == n * nf && file.kd_full.len() == n,
+            fields: file.fields.len(),
         }
     }
 }
 
 impl WalkNodes for FileNodes<'_> {
     fn node_count(&self) -> usize {
-        self.file.kd_nodes.len()
+        self.tree.nodes.len()
+    }
+    fn root(&self) -> u32 {
+        self.tree.root
     }
     #[inline]
     fn node(&self, n: u32) -> Option<Node> {
-        self.file.kd_nodes.as_slice().node(n)
+        self.tree.node(n)
     }
     #[inline]
     fn range(&self, n: u32) -> Option<(f32, f32)> {
-        if !self.ranges {
+        if n & LEAF == 0 || n == EMPTY || self.field >= self.fields {
             return None;
         }
         let r = self
             .file
-            .kd_ranges
-            .get(n as usize * self.fields + self.field)?;
+            .region_ranges
+            .get((n & !LEAF) as usize * self.fields + self.field)?;
         Some((r.min.to_native(), r.max.to_native()))
     }
     #[inline]
     fn full(&self, n: u32) -> bool {
-        self.file.kd_full.get(n as usize).is_some_and(|f| *f)
+        n & LEAF != 0 && n != EMPTY
     }
 }
 
+/// Per node of `tree` reached from its root, in depth-first, left-first order (parents
+/// before children): the node, its children's positions in this list, the range of one
+/// field over its subtree (`range(region)` gives a region's) and whether every leaf below
+/// holds a region. Empty leaves get the empty range (`+∞..−∞`). What a reader that skips
+/// by subtree ranges builds once per field (the file stores no per-node ranges).
+pub fn subtree_ranges<T: KdTree + ?Sized>(
+    tree: &T,
+    range: impl Fn(u32) -> Option<(f32, f32)>,
+) -> Vec<SubtreeEntry> {
+    let empty = (f32::INFINITY, f32::NEG_INFINITY);
+    let mut out: Vec<SubtreeEntry> = Vec::with_capacity(tree.node_count() * 2 + 1);
+    let mut budget = tree.node_count().saturating_mul(2).saturating_add(1);
+    // (reference, parent position and side)
+    let mut todo: Vec<(u32, Option<(usize, bool)>)> = vec![(tree.root(), None)];
+    while let Some((n, parent)) = todo.pop() {
+        if budget == 0 {
+            break;
+        }
+        budget -= 1;
+        let node = tree.node(n).unwrap_or(Node::Leaf(None));
+        let i = out.len();
+        let (range, full) = match node {
+            Node::Leaf(Some(r)) => (range(r).unwrap_or(empty), true),
+            Node::Leaf(None) => (empty, false),
+            Node::Inner { left, right, .. } => {
+                todo.push((right, Some((i, false))));
+                todo.push((left, Some((i, true))));
+                (empty, true)
+            }
+        };
+        out.push(SubtreeEntry {
+            node,
+            children: [u32::MAX; 2],
+            range,
+            full,
+        });
+        if let Some((p, left)) = parent {
+            out[p].children[usize::from(!left)] = i as u32;
+        }
+    }
+    // Children come after parents: fold back to front.
+    for i in (0..out.len()).rev() {
+        if !matches!(out[i].node, Node::Inner { .. }) {
+            continue;
+        }
+        let (mut full, mut range) = (true, empty);
+        for c in out[i].children {
+            match out.get(c as usize) {
+                Some(child) => {
+                    full &= child.full;
+                    range = (range.0.min(child.range.0), range.1.max(child.range.1));
+                }
+                None => full = false,
+            }
+        }
+        out[i].full = full;
+        out[i].range = range;
+    }
+    out
+}
+
+/// One node of [`subtree_ranges`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SubtreeEntry {
+    pub node: Node,
+    /// Positions of the left and right child in the list (`u32::MAX`: none, a leaf).
+    pub children: [u32; 2],
+    /// Range of the field over the subtree.
+    pub range: (f32, f32),
+    pub full: bool,
+}
+
 /// Calls `f` for every region the ray `o + t d` crosses within `[t_min, t_max]`, front to
-/// back, with the region's box clipped to the ray; a subtree whose range (from `nodes`,
+/// back, with the ray's part of the region (its leaf's cell); a subtree whose range (from `nodes`,
 /// the field of `skip.field`) `skip.keep` rejects (and which is full, unless
 /// `skip.across_gaps`) is reported as one [`SKIPPED`] segment over the ray's part of its
 /// cell. `o`, `d` and the result are in the frame shifted by `shift`. `f` returns `false`
@@ -272,7 +511,7 @@ pub fn segments<N: WalkNodes, K: Fn(f32, f32) -> bool, F: FnMut(Segment) -> bool
     skip: &Skip<K>,
     mut f: F,
 ) {
-    if nodes.node_count() == 0 || t_min >= t_max || t_min.is_nan() || t_max.is_nan() {
+    if t_min >= t_max || t_min.is_nan() || t_max.is_nan() {
         return;
     }
     let all = (f32::NEG_INFINITY, f32::INFINITY);
@@ -285,9 +524,9 @@ pub fn segments<N: WalkNodes, K: Fn(f32, f32) -> bool, F: FnMut(Segment) -> bool
     };
     // Each node is entered at most once per ray in a tree: the budget stops the walk on
     // a malformed one.
-    let mut budget = nodes.node_count().saturating_mul(2);
+    let mut budget = nodes.node_count().saturating_mul(2).saturating_add(1);
     stack.clear();
-    stack.push((0, t0, t1));
+    stack.push((nodes.root(), t0, t1));
     while let Some((mut node, ta, mut tb)) = stack.pop() {
         loop {
             if budget == 0 {
@@ -347,19 +586,14 @@ pub fn segments<N: WalkNodes, K: Fn(f32, f32) -> bool, F: FnMut(Segment) -> bool
                     }
                 }
                 Node::Leaf(Some(r)) => {
-                    let Some(reg) = file.regions.get(r as usize) else {
-                        break;
-                    };
-                    let rmin: [f64; 3] =
-                        std::array::from_fn(|a| reg.bounds.min[a].to_native() - shift[a]);
-                    let rmax: [f64; 3] =
-                        std::array::from_fn(|a| reg.bounds.max[a].to_native() - shift[a]);
-                    if let Some((s0, s1)) = ray_box(&rmin, &rmax, &o, &inv, ta, tb) {
+                    // The interval is the ray's part of the leaf's cell, which is the
+                    // region's box: the same numbers a slab test against that box gives.
+                    if ta < tb {
                         let (mn, mx) = range.unwrap_or(all);
                         if !f(Segment {
                             region: r,
-                            t0: s0,
-                            t1: s1,
+                            t0: ta,
+                            t1: tb,
                             min: mn,
                             max: mx,
                         }) {
@@ -372,65 +606,4 @@ pub fn segments<N: WalkNodes, K: Fn(f32, f32) -> bool, F: FnMut(Segment) -> bool
             }
         }
     }
-}
-
-/// The per-node tables a file stores with its tree ([`crate::BrickFile::kd_ranges`],
-/// [`crate::BrickFile::kd_full`]): for every node the range of every field over its
-/// subtree and whether every leaf below holds a region. `region_ranges` is region-major
-/// (`r * fields + f`). Nodes that the root does not reach get an empty range and `false`.
-pub(crate) fn subtree_tables(
-    nodes: &[KdNode],
-    region_ranges: &[crate::ValueRange],
-    fields: usize,
-) -> (Vec<crate::ValueRange>, Vec<bool>) {
-    let empty = crate::ValueRange {
-        min: f32::INFINITY,
-        max: f32::NEG_INFINITY,
-    };
-    let mut ranges = vec![empty; nodes.len() * fields];
-    let mut full = vec![false; nodes.len()];
-    // Pre-order with each node once, then children before parents by walking it backwards.
-    let mut order = Vec::with_capacity(nodes.len());
-    let mut seen = vec![false; nodes.len()];
-    let mut stack = vec![0u32];
-    while let Some(n) = stack.pop() {
-        match seen.get_mut(n as usize) {
-            Some(s) if !*s => *s = true,
-            _ => continue,
-        }
-        order.push(n as usize);
-        if let KdNode::Inner { left, right, .. } = nodes[n as usize] {
-            stack.push(left);
-            stack.push(right);
-        }
-    }
-    for &n in order.iter().rev() {
-        match nodes[n] {
-            KdNode::Leaf { region: Some(r) } => {
-                full[n] = true;
-                for f in 0..fields {
-                    if let Some(v) = region_ranges.get(r as usize * fields + f) {
-                        ranges[n * fields + f] = *v;
-                    }
-                }
-            }
-            KdNode::Leaf { region: None } => {}
-            KdNode::Inner { left, right, .. } => {
-                let (l, r) = (left as usize, right as usize);
-                full[n] =
-                    full.get(l).copied().unwrap_or(false) && full.get(r).copied().unwrap_or(false);
-                for f in 0..fields {
-                    let mut v = empty;
-                    for c in [l, r] {
-                        if let Some(cv) = ranges.get(c * fields + f) {
-                            v.min = v.min.min(cv.min);
-                            v.max = v.max.max(cv.max);
-                        }
-                    }
-                    ranges[n * fields + f] = v;
-                }
-            }
-        }
-    }
-    (ranges, full)
 }

@@ -42,10 +42,30 @@ pub fn bounds(file: &ArchivedBrickFile) -> Aabb {
 /// Region containing the world point `p`, found by descending the KD-tree (`O(depth)`,
 /// see [`crate::kd::locate`]).
 pub fn region_at(file: &ArchivedBrickFile, p: [f64; 3]) -> Option<u32> {
-    let r = kd::locate(file.kd_nodes.as_slice(), p, [0.0; 3])?;
-    let reg = file.regions.get(r as usize)?;
-    // A leaf's cell may be larger than its region (empty space around it).
-    contains(&reg.bounds, p).then_some(r)
+    // Inside the bounds a leaf's cell is its region's box.
+    if !contains(&file.bounds, p) {
+        return None;
+    }
+    kd::locate(&kd::file_tree(file), p, [0.0; 3])
+}
+
+/// Every region's box (its KD leaf's cell), by region index; regions in no leaf (none,
+/// in a validated file) get [`Aabb::EMPTY`]. One walk over the tree.
+pub fn region_boxes(file: &ArchivedBrickFile) -> Vec<Aabb> {
+    let mut out = vec![Aabb::EMPTY; file.regions.len()];
+    let b = bounds(file);
+    kd::leaf_cells(
+        &kd::file_tree(file),
+        b.min,
+        b.max,
+        [0.0; 3],
+        |r, min, max| {
+            if let Some(slot) = out.get_mut(r as usize) {
+                *slot = Aabb { min, max };
+            }
+        },
+    );
+    out
 }
 
 /// Entry and exit distances of the ray `origin + t * dir` through the box, clipped to
@@ -64,9 +84,7 @@ pub fn ray_box(
 }
 
 /// Regions crossed by the ray `origin + t * dir` (world) for `t` in `[t_min, t_max]`,
-/// front to back, with entry and exit distances; consecutive pieces of one region (a
-/// region cut by a split plane sits in several leaves) are merged, so every region
-/// appears once. Allocates the result; [`crate::kd::segments`] is the allocation-free
+/// front to back, with entry and exit distances. Allocates the result; [`crate::kd::segments`] is the allocation-free
 /// walk it is built on.
 pub fn ray_regions(
     file: &ArchivedBrickFile,
@@ -106,16 +124,11 @@ impl RayRegions {
                 &mut stack,
                 &kd::keep_all(),
                 |s| {
-                    match out.last_mut() {
-                        Some(p) if p.region == s.region && s.t0 <= p.t_exit => {
-                            p.t_exit = p.t_exit.max(s.t1);
-                        }
-                        _ => out.push(RegionSegment {
-                            region: s.region,
-                            t_enter: s.t0,
-                            t_exit: s.t1,
-                        }),
-                    }
+                    out.push(RegionSegment {
+                        region: s.region,
+                        t_enter: s.t0,
+                        t_exit: s.t1,
+                    });
                     true
                 },
             );

@@ -11,13 +11,14 @@
 //! → region → its bricks → cell values):
 //! - Everything is a flat array of fixed-size records addressed by `u32`/`u64` index: no
 //!   pointers to chase inside the archive, and each record type is packed next to its
-//!   neighbours. A `Brick` and a `Region` are 64 bytes each (one cache line: a region's
-//!   bounds and brick range arrive together); a `KdNode` is 24 bytes (tag, axis, split,
-//!   children).
+//!   neighbours. A `Brick` is 64 bytes (one cache line), a `Region` 8 (its brick run), a
+//!   `KdNode` 16 (split and two child references).
+//! - Structure is kept small next to the values (format 3): a region's box is its KD
+//!   leaf's cell and is not stored, leaves are not stored either (a child reference
+//!   names the region), and per-node value ranges are not stored: the viewer derives
+//!   the ranges it skips by from `region_ranges` when it first walks a field (one pass).
 //! - A region's brick ids are one contiguous run of `region_bricks`, so visiting a region
 //!   reads one short slice instead of a linked list.
-//! - `kd_ranges` (node-major, like `region_ranges`) and `kd_full` let the ray walk skip
-//!   a whole subtree whose values cannot matter, without visiting its regions.
 //! - `region_ranges` is region-major (`r * fields.len() + f`): empty-space skipping asks
 //!   "can any field of this region matter?", and all fields of one region share a line.
 //! - Cell values are per field, x fastest inside a brick: the trilinear/tent stencil of a
@@ -43,7 +44,9 @@ pub struct BrickFile {
     pub fields: Vec<Field>,
     /// Dense boxes of leaf cells of one level.
     pub bricks: Vec<Brick>,
-    /// Active brick regions: disjoint boxes partitioning the union of supports.
+    /// Active brick regions: disjoint boxes partitioning the union of supports. A region's
+    /// box is its KD leaf's cell (the file's bounds cut by the splits on the way down), so
+    /// it is not stored (see [`crate::kd::leaf_cells`]).
     pub regions: Vec<Region>,
     /// Brick ids per region: region `r` owns
     /// `region_bricks[r.bricks_start .. r.bricks_start + r.bricks_len]`, sorted ascending.
@@ -51,19 +54,17 @@ pub struct BrickFile {
     /// Exact value range of every field over every cell that can contribute to a region:
     /// entry `r * fields.len() + f` is field `f` of region `r`.
     pub region_ranges: Vec<ValueRange>,
-    /// KD-tree over the regions; node 0 is the root (absent when there are no regions),
-    /// and every node is stored before its children (depth first), which is what lets
-    /// validation check that it is a tree in one pass.
+    /// The KD-tree's root as a child reference (see [`crate::kd::LEAF`]): inner node 0,
+    /// or a leaf when the tree has no inner node.
+    pub kd_root: u32,
+    /// Inner nodes of the KD-tree over the regions. Leaves are not stored: a child
+    /// reference with the [`crate::kd::LEAF`] bit names a region (or empty space), so
+    /// every leaf holds exactly one region or nothing. Every node is stored before its
+    /// children (depth first), which is what lets validation check that it is a tree in
+    /// one pass.
     pub kd_nodes: Vec<KdNode>,
-    /// Value range of every field over every KD node's subtree: entry `n * fields.len() + f`
-    /// is field `f` of node `n` (a region leaf: its region's range; an inner node: the
-    /// union of its children's; an empty leaf: `min = +∞, max = −∞`). Stored rather than
-    /// derived at open so that the traversal reads the file as it is (see
-    /// [`crate::query::segments`]) and opening costs no pass over the tree.
-    pub kd_ranges: Vec<ValueRange>,
-    /// Per KD node: every leaf of its subtree holds a region (no empty space in its cell),
-    /// so skipping it by its range cannot step over a gap in the data.
-    pub kd_full: Vec<bool>,
+    /// Split axis (0, 1, 2) of every inner node, kept beside the 16-byte nodes.
+    pub kd_axes: Vec<u8>,
 }
 
 /// Provenance of a baked file.
@@ -197,15 +198,14 @@ pub struct Brick {
     pub level: u32,
 }
 
-/// An active brick region: a box in which the set of overlapping supports is constant.
+/// An active brick region: a box (its KD leaf's cell) in which the set of overlapping
+/// supports is constant. Its finest level (the local sampling unit) is the finest of its
+/// bricks' levels.
 #[derive(Archive, Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
 #[rkyv(derive(Debug))]
 pub struct Region {
-    pub bounds: Aabb,
     pub bricks_start: u32,
     pub bricks_len: u32,
-    /// Finest level among the region's bricks (sets the local sampling step).
-    pub finest_level: u32,
 }
 
 /// Inclusive value range.
@@ -216,35 +216,13 @@ pub struct ValueRange {
     pub max: f32,
 }
 
-/// KD-tree node. Inner nodes split space at `split` on `axis` (0, 1, 2); points with
-/// coordinate `< split` go to `left`. Leaves hold one region or nothing (empty space).
+/// Inner KD-tree node (16 bytes). Points with coordinate `< split` on the node's axis
+/// (`kd_axes`) go to `left`. The children are references: an inner node's index, or
+/// [`crate::kd::LEAF`] `| region`, or [`crate::kd::EMPTY`] for empty space.
 #[derive(Archive, Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
 #[rkyv(derive(Debug))]
-pub enum KdNode {
-    Inner {
-        axis: u8,
-        split: f64,
-        left: u32,
-        right: u32,
-    },
-    Leaf {
-        region: Option<u32>,
-    },
-}
-
-impl BrickFile {
-    /// Fills [`BrickFile::kd_ranges`] and [`BrickFile::kd_full`] from the tree and the
-    /// region ranges (the writer of a file calls this once its tree is final).
-    pub fn derive_kd_tables(&mut self) {
-        let (ranges, full) =
-            crate::kd::subtree_tables(&self.kd_nodes, &self.region_ranges, self.fields.len());
-        self.kd_ranges = ranges;
-        self.kd_full = full;
-    }
-
-    /// [`BrickFile::derive_kd_tables`] for a file built in one expression.
-    pub fn with_kd_tables(mut self) -> Self {
-        self.derive_kd_tables();
-        self
-    }
+pub struct KdNode {
+    pub split: f64,
+    pub left: u32,
+    pub right: u32,
 }

@@ -12,7 +12,8 @@
 //! Errors are [`ValidationError`]s, one variant per check, whose messages name the
 //! element, e.g. `regions[12].bricks[3]: brick 9001 out of range (512 bricks)`.
 
-use crate::schema::{ArchivedBrickFile, ArchivedKdNode};
+use crate::kd::{EMPTY, LEAF};
+use crate::schema::ArchivedBrickFile;
 
 /// A broken schema invariant, naming the element (`regions[12].bricks[3]`) and holding
 /// what was expected and found. One variant per check, so callers and tests can match by
@@ -20,15 +21,10 @@ use crate::schema::{ArchivedBrickFile, ArchivedKdNode};
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[non_exhaustive]
 pub enum ValidationError {
-    /// A box (`bounds`, or `regions[i].bounds` when `region` is set) with `min > max` or
-    /// NaN on an axis.
-    #[error("{}: expected min <= max on axis {axis}, found {min} > {max}", box_name(*.region))]
-    BadBox {
-        region: Option<usize>,
-        axis: usize,
-        min: f64,
-        max: f64,
-    },
+    /// The file's `bounds` with `min > max`, NaN or an infinity on an axis (every region's
+    /// box is cut from it).
+    #[error("bounds: expected finite min <= max on axis {axis}, found {min} > {max}")]
+    BadBox { axis: usize, min: f64, max: f64 },
     #[error("levels[{level}].cell_width: expected > 0, found {width}")]
     LevelCellWidth { level: usize, width: f64 },
     /// Every field holds as many values as `fields[0]`.
@@ -85,12 +81,6 @@ pub enum ValidationError {
         len: u64,
         entries: u64,
     },
-    #[error("regions[{region}].finest_level: level {level} out of range ({levels} levels)")]
-    RegionFinestLevelOutOfRange {
-        region: usize,
-        level: u32,
-        levels: usize,
-    },
     /// `region_bricks[entry]` names no brick; `in_region` is `(region, index in its list)`
     /// when a region's list holds the entry.
     #[error("{}: brick {id} out of range ({bricks} bricks)", entry_name(*.entry, *.in_region))]
@@ -100,13 +90,6 @@ pub enum ValidationError {
         id: u32,
         bricks: usize,
     },
-    /// The region's `finest_level` is not the finest level of its bricks.
-    #[error("regions[{region}].finest_level: {stored}, but its finest brick is on level {finest}")]
-    FinestLevelMismatch {
-        region: usize,
-        stored: u32,
-        finest: u32,
-    },
     #[error("region_ranges: expected {expected} entries ({regions} regions x {fields} fields), found {found}")]
     RegionRangesLength {
         expected: u64,
@@ -114,20 +97,12 @@ pub enum ValidationError {
         fields: usize,
         found: usize,
     },
-    #[error("kd_nodes: empty, but there are {regions} regions")]
-    KdNodesEmpty { regions: usize },
-    #[error(
-        "kd_ranges: expected {expected} entries ({nodes} nodes x {fields} fields), found {found}"
-    )]
-    KdRangesLength {
-        expected: u64,
-        nodes: usize,
-        fields: usize,
-        found: usize,
-    },
-    #[error("kd_full: expected {expected} entries (one per node), found {found}")]
-    KdFullLength { expected: usize, found: usize },
-    #[error("kd_nodes[{node}].axis: expected 0, 1 or 2, found {axis}")]
+    #[error("kd_axes: expected {expected} entries (one per node), found {found}")]
+    KdAxesLength { expected: usize, found: usize },
+    /// An inner root must be node 0 (nodes are stored parent first).
+    #[error("kd_root: expected node 0 or a leaf, found node {root}")]
+    KdRootNotFirst { root: u32 },
+    #[error("kd_axes[{node}]: expected 0, 1 or 2, found {axis}")]
     KdAxis { node: u32, axis: u8 },
     #[error("kd_nodes[{node}].split: NaN")]
     KdSplitNan { node: u32 },
@@ -139,33 +114,23 @@ pub enum ValidationError {
         "kd_nodes[{node}]: child {child} is reached twice or stored before its parent (not a tree stored parent first)"
     )]
     KdNotATree { node: u32, child: u32 },
-    #[error("kd_nodes[{node}]: region {region} out of range ({regions} regions)")]
+    /// A leaf reference names a region that does not exist; `node` is the parent
+    /// (`None`: the root).
+    #[error("{}: region {region} out of range ({regions} regions)", parent_name(*.node))]
     KdRegionOutOfRange {
-        node: u32,
+        node: Option<u32>,
         region: u32,
         regions: usize,
     },
-    /// An inner node's value ranges do not hold its child's.
-    #[error("kd_ranges of node {node}: do not hold those of its child {child}")]
-    KdRangeNotHeld { node: u32, child: u32 },
-    /// A leaf's range of `field` does not hold its region's.
-    #[error("kd_ranges of leaf {node}: field {field} does not hold region {region}'s range")]
-    KdLeafRangeNotHeld {
-        node: u32,
-        field: usize,
-        region: u32,
-    },
-    /// A node flagged full above a child that is not.
-    #[error("kd_full of node {node}: set, but its child {child} is not full")]
-    KdFullChildNotFull { node: u32, child: u32 },
-    #[error("kd_full of node {node}: set on an empty leaf")]
-    KdFullEmptyLeaf { node: u32 },
+    /// A region in two leaves would have two boxes (a region's box is its leaf's cell).
+    #[error("{}: region {region} is in a second leaf", parent_name(*.node))]
+    KdRegionTwice { node: Option<u32>, region: u32 },
     #[error("regions[{region}]: in no KD-tree leaf")]
     RegionNotInTree { region: usize },
 }
 
-fn box_name(region: Option<usize>) -> String {
-    region.map_or_else(|| "bounds".to_owned(), |i| format!("regions[{i}].bounds"))
+fn parent_name(node: Option<u32>) -> String {
+    node.map_or_else(|| "kd_root".to_owned(), |i| format!("kd_nodes[{i}]"))
 }
 
 fn entry_name(entry: usize, in_region: Option<(usize, usize)>) -> String {
@@ -183,8 +148,20 @@ pub fn check(file: &ArchivedBrickFile) -> Result<(), ValidationError> {
     let n_regions = file.regions.len();
     let n_fields = file.fields.len();
 
-    // Bounds.
-    check_box(None, &file.bounds.min, &file.bounds.max)?;
+    // Bounds: every region's box is cut from them.
+    for a in 0..3 {
+        let (lo, hi) = (
+            file.bounds.min[a].to_native(),
+            file.bounds.max[a].to_native(),
+        );
+        if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
+            return Err(ValidationError::BadBox {
+                axis: a,
+                min: lo,
+                max: hi,
+            });
+        }
+    }
 
     // Levels.
     for (i, level) in file.levels.iter().enumerate() {
@@ -275,7 +252,6 @@ pub fn check(file: &ArchivedBrickFile) -> Result<(), ValidationError> {
     // Regions and their brick lists.
     let n_entries = file.region_bricks.len() as u64;
     for (i, region) in file.regions.iter().enumerate() {
-        check_box(Some(i), &region.bounds.min, &region.bounds.max)?;
         let start = u64::from(region.bricks_start.to_native());
         let len = u64::from(region.bricks_len.to_native());
         if start + len > n_entries {
@@ -285,16 +261,6 @@ pub fn check(file: &ArchivedBrickFile) -> Result<(), ValidationError> {
                 len,
                 entries: n_entries,
             });
-        }
-        if len > 0 {
-            let finest = region.finest_level.to_native();
-            if finest as usize >= n_levels {
-                return Err(ValidationError::RegionFinestLevelOutOfRange {
-                    region: i,
-                    level: finest,
-                    levels: n_levels,
-                });
-            }
         }
     }
     // Every entry of every list names a brick: one flat pass over the entries (a list is
@@ -317,27 +283,6 @@ pub fn check(file: &ArchivedBrickFile) -> Result<(), ValidationError> {
             bricks: n_bricks,
         });
     }
-    // The region's step width is its finest level's: it must be the finest level of its
-    // bricks, as the schema says (a finer one makes rays crawl, a coarser one misses
-    // detail). Checked after the entries, so that every id indexes a brick.
-    for (i, region) in file.regions.iter().enumerate() {
-        let start = region.bricks_start.to_native() as usize;
-        let len = region.bricks_len.to_native() as usize;
-        let finest = file.region_bricks[start..start + len]
-            .iter()
-            .map(|id| file.bricks[id.to_native() as usize].level.to_native())
-            .min();
-        if let Some(finest) = finest {
-            let stored = region.finest_level.to_native();
-            if stored != finest {
-                return Err(ValidationError::FinestLevelMismatch {
-                    region: i,
-                    stored,
-                    finest,
-                });
-            }
-        }
-    }
     let expected_ranges = n_regions as u64 * n_fields as u64;
     if file.region_ranges.len() as u64 != expected_ranges {
         return Err(ValidationError::RegionRangesLength {
@@ -351,146 +296,87 @@ pub fn check(file: &ArchivedBrickFile) -> Result<(), ValidationError> {
     check_kd(file)
 }
 
-/// `region` names the box in the error: the file's bounds when `None`.
-fn check_box(
-    region: Option<usize>,
-    min: &[rkyv::Archived<f64>; 3],
-    max: &[rkyv::Archived<f64>; 3],
-) -> Result<(), ValidationError> {
-    for a in 0..3 {
-        let (lo, hi) = (min[a].to_native(), max[a].to_native());
-        if lo.is_nan() || hi.is_nan() || lo > hi {
-            return Err(ValidationError::BadBox {
-                region,
-                axis: a,
-                min: lo,
-                max: hi,
-            });
-        }
-    }
-    Ok(())
-}
-
-/// The KD nodes reachable from node 0 form a tree (no node has two parents, no cycles),
-/// every index is in range, every region sits in at least one leaf, and the per-node
-/// ranges and fullness flags can be trusted for skipping: a node's range holds its
-/// children's (a leaf's its region's) and a node is full only if its children are (a leaf
-/// only if it holds a region). Wider ranges than needed are allowed (they skip less).
+/// The KD nodes reachable from the root form a tree (no node has two parents, no
+/// cycles), every index is in range, and every region sits in exactly one leaf (its box
+/// is that leaf's cell).
 fn check_kd(file: &ArchivedBrickFile) -> Result<(), ValidationError> {
-    let nodes = &file.kd_nodes;
+    let nodes = file.kd_nodes.as_slice();
+    let axes = file.kd_axes.as_slice();
     let n_regions = file.regions.len();
-    let nf = file.fields.len();
-    let range = |n: usize, f: usize| {
-        let r = &file.kd_ranges[n * nf + f];
-        (r.min.to_native(), r.max.to_native())
-    };
-    // `outer` holds `inner` (NaN holds nothing and is held by nothing).
-    let holds = |outer: (f32, f32), inner: (f32, f32)| outer.0 <= inner.0 && outer.1 >= inner.1;
-    if nodes.is_empty() && n_regions > 0 {
-        return Err(ValidationError::KdNodesEmpty { regions: n_regions });
-    }
-    let expected = nodes.len() as u64 * nf as u64;
-    if file.kd_ranges.len() as u64 != expected {
-        return Err(ValidationError::KdRangesLength {
-            expected,
-            nodes: nodes.len(),
-            fields: nf,
-            found: file.kd_ranges.len(),
-        });
-    }
-    if file.kd_full.len() != nodes.len() {
-        return Err(ValidationError::KdFullLength {
+    if axes.len() != nodes.len() {
+        return Err(ValidationError::KdAxesLength {
             expected: nodes.len(),
-            found: file.kd_full.len(),
+            found: axes.len(),
         });
     }
-    if nodes.is_empty() {
-        return Ok(());
+    let mut region_in_leaf = vec![false; n_regions];
+    // A leaf reference (`parent`: the inner node naming it, `None` for the root).
+    let mut leaf = |parent: Option<u32>, child: u32| -> Result<(), ValidationError> {
+        if child == EMPTY {
+            return Ok(());
+        }
+        let region = child & !LEAF;
+        match region_in_leaf.get_mut(region as usize) {
+            Some(seen) if *seen => Err(ValidationError::KdRegionTwice {
+                node: parent,
+                region,
+            }),
+            Some(seen) => {
+                *seen = true;
+                Ok(())
+            }
+            None => Err(ValidationError::KdRegionOutOfRange {
+                node: parent,
+                region,
+                regions: n_regions,
+            }),
+        }
+    };
+    let root = file.kd_root.to_native();
+    // Sized by counts that bytecheck has proven to be backed by bytes of the file.
+    let mut reached = vec![false; nodes.len()];
+    if root & LEAF != 0 {
+        leaf(None, root)?;
+    } else if root != 0 || nodes.is_empty() {
+        return Err(ValidationError::KdRootNotFirst { root });
+    } else {
+        reached[0] = true;
     }
     // One pass in storage order. Writers store a parent before its children (depth
     // first), so requiring `child > parent` rules out cycles, and a node reached from two
     // parents is caught when the second one names it: what the root reaches is a tree.
     // A node the root does not reach is never walked and is skipped, as a walk would.
-    // (A depth-first walk over a quarter of a million nodes took 9 ms, most of opening a
-    // large file without the checksum; this pass reads the tables front to back.)
-    // Sized by counts that bytecheck has proven to be backed by bytes of the file.
-    let mut reached = vec![false; nodes.len()];
-    reached[0] = true;
-    let mut region_in_leaf = vec![false; n_regions];
-    let full = file.kd_full.as_slice();
     for (n, node) in nodes.iter().enumerate() {
         if !reached[n] {
             continue;
         }
         let i = n as u32;
-        match node {
-            ArchivedKdNode::Inner {
-                axis,
-                split,
-                left,
-                right,
-            } => {
-                if *axis > 2 {
-                    return Err(ValidationError::KdAxis {
-                        node: i,
-                        axis: *axis,
-                    });
-                }
-                if split.to_native().is_nan() {
-                    return Err(ValidationError::KdSplitNan { node: i });
-                }
-                for child in [left.to_native(), right.to_native()] {
-                    let c = child as usize;
-                    if c >= nodes.len() {
-                        return Err(ValidationError::KdChildOutOfRange {
-                            node: i,
-                            child,
-                            nodes: nodes.len(),
-                        });
-                    }
-                    if c <= n || reached[c] {
-                        return Err(ValidationError::KdNotATree { node: i, child });
-                    }
-                    reached[c] = true;
-                    if (0..nf).any(|f| !holds(range(n, f), range(c, f))) {
-                        return Err(ValidationError::KdRangeNotHeld { node: i, child });
-                    }
-                    if full[n] && !full[c] {
-                        return Err(ValidationError::KdFullChildNotFull { node: i, child });
-                    }
-                }
+        if axes[n] > 2 {
+            return Err(ValidationError::KdAxis {
+                node: i,
+                axis: axes[n],
+            });
+        }
+        if node.split.to_native().is_nan() {
+            return Err(ValidationError::KdSplitNan { node: i });
+        }
+        for child in [node.left.to_native(), node.right.to_native()] {
+            if child & LEAF != 0 {
+                leaf(Some(i), child)?;
+                continue;
             }
-            ArchivedKdNode::Leaf { region } => match region.as_ref() {
-                Some(r) => {
-                    let r = r.to_native();
-                    match region_in_leaf.get_mut(r as usize) {
-                        Some(flag) => *flag = true,
-                        None => {
-                            return Err(ValidationError::KdRegionOutOfRange {
-                                node: i,
-                                region: r,
-                                regions: n_regions,
-                            })
-                        }
-                    }
-                    for f in 0..nf {
-                        let reg = &file.region_ranges[r as usize * nf + f];
-                        let reg = (reg.min.to_native(), reg.max.to_native());
-                        if !holds(range(n, f), reg) {
-                            return Err(ValidationError::KdLeafRangeNotHeld {
-                                node: i,
-                                field: f,
-                                region: r,
-                            });
-                        }
-                    }
-                }
-                None => {
-                    if full[n] {
-                        return Err(ValidationError::KdFullEmptyLeaf { node: i });
-                    }
-                }
-            },
+            let c = child as usize;
+            if c >= nodes.len() {
+                return Err(ValidationError::KdChildOutOfRange {
+                    node: i,
+                    child,
+                    nodes: nodes.len(),
+                });
+            }
+            if c <= n || reached[c] {
+                return Err(ValidationError::KdNotATree { node: i, child });
+            }
+            reached[c] = true;
         }
     }
     if let Some(r) = region_in_leaf.iter().position(|&s| !s) {
@@ -507,8 +393,8 @@ mod tests {
     #[test]
     fn archived_record_sizes() {
         assert_eq!(std::mem::size_of::<ArchivedBrick>(), 64);
-        assert_eq!(std::mem::size_of::<ArchivedRegion>(), 64);
-        assert_eq!(std::mem::size_of::<ArchivedKdNode>(), 24);
+        assert_eq!(std::mem::size_of::<ArchivedRegion>(), 8);
+        assert_eq!(std::mem::size_of::<ArchivedKdNode>(), 16);
         assert_eq!(std::mem::size_of::<ArchivedValueRange>(), 8);
     }
 }

@@ -66,7 +66,7 @@ fn stream_archive(out: &mut File, file: &BrickFile) -> Result<u64, FormatErrorKi
     out.write_all(&[0u8; HEADER_LEN])?;
     let mut sink = HashingWriter {
         inner: BufWriter::with_capacity(1 << 20, &mut *out),
-        hasher: xxhash_rust::xxh3::Xxh3::new(),
+        hasher: crate::header::ChunkedChecksum::default(),
         len: 0,
         error: None,
     };
@@ -84,7 +84,7 @@ fn stream_archive(out: &mut File, file: &BrickFile) -> Result<u64, FormatErrorKi
         format_version: FORMAT_VERSION,
         flags: FLAGS,
         payload_len: sink.len,
-        checksum: sink.hasher.digest(),
+        checksum: sink.hasher.clone().digest(),
     };
     let len = sink.len;
     drop(sink);
@@ -97,7 +97,7 @@ fn stream_archive(out: &mut File, file: &BrickFile) -> Result<u64, FormatErrorKi
 /// so it reaches the caller as an I/O error rather than a serialisation message.
 struct HashingWriter<W: Write> {
     inner: W,
-    hasher: xxhash_rust::xxh3::Xxh3,
+    hasher: crate::header::ChunkedChecksum,
     len: u64,
     error: Option<io::Error>,
 }

@@ -155,7 +155,6 @@ fn brick_cell_count_overflowing_u64_is_an_error() {
         if no_fields {
             file.fields.clear();
             file.region_ranges.clear();
-            file.kd_ranges.clear();
         }
         let bytes = writer::to_bytes(&file).expect("to_bytes");
         let err = BrickFileView::from_bytes(Path::new("huge_brick.qbk"), &bytes)
@@ -176,10 +175,10 @@ fn brick_cell_count_overflowing_u64_is_an_error() {
 /// Regression (a timeout found by the `qbk_open` fuzz target): a level's cell width of
 /// 1.1e-12 under bricks of width 1. The viewer steps through a region in units of its
 /// finest level's width, so every ray took a million samples per region. Now a brick
-/// whose width is not its level's, or a region whose `finest_level` is not the finest
-/// level of its bricks, is an error naming it.
+/// whose width is not its level's is an error naming it (and format 3 derives a region's
+/// finest level from its bricks instead of storing it).
 #[test]
-fn level_widths_and_finest_levels_must_match_the_bricks() {
+fn level_widths_must_match_the_bricks() {
     let base = (0..500)
         .map(common::random_file)
         .find(|f| f.levels.len() >= 2 && f.regions.iter().any(|r| r.bricks_len > 0))
@@ -209,21 +208,6 @@ fn level_widths_and_finest_levels_must_match_the_bricks() {
         ) && msg.contains("levels.qbk")
             && msg.contains(".cell_width")
             && msg.contains("differs"),
-        "{msg}"
-    );
-
-    let mut wrong_finest = base.clone();
-    let finest = wrong_finest.regions[r].finest_level;
-    wrong_finest.regions[r].finest_level = if finest == 0 { 1 } else { 0 };
-    let err = open(&wrong_finest).expect_err("finest level");
-    let msg = err.to_string();
-    assert!(
-        matches!(
-            err.kind,
-            FormatErrorKind::Invalid(ValidationError::FinestLevelMismatch { region, .. })
-                if region == r
-        ) && msg.contains("levels.qbk")
-            && msg.contains(&format!("regions[{r}].finest_level")),
         "{msg}"
     );
 }

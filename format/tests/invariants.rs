@@ -5,8 +5,9 @@ mod common;
 
 use std::path::Path;
 
+use qbricks_format::kd::{self, LEAF};
 use qbricks_format::validate::ValidationError as V;
-use qbricks_format::{writer, BrickFile, BrickFileView, FormatErrorKind, KdNode};
+use qbricks_format::{writer, BrickFile, BrickFileView, FormatErrorKind};
 
 /// A valid base with at least two bricks, two regions and an inner KD node.
 fn base() -> BrickFile {
@@ -16,7 +17,12 @@ fn base() -> BrickFile {
             f.bricks.len() >= 2
                 && f.regions.len() >= 2
                 && f.regions.iter().all(|r| r.bricks_len > 0)
-                && matches!(f.kd_nodes[0], KdNode::Inner { .. })
+                && f.kd_root == 0
+                // An inner node below the root with an inner child (a grandchild of
+                // the root), so that reordering can put a child before its parent.
+                && f.kd_nodes[1..]
+                    .iter()
+                    .any(|n| [n.left, n.right].iter().any(|&c| c & LEAF == 0))
         })
         .expect("some seed fits")
 }
@@ -98,16 +104,11 @@ fn each_broken_invariant_is_named() {
     );
 
     let mut f = base();
-    f.regions[1].bounds.min[2] = f64::NAN;
-    refused!(
-        f,
-        "regions[1].bounds",
-        V::BadBox {
-            region: Some(1),
-            axis: 2,
-            ..
-        }
-    );
+    f.bounds.min[2] = f64::NAN;
+    refused!(f, "bounds", V::BadBox { axis: 2, .. });
+    let mut f = base();
+    f.bounds.max[0] = f64::INFINITY;
+    refused!(f, "bounds", V::BadBox { axis: 0, .. });
 
     let mut f = base();
     f.region_ranges.pop();
@@ -121,121 +122,96 @@ fn each_broken_invariant_is_named() {
         V::LevelCellWidth { level: 0, .. }
     );
 
-    // KD-tree: child out of range, a cycle back to the root, a bad axis, a lost region.
+    // KD-tree: child out of range, a cycle back to the root, a bad axis, a lost region,
+    // a region in two leaves, a leaf naming no region, a root that is not node 0.
     let n = f.kd_nodes.len() as u32;
-    let set_root = |f: &mut BrickFile, left: Option<u32>, axis: Option<u8>| {
-        if let KdNode::Inner {
-            left: l, axis: a, ..
-        } = &mut f.kd_nodes[0]
-        {
-            if let Some(v) = left {
-                *l = v;
-            }
-            if let Some(v) = axis {
-                *a = v;
-            }
-        }
-    };
     let mut f = base();
-    set_root(&mut f, Some(n + 3), None);
+    f.kd_nodes[0].left = n + 3;
     refused!(
         f,
         "kd_nodes[0]: child",
         V::KdChildOutOfRange { node: 0, .. }
     );
     let mut f = base();
-    set_root(&mut f, Some(0), None);
+    f.kd_nodes[0].left = 0;
     refused!(f, "reached twice", V::KdNotATree { child: 0, .. });
-    // Both children the same node: reached twice.
+    // Both children the same inner node: reached twice.
     let mut f = base();
-    if let KdNode::Inner { right, .. } = f.kd_nodes[0] {
-        set_root(&mut f, Some(right), None);
-    }
+    let inner_child = [f.kd_nodes[0].left, f.kd_nodes[0].right]
+        .into_iter()
+        .find(|&c| c & LEAF == 0)
+        .expect("the base's root has an inner child");
+    f.kd_nodes[0].left = inner_child;
+    f.kd_nodes[0].right = inner_child;
     refused!(f, "reached twice", V::KdNotATree { node: 0, .. });
     // The same tree with nodes 1.. stored in reverse (the root stays at 0): every node
     // below the root now comes after its children. It is still a tree, but refused:
     // validation relies on the parent-first order.
     let mut f = base();
     let n = f.kd_nodes.len();
-    assert!(
-        f.kd_nodes[1..]
-            .iter()
-            .any(|k| matches!(k, KdNode::Inner { .. })),
-        "the base has an inner node below the root"
-    );
-    let moved = |i: u32| if i == 0 { 0 } else { n as u32 - i };
+    let moved = |i: u32| {
+        if i & LEAF != 0 || i == 0 {
+            i
+        } else {
+            n as u32 - i
+        }
+    };
     let mut reordered = f.kd_nodes.clone();
+    let mut axes = f.kd_axes.clone();
     for (i, node) in f.kd_nodes.iter().enumerate() {
         let mut node = *node;
-        if let KdNode::Inner { left, right, .. } = &mut node {
-            *left = moved(*left);
-            *right = moved(*right);
-        }
+        node.left = moved(node.left);
+        node.right = moved(node.right);
         reordered[moved(i as u32) as usize] = node;
+        axes[moved(i as u32) as usize] = f.kd_axes[i];
     }
     f.kd_nodes = reordered;
-    f.derive_kd_tables();
+    f.kd_axes = axes;
     refused!(f, "stored before its parent", V::KdNotATree { .. });
     let mut f = base();
-    set_root(&mut f, None, Some(3));
-    refused!(f, "kd_nodes[0].axis", V::KdAxis { node: 0, axis: 3 });
+    f.kd_axes[0] = 3;
+    refused!(f, "kd_axes[0]", V::KdAxis { node: 0, axis: 3 });
+    let mut f = base();
+    f.kd_axes.pop();
+    refused!(f, "kd_axes: expected", V::KdAxesLength { .. });
+    let mut f = base();
+    f.kd_nodes[0].split = f64::NAN;
+    refused!(f, "kd_nodes[0].split", V::KdSplitNan { node: 0 });
     let mut f = base();
     for node in &mut f.kd_nodes {
-        if let KdNode::Leaf { region: Some(0) } = node {
-            *node = KdNode::Leaf { region: None };
+        for c in [&mut node.left, &mut node.right] {
+            if *c == kd::leaf_ref(Some(0)) {
+                *c = kd::EMPTY;
+            }
         }
     }
-    f.derive_kd_tables();
     refused!(
         f,
         "regions[0]: in no KD-tree leaf",
         V::RegionNotInTree { region: 0 }
     );
-
-    // The skipping tables: a node whose range misses its child's, a full flag on a node
-    // with an empty leaf below, an empty leaf flagged full, missing entries.
     let mut f = base();
-    let nf = f.fields.len();
-    f.kd_ranges[0].max = f.kd_ranges[0].min - 1.0;
-    assert!(nf > 0);
-    refused!(f, "kd_ranges of node 0", V::KdRangeNotHeld { node: 0, .. });
-    let mut f = base();
-    if let Some(empty) = f
-        .kd_nodes
-        .iter()
-        .position(|n| matches!(n, KdNode::Leaf { region: None }))
-    {
-        f.kd_full[empty] = true;
-        let e = refused(
-            &f,
-            &format!("kd_full of node {empty}: set on an empty leaf"),
-        );
-        assert!(
-            matches!(e, V::KdFullEmptyLeaf { node } if node as usize == empty),
-            "{e:?}"
-        );
+    let regions = f.regions.len() as u32;
+    let leaf = |f: &BrickFile| {
+        f.kd_nodes
+            .iter()
+            .enumerate()
+            .find_map(|(i, node)| (node.right & LEAF != 0).then_some(i))
+    };
+    if let Some(i) = leaf(&f) {
+        f.kd_nodes[i].right = kd::leaf_ref(Some(regions));
+        refused!(f, "region", V::KdRegionOutOfRange { .. });
     }
     let mut f = base();
-    if let Some(leaf) = f
-        .kd_nodes
-        .iter()
-        .position(|n| matches!(n, KdNode::Leaf { region: Some(_) }))
-    {
-        f.kd_ranges[leaf * nf].min = f32::NAN;
-        // Caught at the leaf, or first at its parent (whose range holds no NaN).
-        refused!(
-            f,
-            "kd_ranges of",
-            V::KdLeafRangeNotHeld { .. } | V::KdRangeNotHeld { .. }
-        );
+    if let Some(i) = leaf(&f) {
+        // Name a region some other leaf holds too.
+        let other = (0..regions)
+            .find(|&r| f.kd_nodes[i].right != kd::leaf_ref(Some(r)))
+            .expect("two regions");
+        f.kd_nodes[i].right = kd::leaf_ref(Some(other));
+        refused!(f, "in a second leaf", V::KdRegionTwice { .. });
     }
     let mut f = base();
-    f.kd_full.pop();
-    refused!(f, "kd_full: expected", V::KdFullLength { .. });
-    let mut f = base();
-    f.kd_ranges.pop();
-    refused!(f, "kd_ranges: expected", V::KdRangesLength { .. });
-    let mut f = base();
-    f.kd_nodes.clear();
-    refused!(f, "kd_nodes: empty", V::KdNodesEmpty { .. });
+    f.kd_root = 1;
+    refused!(f, "kd_root", V::KdRootNotFirst { root: 1 });
 }

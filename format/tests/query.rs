@@ -6,35 +6,37 @@ use std::path::Path;
 
 use common::Rng;
 use proptest::prelude::*;
+use qbricks_format::kd;
 use qbricks_format::query::{self, RayRegions, RegionSegment};
-use qbricks_format::{writer, Aabb, ArchivedBrickFile, BrickFileView};
+use qbricks_format::{writer, Aabb, BrickFileView};
 
-fn open(seed: u64) -> BrickFileView {
-    let bytes = writer::to_bytes(&common::random_file(seed)).expect("to_bytes");
-    BrickFileView::from_bytes(Path::new("q.qbk"), &bytes).expect("open")
+/// A random file, opened, with its regions' boxes as generated.
+fn open(seed: u64) -> (BrickFileView, Vec<Aabb>) {
+    let (file, boxes) = common::random_file_with_boxes(seed);
+    let bytes = writer::to_bytes(&file).expect("to_bytes");
+    let view = BrickFileView::from_bytes(Path::new("q.qbk"), &bytes).expect("open");
+    (view, boxes)
 }
 
-fn brute_region_at(file: &ArchivedBrickFile, p: [f64; 3]) -> Option<u32> {
-    let hits: Vec<u32> = (0..file.regions.len() as u32)
-        .filter(|&r| query::contains(&file.regions[r as usize].bounds, p))
+fn inside(b: &Aabb, p: [f64; 3]) -> bool {
+    (0..3).all(|a| p[a] >= b.min[a] && p[a] < b.max[a])
+}
+
+fn brute_region_at(boxes: &[Aabb], p: [f64; 3]) -> Option<u32> {
+    let hits: Vec<u32> = (0..boxes.len() as u32)
+        .filter(|&r| inside(&boxes[r as usize], p))
         .collect();
     assert!(hits.len() <= 1, "regions overlap at {p:?}: {hits:?}");
     hits.first().copied()
 }
 
-fn brute_ray(
-    file: &ArchivedBrickFile,
-    o: [f64; 3],
-    d: [f64; 3],
-    t0: f64,
-    t1: f64,
-) -> Vec<RegionSegment> {
-    let mut v: Vec<RegionSegment> = file
-        .regions
+fn brute_ray(boxes: &[Aabb], o: [f64; 3], d: [f64; 3], t0: f64, t1: f64) -> Vec<RegionSegment> {
+    let inv = kd::inverse(&d);
+    let mut v: Vec<RegionSegment> = boxes
         .iter()
         .enumerate()
         .filter_map(|(i, r)| {
-            query::ray_box(&r.bounds, o, d, t0, t1).map(|(a, b)| RegionSegment {
+            kd::ray_box(&r.min, &r.max, &o, &inv, t0, t1).map(|(a, b)| RegionSegment {
                 region: i as u32,
                 t_enter: a,
                 t_exit: b,
@@ -79,24 +81,26 @@ proptest! {
 
     #[test]
     fn region_at_matches_brute_force(seed in any::<u64>()) {
-        let view = open(seed);
+        let (view, boxes) = open(seed);
         let file = view.file();
         let b = query::bounds(file);
         let mut rng = Rng::new(seed ^ 0xABCD);
         for _ in 0..200 {
             let p = random_point(&mut rng, &b);
-            prop_assert_eq!(query::region_at(file, p), brute_region_at(file, p), "at {:?}", p);
+            prop_assert_eq!(query::region_at(file, p), brute_region_at(&boxes, p), "at {:?}", p);
         }
         // Region corners are on faces: the half-open rule must agree there too.
-        for r in file.regions.iter() {
-            let lo = r.bounds.min.map(|v| v.to_native());
-            prop_assert_eq!(query::region_at(file, lo), brute_region_at(file, lo));
+        for r in &boxes {
+            prop_assert_eq!(query::region_at(file, r.min), brute_region_at(&boxes, r.min));
+            prop_assert_eq!(query::region_at(file, r.max), brute_region_at(&boxes, r.max));
         }
+        // The boxes derived from the tree are the generated ones.
+        prop_assert_eq!(query::region_boxes(file), boxes);
     }
 
     #[test]
     fn ray_regions_match_brute_force(seed in any::<u64>()) {
-        let view = open(seed);
+        let (view, boxes) = open(seed);
         let file = view.file();
         let b = query::bounds(file);
         let mut rng = Rng::new(seed ^ 0x1234);
@@ -105,12 +109,11 @@ proptest! {
             let d = random_dir(&mut rng);
             // A ray in a face plane of some region: tests the half-open rule for rays
             // parallel to a split plane.
-            if !file.regions.is_empty() && rng.chance(0.5) {
-                let r = &file.regions[rng.below(file.regions.len() as u64) as usize];
+            if !boxes.is_empty() && rng.chance(0.5) {
+                let r = &boxes[rng.below(boxes.len() as u64) as usize];
                 for a in 0..3 {
                     if d[a] == 0.0 {
-                        let face = if rng.chance(0.5) { &r.bounds.min } else { &r.bounds.max };
-                        o[a] = face[a].to_native();
+                        o[a] = if rng.chance(0.5) { r.min[a] } else { r.max[a] };
                     }
                 }
             }
@@ -121,7 +124,7 @@ proptest! {
                 (a, a + rng.range(0.0, 10.0))
             };
             let kd = query::ray_regions(file, o, d, t0, t1);
-            let bf = brute_ray(file, o, d, t0, t1);
+            let bf = brute_ray(&boxes, o, d, t0, t1);
             prop_assert_eq!(kd.len(), bf.len(), "o {:?} d {:?}\nkd {:?}\nbf {:?}", o, d, kd, bf);
             for (k, f) in kd.iter().zip(&bf) {
                 prop_assert_eq!(k.region, f.region);
@@ -140,7 +143,7 @@ proptest! {
     #[test]
     fn brick_access_matches_layout(seed in any::<u64>()) {
         let original = common::random_file(seed);
-        let view = open(seed);
+        let (view, _) = open(seed);
         let file = view.file();
         for (bi, brick) in original.bricks.iter().enumerate() {
             let ab = &file.bricks[bi];
@@ -225,7 +228,7 @@ fn ray_box_matches_point_sampling() {
 
 #[test]
 fn degenerate_rays_give_nothing_not_panics() {
-    let view = open(11);
+    let (view, _) = open(11);
     let file = view.file();
     assert!(query::ray_regions(file, [f64::NAN; 3], [1.0, 0.0, 0.0], 0.0, 1.0).is_empty());
     assert!(query::ray_regions(file, [0.0; 3], [f64::INFINITY, 0.0, 0.0], 0.0, 1.0).is_empty());
@@ -236,34 +239,36 @@ fn degenerate_rays_give_nothing_not_panics() {
 /// child on the stack, so the iterator's inline stack (32 entries) must spill.
 #[test]
 fn deep_tree_spills_the_stack_and_stays_correct() {
-    use qbricks_format::{BrickFile, Field, KdNode, Level, Provenance, Region};
+    use qbricks_format::kd::BuildNode;
+    use qbricks_format::{BrickFile, Field, Level, Provenance, Region};
     let n = 100u32;
     let mut regions = Vec::new();
-    let mut kd_nodes = Vec::new();
+    let mut boxes = Vec::new();
+    let mut built = Vec::new();
     // Node 2i is the inner node splitting at x = i + 1; node 2i + 1 the leaf of slab i.
     for i in 0..n {
         let (lo, hi) = (f64::from(i), f64::from(i + 1));
+        boxes.push(Aabb {
+            min: [lo, 0.0, 0.0],
+            max: [hi, 1.0, 1.0],
+        });
         regions.push(Region {
-            bounds: Aabb {
-                min: [lo, 0.0, 0.0],
-                max: [hi, 1.0, 1.0],
-            },
             bricks_start: 0,
             bricks_len: 0,
-            finest_level: 0,
         });
         if i + 1 < n {
-            kd_nodes.push(KdNode::Inner {
+            built.push(BuildNode::Inner {
                 axis: 0,
                 split: hi,
                 left: 2 * i + 1,
                 right: 2 * i + 2,
             });
-            kd_nodes.push(KdNode::Leaf { region: Some(i) });
+            built.push(BuildNode::Leaf { region: Some(i) });
         } else {
-            kd_nodes.push(KdNode::Leaf { region: Some(i) });
+            built.push(BuildNode::Leaf { region: Some(i) });
         }
     }
+    let (kd_root, kd_nodes, kd_axes) = kd::pack(&built);
     let file = BrickFile {
         provenance: Provenance {
             source: String::new(),
@@ -291,11 +296,10 @@ fn deep_tree_spills_the_stack_and_stays_correct() {
         region_ranges: vec![qbricks_format::ValueRange { min: 0.0, max: 0.0 }; n as usize],
         regions,
         region_bricks: vec![],
+        kd_root,
         kd_nodes,
-        kd_ranges: Vec::new(),
-        kd_full: Vec::new(),
-    }
-    .with_kd_tables();
+        kd_axes,
+    };
     let bytes = writer::to_bytes(&file).expect("bytes");
     let view = BrickFileView::from_bytes(Path::new("deep.qbk"), &bytes).expect("open");
     let f = view.file();
@@ -305,7 +309,7 @@ fn deep_tree_spills_the_stack_and_stays_correct() {
         ([50.5, 0.5, 0.5], [-1.0, 0.0, 0.0]),
     ] {
         let kd = query::ray_regions(f, o, d, 0.0, f64::INFINITY);
-        let bf = brute_ray(f, o, d, 0.0, f64::INFINITY);
+        let bf = brute_ray(&boxes, o, d, 0.0, f64::INFINITY);
         assert_eq!(kd.len(), bf.len());
         assert!(kd.len() > 40);
         for (k, b) in kd.iter().zip(&bf) {

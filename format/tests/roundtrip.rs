@@ -61,23 +61,46 @@ fn payload_is_16_aligned_in_file_and_memory() {
 #[test]
 fn version_mismatch_names_both_versions() {
     let mut bytes = sample_bytes();
-    // A file made by the previous version (1: no per-node ranges in the KD-tree).
+    // A file made by an earlier version (1: no per-node ranges in the KD-tree).
     bytes[8..12].copy_from_slice(&1u32.to_le_bytes());
     let err = BrickFileView::from_bytes(Path::new("old.qbk"), &bytes).expect_err("version 1");
     assert!(matches!(
         err.kind,
         FormatErrorKind::UnsupportedVersion {
             found: 1,
-            supported: 2
+            supported: 3
         }
     ));
     let msg = err.to_string();
     assert!(msg.starts_with("old.qbk: "), "{msg}");
     assert!(
-        msg.contains("version 2") && msg.contains("version 1"),
+        msg.contains("version 3") && msg.contains("version 1"),
         "{msg}"
     );
     assert!(!msg.contains('\n'));
+}
+
+/// A real file of the previous format (baked by the format-2 `qbricks-bake` from
+/// `synth abc --n0 4`) is refused before its archive is read, naming both versions.
+#[test]
+fn a_format_2_file_is_refused_by_version() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/format2_abc.qbk");
+    let err = BrickFileView::open(&path).expect_err("format 2");
+    assert!(
+        matches!(
+            err.kind,
+            FormatErrorKind::UnsupportedVersion {
+                found: 2,
+                supported: 3
+            }
+        ),
+        "{err}"
+    );
+    let msg = err.to_string();
+    assert!(
+        msg.contains("format2_abc.qbk") && msg.contains("version 2") && msg.contains("version 3"),
+        "{msg}"
+    );
 }
 
 #[test]

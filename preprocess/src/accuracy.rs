@@ -219,9 +219,19 @@ fn field_index(file: &BrickFile, name: &'static str) -> Result<usize, AccuracyEr
         .ok_or(AccuracyError::MissingField(name))
 }
 
-/// Region containing `p` by KD-tree descent.
+/// Region containing `p` by KD-tree descent (inside the bounds, a leaf's cell is its
+/// region's box).
 fn locate(file: &BrickFile, p: [f64; 3]) -> Option<u32> {
-    crate::kdtree::locate(&file.kd_nodes, p)
+    let b = &file.bounds;
+    if !(0..3).all(|a| p[a] >= b.min[a] && p[a] < b.max[a]) {
+        return None;
+    }
+    let tree = format::kd::Stored {
+        root: file.kd_root,
+        nodes: &file.kd_nodes,
+        axes: &file.kd_axes,
+    };
+    format::kd::locate(&tree, p, [0.0; 3])
 }
 
 /// The basis-method reconstruction at `p` over the bricks of the region holding it.

@@ -57,6 +57,9 @@ pub enum BakeError {
     BadMaxBrick(u32),
     #[error("grids have no active cells")]
     Empty,
+    /// A leaf of the file's KD-tree names its region in 31 bits.
+    #[error("{regions} regions exceed the file format's limit of {limit}")]
+    TooManyRegions { regions: u64, limit: u64 },
     #[error("thread pool: {0}")]
     ThreadPool(String),
 }

@@ -240,7 +240,7 @@ mod tests {
                 // above), so the union of regions is exactly the union of supports.
             }
             // The serialised KD-tree finds the same region as brute force.
-            let (nodes, flat) = crate::kdtree::flatten(&tree);
+            let (packed, flat) = crate::kdtree::flatten(&tree).expect("few regions");
             prop_assert_eq!(flat.len(), regs.len());
             for (x, y, z) in pts {
                 let f = [x, y, z];
@@ -248,7 +248,7 @@ mod tests {
                 let brute = flat.iter().position(|(b, _)| {
                     (0..3).all(|a| p[a] >= b.min[a] && p[a] < b.max[a])
                 });
-                prop_assert_eq!(crate::kdtree::locate(&nodes, p), brute.map(|r| r as u32));
+                prop_assert_eq!(crate::kdtree::locate(&packed, p), brute.map(|r| r as u32));
                 let in_support = sup.iter().any(|s| (0..3).all(|a| p[a] >= s.min[a] && p[a] < s.max[a]));
                 prop_assert_eq!(brute.is_some(), in_support);
             }

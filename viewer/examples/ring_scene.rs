@@ -56,15 +56,11 @@ fn scale_file(file: &mut format::BrickFile, s: f64, shift: f64) {
     for b in &mut file.bricks {
         b.origin.iter_mut().for_each(m);
         b.cell_width *= s;
+        b.inv_cell_width = 1.0 / b.cell_width;
     }
-    for r in &mut file.regions {
-        r.bounds.min.iter_mut().for_each(m);
-        r.bounds.max.iter_mut().for_each(m);
-    }
+    // Region boxes are the tree's leaf cells: scaling the splits scales them.
     for node in &mut file.kd_nodes {
-        if let format::KdNode::Inner { split, .. } = node {
-            m(split);
-        }
+        m(&mut node.split);
     }
     for l in &mut file.levels {
         l.cell_width *= s;

@@ -90,7 +90,7 @@ impl ActiveTree {
         // The active-tree node each finished subtree became, or `NONE`.
         let mut done: Vec<u32> = Vec::with_capacity(64);
         if tree.node_count() > 0 {
-            todo.push((0, false));
+            todo.push((tree.root(), false));
         }
         // Every node is visited at most twice in a tree; more means it is not one.
         let mut budget = tree.node_count().saturating_mul(2).saturating_add(2);

@@ -7,8 +7,9 @@
 
 use std::fmt::Write as _;
 
+use format::kd::{KdTree, Node};
 use format::sequence::FieldRange;
-use format::{query, ArchivedKdNode, BrickFileView};
+use format::{query, BrickFileView};
 use serde::Serialize;
 
 /// Summary of one level. `cells` and `bricks` are counted from the bricks in the file.
@@ -170,28 +171,27 @@ pub fn info(view: &BrickFileView) -> Info {
     }
 }
 
-/// Depth and leaf count of the KD-tree (validated at open to be a tree).
+/// Depth and leaf count of the KD-tree (validated at open to be a tree); leaves are
+/// counted with the empty ones, depth in levels of nodes with the leaves (a lone leaf
+/// is depth 1).
 fn kd_shape(view: &BrickFileView) -> (u64, u64) {
-    let nodes = &view.file().kd_nodes;
-    if nodes.is_empty() {
-        return (0, 0);
-    }
+    let tree = format::kd::file_tree(view.file());
     let (mut depth, mut leaves) = (0u64, 0u64);
-    let mut stack = vec![(0u32, 1u64)];
+    let mut stack = vec![(tree.root, 1u64)];
     // The budget guards against cycles even though validation rules them out.
-    let mut budget = nodes.len();
+    let mut budget = tree.nodes.len().saturating_mul(2).saturating_add(1);
     while let Some((i, d)) = stack.pop() {
         if budget == 0 {
             break;
         }
         budget -= 1;
         depth = depth.max(d);
-        match nodes.get(i as usize) {
-            Some(ArchivedKdNode::Inner { left, right, .. }) => {
-                stack.push((left.to_native(), d + 1));
-                stack.push((right.to_native(), d + 1));
+        match tree.node(i) {
+            Some(Node::Inner { left, right, .. }) => {
+                stack.push((left, d + 1));
+                stack.push((right, d + 1));
             }
-            Some(ArchivedKdNode::Leaf { .. }) => leaves += 1,
+            Some(Node::Leaf(_)) => leaves += 1,
             None => {}
         }
     }
@@ -251,11 +251,12 @@ pub fn to_text(info: &Info) -> String {
     );
     let _ = writeln!(
         s,
-        "  {:.1} bytes per leaf cell; values {} bytes, structure {} bytes ({:.1} %); a uniform grid at the finest width would need {:.0} cells ({:.1}× the leaf cells)",
+        "  {:.1} bytes per leaf cell; values {} bytes, structure {} bytes ({:.1} % of the file, {:.1} % of the values); a uniform grid at the finest width would need {:.0} cells ({:.1}× the leaf cells)",
         info.bytes_per_cell,
         info.value_bytes,
         info.structure_bytes,
         100.0 * info.structure_share,
+        100.0 * info.structure_bytes as f64 / info.value_bytes.max(1) as f64,
         info.uniform_finest_cells,
         info.uniform_finest_cells / info.cells.max(1) as f64
     );
@@ -281,9 +282,20 @@ pub fn to_text(info: &Info) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use format::{Aabb, Brick, BrickFile, Field, KdNode, Level, Provenance, Region, ValueRange};
+    use format::kd::BuildNode;
+    use format::{Aabb, Brick, BrickFile, Field, Level, Provenance, Region, ValueRange};
 
     fn sample() -> BrickFile {
+        let (kd_root, kd_nodes, kd_axes) = format::kd::pack(&[
+            BuildNode::Inner {
+                axis: 0,
+                split: 0.5,
+                left: 1,
+                right: 2,
+            },
+            BuildNode::Leaf { region: Some(0) },
+            BuildNode::Leaf { region: Some(1) },
+        ]);
         BrickFile {
             provenance: Provenance {
                 source: "wake.vdb".into(),
@@ -334,40 +346,20 @@ mod tests {
             ],
             regions: vec![
                 Region {
-                    bounds: Aabb {
-                        min: [-1.0; 3],
-                        max: [0.5, 1.0, 1.0],
-                    },
                     bricks_start: 0,
                     bricks_len: 1,
-                    finest_level: 0,
                 },
                 Region {
-                    bounds: Aabb {
-                        min: [0.5, -1.0, -1.0],
-                        max: [2.0, 1.0, 1.0],
-                    },
                     bricks_start: 1,
                     bricks_len: 2,
-                    finest_level: 0,
                 },
             ],
             region_bricks: vec![0, 0, 1],
             region_ranges: vec![ValueRange { min: 0.0, max: 0.0 }; 2],
-            kd_nodes: vec![
-                KdNode::Inner {
-                    axis: 0,
-                    split: 0.5,
-                    left: 1,
-                    right: 2,
-                },
-                KdNode::Leaf { region: Some(0) },
-                KdNode::Leaf { region: Some(1) },
-            ],
-            kd_ranges: Vec::new(),
-            kd_full: Vec::new(),
+            kd_root,
+            kd_nodes,
+            kd_axes,
         }
-        .with_kd_tables()
     }
 
     #[test]
@@ -376,7 +368,7 @@ mod tests {
         let view = BrickFileView::from_bytes(std::path::Path::new("s.qbk"), &bytes).expect("open");
         let i = info(&view);
         assert_eq!(i.bytes, bytes.len() as u64);
-        assert_eq!((i.cells, i.bricks, i.regions, i.kd_nodes), (9, 2, 2, 3));
+        assert_eq!((i.cells, i.bricks, i.regions, i.kd_nodes), (9, 2, 2, 1));
         assert_eq!((i.kd_depth, i.kd_leaves, i.region_brick_refs), (2, 2, 3));
         assert_eq!(i.levels[0].cells, 8);
         assert_eq!(i.levels[1].bricks, 1);

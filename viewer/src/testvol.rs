@@ -6,9 +6,8 @@
 //! grid; each elementary cell gets the set of supports containing it; a KD-tree splits the
 //! elementary grid at its middle index until a box has one set, and that box is a region.
 
-use format::{
-    Aabb, Brick, BrickFile, Field, KdNode, Level, Provenance, Region, SourceGrid, ValueRange,
-};
+use format::kd::BuildNode;
+use format::{Aabb, Brick, BrickFile, Field, Level, Provenance, Region, SourceGrid, ValueRange};
 
 /// One grid: cell `(i, j, k)` is centred at `origin + (i, j, k) * cell_width`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -146,9 +145,7 @@ pub fn build(grids: &[GridSpec], fields: &[FieldFn], max_brick: u32) -> BrickFil
     }
 
     // KD-tree over the elementary grid; uniform boxes become regions.
-    let brick_levels: Vec<u32> = bricks.iter().map(|b| b.level).collect();
     let mut out = Builder {
-        brick_levels: &brick_levels,
         coords: &coords,
         n,
         sets: &sets,
@@ -161,14 +158,16 @@ pub fn build(grids: &[GridSpec], fields: &[FieldFn], max_brick: u32) -> BrickFil
     }
     let Builder {
         kd,
-        regions,
+        regions: boxed_regions,
         region_bricks,
         ..
     } = out;
+    let (kd_root, kd_nodes, kd_axes) = format::kd::pack(&kd);
+    let regions: Vec<Region> = boxed_regions.iter().map(|(_, r)| *r).collect();
 
     // Region ranges over the cells whose support overlaps the region.
     let mut region_ranges = Vec::with_capacity(regions.len() * fields.len());
-    for r in &regions {
+    for (bounds, r) in &boxed_regions {
         for (f, vals) in values.iter().enumerate() {
             let _ = f;
             let mut lo = f32::INFINITY;
@@ -179,8 +178,8 @@ pub fn build(grids: &[GridSpec], fields: &[FieldFn], max_brick: u32) -> BrickFil
                 let br = &bricks[b as usize];
                 let w = br.cell_width;
                 let range: [(i64, i64); 3] = std::array::from_fn(|a| {
-                    let i0 = ((r.bounds.min[a] - br.origin[a]) / w - 1.0).floor() as i64 + 1;
-                    let i1 = ((r.bounds.max[a] - br.origin[a]) / w + 1.0).ceil() as i64 - 1;
+                    let i0 = ((bounds.min[a] - br.origin[a]) / w - 1.0).floor() as i64 + 1;
+                    let i1 = ((bounds.max[a] - br.origin[a]) / w + 1.0).ceil() as i64 - 1;
                     (i0.max(0), i1.min(br.dims[a] as i64 - 1))
                 });
                 for k in range[2].0..=range[2].1 {
@@ -265,11 +264,10 @@ pub fn build(grids: &[GridSpec], fields: &[FieldFn], max_brick: u32) -> BrickFil
         regions,
         region_bricks,
         region_ranges,
-        kd_nodes: kd,
-        kd_ranges: Vec::new(),
-        kd_full: Vec::new(),
+        kd_root,
+        kd_nodes,
+        kd_axes,
     }
-    .with_kd_tables()
 }
 
 /// Splits the index box `lo..hi` into boxes of leaf cells only.
@@ -309,12 +307,12 @@ fn split_leaf_boxes(
 }
 
 struct Builder<'a> {
-    brick_levels: &'a [u32],
     coords: &'a [Vec<f64>; 3],
     n: [usize; 3],
     sets: &'a [Vec<u32>],
-    kd: Vec<KdNode>,
-    regions: Vec<Region>,
+    kd: Vec<format::kd::BuildNode>,
+    /// Each region with its box (the file derives the box from the tree).
+    regions: Vec<(Aabb, Region)>,
     region_bricks: Vec<u32>,
 }
 
@@ -325,7 +323,7 @@ impl Builder<'_> {
 
     fn node(&mut self, lo: [usize; 3], hi: [usize; 3]) -> u32 {
         let id = self.kd.len() as u32;
-        self.kd.push(KdNode::Leaf { region: None });
+        self.kd.push(BuildNode::Leaf { region: None });
         let first = self.set(lo[0], lo[1], lo[2]).to_vec();
         let uniform = (lo[2]..hi[2]).all(|k| {
             (lo[1]..hi[1]).all(|j| (lo[0]..hi[0]).all(|i| self.set(i, j, k) == first.as_slice()))
@@ -333,22 +331,18 @@ impl Builder<'_> {
         if uniform {
             if !first.is_empty() {
                 let r = self.regions.len() as u32;
-                let finest_level = first
-                    .iter()
-                    .map(|&b| self.brick_levels[b as usize])
-                    .min()
-                    .unwrap_or(0);
-                self.regions.push(Region {
-                    bounds: Aabb {
+                self.regions.push((
+                    Aabb {
                         min: std::array::from_fn(|a| self.coords[a][lo[a]]),
                         max: std::array::from_fn(|a| self.coords[a][hi[a]]),
                     },
-                    bricks_start: self.region_bricks.len() as u32,
-                    bricks_len: first.len() as u32,
-                    finest_level,
-                });
+                    Region {
+                        bricks_start: self.region_bricks.len() as u32,
+                        bricks_len: first.len() as u32,
+                    },
+                ));
                 self.region_bricks.extend_from_slice(&first);
-                self.kd[id as usize] = KdNode::Leaf { region: Some(r) };
+                self.kd[id as usize] = BuildNode::Leaf { region: Some(r) };
             }
             return id;
         }
@@ -360,7 +354,7 @@ impl Builder<'_> {
         l2[a] = mid;
         let left = self.node(lo, h1);
         let right = self.node(l2, hi);
-        self.kd[id as usize] = KdNode::Inner {
+        self.kd[id as usize] = BuildNode::Inner {
             axis: a as u8,
             split: self.coords[a][mid],
             left,

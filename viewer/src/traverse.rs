@@ -2,15 +2,15 @@
 //! ([`format::kd::segments`]) in the volume's local frame, over a per-field packed copy
 //! of the tree.
 //!
-//! The file keeps a node's value ranges in a table beside the node (`kd_ranges`, one
-//! entry per node and field), so walking the archive as stored costs a second cache miss
-//! per node. The first walk over a field packs node, range and fullness into one 32-byte
-//! record per node (a few milliseconds for a quarter of a million nodes, once per field
-//! and open file), and every later walk reads one line per node. Opening stays free, and
-//! a field that is never traversed is never packed.
+//! The file stores no per-node value ranges (format 3 keeps its structure small): the
+//! first walk over a field derives each subtree's range and fullness from the regions'
+//! ranges ([`format::kd::subtree_ranges`]) and packs node, range and fullness into one
+//! 32-byte record per node (a few milliseconds for a quarter of a million nodes, once per
+//! field and open file); every later walk reads one line per node. Opening stays free,
+//! and a field that is never traversed is never packed.
 
 pub use format::kd::{inverse, ray_box, Segment, Skip, SKIPPED};
-use format::kd::{KdTree, Node, WalkNodes};
+use format::kd::{Node, WalkNodes};
 
 use crate::volume::Volume;
 
@@ -34,42 +34,39 @@ pub(crate) struct PackedNode {
 pub(crate) struct Packed(Vec<PackedNode>);
 
 impl Packed {
+    /// Field `field`'s packed tree: nodes in depth-first, left-first order, the root
+    /// first.
     pub fn build(file: &format::ArchivedBrickFile, field: usize) -> Packed {
-        let stored = format::kd::FileNodes::new(file, field);
-        let nodes = file.kd_nodes.as_slice();
+        let nf = file.fields.len();
+        let entries = format::kd::subtree_ranges(&format::kd::file_tree(file), |r| {
+            let v = file
+                .region_ranges
+                .get((r as usize).checked_mul(nf)? + field)?;
+            (field < nf).then(|| (v.min.to_native(), v.max.to_native()))
+        });
         Packed(
-            (0..nodes.len() as u32)
-                .map(|n| {
-                    let (min, max) = stored
-                        .range(n)
-                        .unwrap_or((f32::NEG_INFINITY, f32::INFINITY));
-                    let full = stored.full(n);
-                    match nodes.node(n) {
-                        Some(Node::Inner {
-                            axis,
+            entries
+                .iter()
+                .map(|e| {
+                    let (min, max) = e.range;
+                    match e.node {
+                        Node::Inner { axis, split, .. } => PackedNode {
                             split,
-                            left,
-                            right,
-                        }) => PackedNode {
-                            split,
-                            a: left,
-                            b: right,
+                            a: e.children[0],
+                            b: e.children[1],
                             min,
                             max,
                             axis: axis.min(2) as u8,
-                            full,
+                            full: e.full,
                         },
-                        leaf => PackedNode {
+                        Node::Leaf(r) => PackedNode {
                             split: 0.0,
-                            a: match leaf {
-                                Some(Node::Leaf(Some(r))) => r,
-                                _ => u32::MAX,
-                            },
+                            a: r.unwrap_or(u32::MAX),
                             b: 0,
                             min,
                             max,
                             axis: 3,
-                            full,
+                            full: e.full,
                         },
                     }
                 })
@@ -82,6 +79,9 @@ impl format::kd::KdTree for Packed {
     fn node_count(&self) -> usize {
         self.0.len()
     }
+    fn root(&self) -> u32 {
+        0
+    }
     #[inline(always)]
     fn node(&self, n: u32) -> Option<Node> {
         WalkNodes::node(self, n)
@@ -91,6 +91,9 @@ impl format::kd::KdTree for Packed {
 impl WalkNodes for Packed {
     fn node_count(&self) -> usize {
         self.0.len()
+    }
+    fn root(&self) -> u32 {
+        0
     }
     #[inline(always)]
     fn node(&self, n: u32) -> Option<Node> {

@@ -67,6 +67,9 @@ pub struct Volume<'a> {
     packed: Vec<std::sync::OnceLock<crate::traverse::Packed>>,
     /// The last few trees of regions that one iso value can touch (see [`crate::active`]).
     active: crate::active::ActiveCache,
+    /// Every region's box (its KD leaf's cell) and step width, derived on first use: the
+    /// file stores neither (format 3).
+    region_table: std::sync::OnceLock<Vec<RegionN>>,
     /// Finest cell width in the file (reference length for opacity).
     pub finest_w: f64,
 }
@@ -119,6 +122,7 @@ impl<'a> Volume<'a> {
                 .map(|_| std::sync::OnceLock::new())
                 .collect(),
             active: Default::default(),
+            region_table: std::sync::OnceLock::new(),
             finest_w: if finest_w.is_finite() { finest_w } else { 1.0 },
         })
     }
@@ -189,32 +193,63 @@ impl<'a> Volume<'a> {
         self.file.regions.len()
     }
 
+    /// Every region in the local frame, by index (derived on first use, one walk over
+    /// the tree: a region's box is its leaf's cell, its step width its finest brick's
+    /// level's).
+    fn region_table(&self) -> &[RegionN] {
+        self.region_table.get_or_init(|| {
+            let file = self.file;
+            let empty = RegionN {
+                min: [f64::INFINITY; 3],
+                max: [f64::NEG_INFINITY; 3],
+                finest_w: self.finest_w,
+            };
+            let mut table = vec![empty; file.regions.len()];
+            let b = &file.bounds;
+            format::kd::leaf_cells(
+                &format::kd::file_tree(file),
+                std::array::from_fn(|a| b.min[a].to_native()),
+                std::array::from_fn(|a| b.max[a].to_native()),
+                self.frame,
+                |r, min, max| {
+                    let Some(slot) = table.get_mut(r as usize) else {
+                        return;
+                    };
+                    let finest = format::query::region_bricks(file, r)
+                        .iter()
+                        .filter_map(|&id| file.bricks.get(id.to_native() as usize))
+                        .map(|br| br.level.to_native())
+                        .min();
+                    *slot = RegionN {
+                        min,
+                        max,
+                        finest_w: finest
+                            .and_then(|l| self.level_w.get(l as usize).copied())
+                            .unwrap_or(self.finest_w),
+                    };
+                },
+            );
+            table
+        })
+    }
+
     /// Region `r` in the local frame.
     #[inline]
     pub fn region(&self, r: usize) -> RegionN {
-        let reg = &self.file.regions[r];
-        let finest = reg.finest_level.to_native() as usize;
-        RegionN {
-            min: std::array::from_fn(|a| reg.bounds.min[a].to_native() - self.frame[a]),
-            max: std::array::from_fn(|a| reg.bounds.max[a].to_native() - self.frame[a]),
-            finest_w: self.level_w.get(finest).copied().unwrap_or(self.finest_w),
-        }
+        self.region_table()[r]
     }
 
     /// Every region in the local frame, by index.
     pub fn regions(&self) -> impl Iterator<Item = RegionN> + '_ {
-        (0..self.region_count()).map(|r| self.region(r))
+        self.region_table().iter().copied()
     }
 
     /// Local cell width of a segment's region (the finest width for a skipped subtree).
     #[inline]
     pub fn step_width(&self, region: u32) -> f64 {
-        self.file
-            .regions
+        self.region_table()
             .get(region as usize)
-            .and_then(|r| self.level_w.get(r.finest_level.to_native() as usize))
-            .copied()
-            .unwrap_or(self.finest_w)
+            .map_or(self.finest_w, |g| g.finest_w)
     }
 
     /// Bricks of region `r`.
@@ -235,13 +270,15 @@ impl<'a> Volume<'a> {
     /// Region containing the local point `p` (half-open boxes), by KD descent.
     pub fn region_at(&self, p: [f64; 3]) -> Option<u32> {
         // The packed copy of field 0's tree (when there is one) is the denser read.
-        let r = match self.packed(0) {
-            Some(packed) => format::kd::locate(packed, p, self.frame)?,
-            None => format::kd::locate(self.file.kd_nodes.as_slice(), p, self.frame)?,
-        };
-        let reg = self.region(r as usize);
-        let inside = (0..3).all(|a| p[a] >= reg.min[a] && p[a] < reg.max[a]);
-        inside.then_some(r)
+        // Inside the bounds a leaf's cell is its region's box.
+        let inside = (0..3).all(|a| p[a] >= self.bounds_min[a] && p[a] < self.bounds_max[a]);
+        if !inside {
+            return None;
+        }
+        match self.packed(0) {
+            Some(packed) => format::kd::locate(packed, p, self.frame),
+            None => format::kd::locate(&format::kd::file_tree(self.file), p, self.frame),
+        }
     }
 
     /// Value of field `f`, cell `idx` (checked at open to be in range for every brick cell).

@@ -2,6 +2,7 @@
 //! split trees whose leaves are the regions (so brute force is the reference).
 #![allow(dead_code)]
 
+use qbricks_format::kd;
 use qbricks_format::{
     Aabb, Brick, BrickFile, Field, KdNode, Level, Provenance, Region, SourceGrid, ValueRange,
 };
@@ -40,12 +41,15 @@ impl Rng {
 }
 
 /// A random KD split tree over `root`: inner nodes split at a random plane inside their
-/// cell; leaves hold a region (their cell, sometimes shrunk inside it) or nothing.
-/// Sometimes both leaf children of a node hold the *same* region (the parent's cell), as
-/// when a builder has to cut a region. Node indices are shuffled (root stays 0).
+/// cell; leaves hold a region (their cell, which is how format 3 defines a region's box)
+/// or nothing. Inner nodes get shuffled indices (root stays 0, every node after its
+/// parent, the order a file must have).
 pub struct KdConfig {
+    /// Each region's box (its leaf's cell).
     pub regions: Vec<Aabb>,
+    pub root: u32,
     pub nodes: Vec<KdNode>,
+    pub axes: Vec<u8>,
 }
 
 enum Tmp {
@@ -56,36 +60,43 @@ enum Tmp {
 pub fn random_kd(rng: &mut Rng, root: Aabb, max_depth: u32) -> KdConfig {
     let mut regions = Vec::new();
     let tree = grow(rng, root, max_depth, &mut regions);
-    // Give the nodes shuffled indices with the root at 0 and every node after its parent
-    // (the order a file must have): each next index goes to a random node among those
-    // whose parent is placed, so siblings, subtrees and levels interleave.
+    // Each next index goes to a random inner node among those whose parent is placed,
+    // so siblings, subtrees and levels interleave.
     let mut nodes: Vec<KdNode> = Vec::new();
-    // (node, its index, the index of the parent slot to fill: (parent index, is left)).
+    let mut axes: Vec<u8> = Vec::new();
+    let mut root_ref = kd::EMPTY;
+    // (node, the parent slot to fill: (parent index, is left)).
     let mut frontier: Vec<(&Tmp, Option<(usize, bool)>)> = vec![(&tree, None)];
     while !frontier.is_empty() {
         let k = rng.below(frontier.len() as u64) as usize;
         let (t, parent) = frontier.swap_remove(k);
-        let id = nodes.len() as u32;
-        if let Some((p, is_left)) = parent {
-            if let KdNode::Inner { left, right, .. } = &mut nodes[p] {
-                *(if is_left { left } else { right }) = id;
-            }
-        }
-        match t {
-            Tmp::Leaf(r) => nodes.push(KdNode::Leaf { region: *r }),
+        let r = match t {
+            Tmp::Leaf(r) => kd::leaf_ref(*r),
             Tmp::Inner(axis, split, l, r) => {
-                nodes.push(KdNode::Inner {
-                    axis: *axis,
+                let id = nodes.len();
+                nodes.push(KdNode {
                     split: *split,
-                    left: u32::MAX,
-                    right: u32::MAX,
+                    left: kd::EMPTY,
+                    right: kd::EMPTY,
                 });
-                frontier.push((l, Some((id as usize, true))));
-                frontier.push((r, Some((id as usize, false))));
+                axes.push(*axis);
+                frontier.push((l, Some((id, true))));
+                frontier.push((r, Some((id, false))));
+                id as u32
             }
+        };
+        match parent {
+            None => root_ref = r,
+            Some((p, true)) => nodes[p].left = r,
+            Some((p, false)) => nodes[p].right = r,
         }
     }
-    KdConfig { regions, nodes }
+    KdConfig {
+        regions,
+        root: root_ref,
+        nodes,
+        axes,
+    }
 }
 
 fn grow(rng: &mut Rng, cell: Aabb, depth: u32, regions: &mut Vec<Aabb>) -> Tmp {
@@ -93,31 +104,12 @@ fn grow(rng: &mut Rng, cell: Aabb, depth: u32, regions: &mut Vec<Aabb>) -> Tmp {
         if rng.chance(0.25) {
             return Tmp::Leaf(None);
         }
-        let mut b = cell;
-        if rng.chance(0.3) {
-            for a in 0..3 {
-                let w = cell.max[a] - cell.min[a];
-                b.min[a] = cell.min[a] + w * rng.range(0.0, 0.3);
-                b.max[a] = cell.max[a] - w * rng.range(0.0, 0.3);
-            }
-        }
-        regions.push(b);
+        regions.push(cell);
         return Tmp::Leaf(Some(regions.len() as u32 - 1));
     }
     let axis = rng.below(3) as u8;
     let a = axis as usize;
     let split = cell.min[a] + (cell.max[a] - cell.min[a]) * rng.range(0.1, 0.9);
-    if depth == 1 && rng.chance(0.15) {
-        // One region cut in two by the split plane.
-        regions.push(cell);
-        let r = regions.len() as u32 - 1;
-        return Tmp::Inner(
-            axis,
-            split,
-            Box::new(Tmp::Leaf(Some(r))),
-            Box::new(Tmp::Leaf(Some(r))),
-        );
-    }
     let (mut lo, mut hi) = (cell, cell);
     lo.max[a] = split;
     hi.min[a] = split;
@@ -135,6 +127,12 @@ fn random_string(rng: &mut Rng) -> String {
 
 /// A random file that satisfies every schema invariant (so it must open).
 pub fn random_file(seed: u64) -> BrickFile {
+    random_file_with_boxes(seed).0
+}
+
+/// [`random_file`] and its regions' boxes as generated (the reference for the queries,
+/// which derive them from the tree).
+pub fn random_file_with_boxes(seed: u64) -> (BrickFile, Vec<Aabb>) {
     let mut rng = Rng::new(seed);
     let n_levels = 1 + rng.below(3) as usize;
     let n_fields = 1 + rng.below(3) as usize;
@@ -188,20 +186,16 @@ pub fn random_file(seed: u64) -> BrickFile {
     let regions: Vec<Region> = kd
         .regions
         .iter()
-        .map(|b| {
+        .map(|_| {
             let start = region_bricks.len() as u32;
-            let mut finest = u32::MAX;
-            for (i, brick) in bricks.iter().enumerate() {
+            for i in 0..bricks.len() {
                 if rng.chance(0.4) {
                     region_bricks.push(i as u32);
-                    finest = finest.min(brick.level);
                 }
             }
             Region {
-                bounds: *b,
                 bricks_start: start,
                 bricks_len: region_bricks.len() as u32 - start,
-                finest_level: if finest == u32::MAX { 0 } else { finest },
             }
         })
         .collect();
@@ -215,7 +209,7 @@ pub fn random_file(seed: u64) -> BrickFile {
         })
         .collect();
 
-    BrickFile {
+    let file = BrickFile {
         provenance: Provenance {
             source: format!("{}.vdb", random_string(&mut rng)),
             grids: (0..n_levels)
@@ -235,9 +229,9 @@ pub fn random_file(seed: u64) -> BrickFile {
         regions,
         region_bricks,
         region_ranges,
+        kd_root: kd.root,
         kd_nodes: kd.nodes,
-        kd_ranges: Vec::new(),
-        kd_full: Vec::new(),
-    }
-    .with_kd_tables()
+        kd_axes: kd.axes,
+    };
+    (file, kd.regions)
 }

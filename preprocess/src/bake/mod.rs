@@ -10,9 +10,7 @@
 use rayon::prelude::*;
 use serde::Serialize;
 
-use format::{
-    Aabb, Brick, BrickFile, Field, KdNode, Level, Provenance, Region, SourceGrid, ValueRange,
-};
+use format::{Aabb, Brick, BrickFile, Field, Level, Provenance, Region, SourceGrid, ValueRange};
 
 use crate::bricks::{make_bricks, BrickBox};
 use crate::cells::{classify_leaves, CellSet};
@@ -246,7 +244,7 @@ fn run(
 
     stage("building regions");
     let (bounds, tree) = build_regions(sets, &bricks, selection.widths[0]);
-    let kd = kd_tree(&tree, &bricks, &fields.values);
+    let kd = kd_tree(&tree, &bricks, &fields.values)?;
 
     stage("assembling");
     let (file, field_summaries) = assemble(
@@ -540,7 +538,8 @@ fn build_regions(
 
 /// The region tree as the file stores it.
 struct Kd {
-    nodes: Vec<KdNode>,
+    /// Root reference, inner nodes, their axes.
+    tree: format::kd::Packed,
     /// Bounds and brick ids of each region, in the order the nodes number them.
     regions: Vec<(Aabb, Vec<u32>)>,
     /// `(min, max)` of each field over each region (see [`region_ranges`]).
@@ -550,8 +549,17 @@ struct Kd {
 /// KD-tree stage: flattens the region tree (see [`crate::kdtree::flatten`]) and computes
 /// each region's value range per field, which lets the viewer skip regions an iso-value
 /// cannot cross.
-fn kd_tree(tree: &regions::RegionTree, bricks: &Bricks, values: &[Vec<f32>]) -> Kd {
-    let (nodes, regions) = crate::kdtree::flatten(tree);
+fn kd_tree(
+    tree: &regions::RegionTree,
+    bricks: &Bricks,
+    values: &[Vec<f32>],
+) -> Result<Kd, BakeError> {
+    let Some((packed, regions)) = crate::kdtree::flatten(tree) else {
+        return Err(BakeError::TooManyRegions {
+            regions: count_regions(tree),
+            limit: u64::from(format::kd::MAX_REGION) + 1,
+        });
+    };
     let ranges = region_ranges(
         &RangeInput {
             bricks: &bricks.boxes,
@@ -562,15 +570,32 @@ fn kd_tree(tree: &regions::RegionTree, bricks: &Bricks, values: &[Vec<f32>]) -> 
         },
         &regions,
     );
-    Kd {
-        nodes,
+    Ok(Kd {
+        tree: packed,
         regions,
         ranges,
+    })
+}
+
+/// Regions of a region tree (for the error when there are too many).
+fn count_regions(tree: &regions::RegionTree) -> u64 {
+    let mut n = 0u64;
+    let mut todo = vec![tree];
+    while let Some(t) = todo.pop() {
+        match t {
+            regions::RegionTree::Empty => {}
+            regions::RegionTree::Region { .. } => n += 1,
+            regions::RegionTree::Split { left, right, .. } => {
+                todo.push(left);
+                todo.push(right);
+            }
+        }
     }
+    n
 }
 
 /// Assembly stage: the [`BrickFile`] (fields with their ranges and histograms, levels,
-/// bricks, regions, KD-tree and its per-subtree tables, provenance) ready to be written, and
+/// bricks, regions, KD-tree, provenance) ready to be written, and
 /// the field ranges for the summary.
 fn assemble(
     opts: &BakeOptions,
@@ -628,17 +653,10 @@ fn assemble(
         .collect();
     let mut region_bricks = Vec::new();
     let mut file_regions = Vec::with_capacity(kd.regions.len());
-    for (rb, ids) in &kd.regions {
-        let finest_level = ids
-            .iter()
-            .map(|&i| bricks.boxes[i as usize].level)
-            .min()
-            .unwrap_or(0);
+    for (_, ids) in &kd.regions {
         file_regions.push(Region {
-            bounds: *rb,
             bricks_start: region_bricks.len() as u32,
             bricks_len: ids.len() as u32,
-            finest_level,
         });
         region_bricks.extend_from_slice(ids);
     }
@@ -646,7 +664,8 @@ fn assemble(
         min: [0.0; 3],
         max: [0.0; 3],
     });
-    let mut file = BrickFile {
+    let (kd_root, kd_nodes, kd_axes) = kd.tree;
+    let file = BrickFile {
         provenance: Provenance {
             source: opts.source.clone(),
             grids: source_grids,
@@ -664,11 +683,10 @@ fn assemble(
             .into_iter()
             .map(|[min, max]| ValueRange { min, max })
             .collect(),
-        kd_nodes: kd.nodes,
-        kd_ranges: Vec::new(),
-        kd_full: Vec::new(),
+        kd_root,
+        kd_nodes,
+        kd_axes,
     };
-    file.derive_kd_tables();
     (file, field_summaries)
 }
 

@@ -1,6 +1,6 @@
 //! Bake pipeline on in-memory grids sampled from closed-form flows.
 
-use crate::common::bake::{cells, field, locate, reconstruct};
+use crate::common::bake::{cells, field, locate, reconstruct, region_boxes};
 use crate::common::Rng;
 use format::BrickFile;
 use qbricks_preprocess::bake::{bake, BakeError, BakeOptions};
@@ -184,7 +184,8 @@ fn summary_counts_match_the_stored_cells_and_covered_cells_are_dropped() {
         let e = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt();
         assert!((v as f64 - e).abs() < 1e-5);
     }
-    assert!(s.regions > 0 && s.kd_nodes >= s.regions);
+    // A tree of N leaves has N - 1 inner nodes (the stored ones); every region is a leaf.
+    assert!(s.regions > 0 && s.kd_nodes + 1 >= s.regions);
 }
 
 #[test]
@@ -193,13 +194,17 @@ fn region_bounds_are_conservative_and_kd_tree_finds_regions() {
     let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
     let nf = file.fields.len();
     let (lo, hi) = (file.bounds.min, file.bounds.max);
+    let boxes = region_boxes(&file);
+    assert!(
+        boxes.iter().all(|b| !b.is_empty()),
+        "every region is in a leaf"
+    );
     let mut inside = 0;
     for _ in 0..400 {
         let p = [0, 1, 2].map(|a| lo[a] + rng.next() * (hi[a] - lo[a]));
-        let brute = file
-            .regions
+        let brute = boxes
             .iter()
-            .position(|r| (0..3).all(|a| p[a] >= r.bounds.min[a] && p[a] < r.bounds.max[a]));
+            .position(|r| (0..3).all(|a| p[a] >= r.min[a] && p[a] < r.max[a]));
         let found = locate(&file, p);
         assert_eq!(
             found,
@@ -391,14 +396,14 @@ fn odd_layouts_keep_regions_and_bounds_exact() {
 
     let mut rng = Rng(7);
     let nf = file.fields.len();
+    let boxes = region_boxes(&file);
     let all: Vec<u32> = (0..file.bricks.len() as u32).collect();
     for _ in 0..300 {
         let p = [0, 1, 2]
             .map(|a| file.bounds.min[a] + rng.next() * (file.bounds.max[a] - file.bounds.min[a]));
-        let brute = file
-            .regions
+        let brute = boxes
             .iter()
-            .position(|r| (0..3).all(|a| p[a] >= r.bounds.min[a] && p[a] < r.bounds.max[a]));
+            .position(|r| (0..3).all(|a| p[a] >= r.min[a] && p[a] < r.max[a]));
         assert_eq!(locate(&file, p), brute.map(|r| r as u32));
         let Some(r) = brute else { continue };
         let reg = &file.regions[r];

@@ -43,9 +43,36 @@ pub fn field(file: &BrickFile, name: &str) -> usize {
         .unwrap_or_else(|| panic!("field {name} missing"))
 }
 
-/// Region containing `p` by KD-tree descent (the file's own, [`format::kd::locate`]).
+/// The file's KD-tree.
+pub fn tree(file: &BrickFile) -> format::kd::Stored<'_, format::KdNode> {
+    format::kd::Stored {
+        root: file.kd_root,
+        nodes: &file.kd_nodes,
+        axes: &file.kd_axes,
+    }
+}
+
+/// Region containing `p` by KD-tree descent (the file's own, [`format::kd::locate`]);
+/// inside the bounds a leaf's cell is its region's box.
 pub fn locate(file: &BrickFile, p: [f64; 3]) -> Option<u32> {
-    format::kd::locate(file.kd_nodes.as_slice(), p, [0.0; 3])
+    let b = &file.bounds;
+    if !(0..3).all(|a| p[a] >= b.min[a] && p[a] < b.max[a]) {
+        return None;
+    }
+    format::kd::locate(&tree(file), p, [0.0; 3])
+}
+
+/// Every region's box (its leaf's cell), by region.
+pub fn region_boxes(file: &BrickFile) -> Vec<format::Aabb> {
+    let mut out = vec![format::Aabb::EMPTY; file.regions.len()];
+    format::kd::leaf_cells(
+        &tree(file),
+        file.bounds.min,
+        file.bounds.max,
+        [0.0; 3],
+        |r, min, max| out[r as usize] = format::Aabb { min, max },
+    );
+    out
 }
 
 /// Brick ids of region `r`.

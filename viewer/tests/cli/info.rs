@@ -4,7 +4,7 @@ use std::path::Path;
 
 use crate::common::qbricks_view;
 
-use format::{Aabb, Brick, BrickFile, Field, KdNode, Level, Provenance, Region, ValueRange};
+use format::{Aabb, Brick, BrickFile, Field, Level, Provenance, Region, ValueRange};
 
 fn sample() -> BrickFile {
     // Two levels: a 4x2x1 brick of width 0.5 and a 1x1x1 brick of width 1.
@@ -65,22 +65,17 @@ fn sample() -> BrickFile {
                 first_value: 8,
             },
         ],
+        // One region, the whole bounds: the tree is a lone leaf.
         regions: vec![Region {
-            bounds: Aabb {
-                min: [-0.5, -0.5, -0.5],
-                max: [3.0, 1.0, 0.5],
-            },
             bricks_start: 0,
             bricks_len: 2,
-            finest_level: 0,
         }],
         region_bricks: vec![0, 1],
         region_ranges: vec![ValueRange { min: 0.0, max: 4.0 }; 2],
-        kd_nodes: vec![KdNode::Leaf { region: Some(0) }],
-        kd_ranges: Vec::new(),
-        kd_full: Vec::new(),
+        kd_root: format::kd::leaf_ref(Some(0)),
+        kd_nodes: vec![],
+        kd_axes: vec![],
     }
-    .with_kd_tables()
 }
 
 fn view(args: &[&str]) -> std::process::Output {
@@ -127,7 +122,7 @@ fn info_json_has_the_documented_keys_and_values() {
     assert_eq!(j["cells"], 9);
     assert_eq!(j["bricks"], 2);
     assert_eq!(j["regions"], 1);
-    assert_eq!(j["kd_nodes"], 1);
+    assert_eq!(j["kd_nodes"], 0);
     assert_eq!(j["source"], "wake_small.vdb");
     assert_eq!(j["bounds_min"], serde_json::json!([-0.5, -0.5, -0.5]));
     assert_eq!(j["bounds_max"], serde_json::json!([3.0, 1.0, 0.5]));
