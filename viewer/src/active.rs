@@ -19,6 +19,12 @@
 //! Building costs one pass over the subtrees whose range holds the value (a few
 //! milliseconds at most); the volume keeps the last few trees, so a still view or a
 //! sequence of frames at one iso value builds once.
+//!
+//! The walk reads a compact copy of the tree ([`Walk`]): every inner node holds both
+//! children's boxes in `f32`, widened outwards, in one 64-byte record, so a ray reads one
+//! cache line per level and only descends into children it may meet; a leaf keeps its
+//! region's exact `f64` box, and the segment is clipped to that, so the `f32` boxes only
+//! ever let through more candidates, never fewer, and the segments stay bit-identical.
 
 use std::sync::Arc;
 
@@ -62,12 +68,148 @@ pub(crate) struct ActiveTree {
     field: usize,
     /// `f64::to_bits` of the value (bits, so that a NaN value is a key like any other).
     value_bits: u64,
-    /// Children before parents; the root is the last node (empty: no region qualifies).
-    nodes: Vec<ActiveNode>,
     /// The cell lattices of every leaf's region, leaf after leaf: `exact` cuts a segment at
     /// their planes, and listing them once here spares each segment a pass over the
     /// region's bricks.
     lattices: Vec<Lattice>,
+    /// What the ray walk reads (built from the tree of [`ActiveNode`]s).
+    walk: Walk,
+}
+
+/// Reference bit of a [`Walk`] child that is a leaf (`LEAF_REF | index into leaves`).
+const LEAF_REF: u32 = 1 << 31;
+
+/// An inner node of the walk: both children's boxes (local frame, `f32`, widened so that
+/// a ray that meets the exact box always meets these), axis by axis with the two
+/// children side by side so that both are tested at once, and the children (the left one,
+/// below the split plane on `axis`, first). One 64-byte line.
+#[derive(Debug, Clone, Copy)]
+#[repr(C, align(64))]
+struct WalkInner {
+    lo: [[f32; 2]; 3],
+    hi: [[f32; 2]; 3],
+    child: [u32; 2],
+    axis: u8,
+}
+
+/// A leaf of the walk: its region, exact box and lattices.
+#[derive(Debug, Clone, Copy)]
+struct WalkLeaf {
+    min: [f64; 3],
+    max: [f64; 3],
+    region: u32,
+    /// First of its lattices in [`ActiveTree::lattices`], and how many.
+    first: u32,
+    lattices: u8,
+    inexact: bool,
+}
+
+/// The active tree as the ray walk reads it.
+#[derive(Debug, Default)]
+struct Walk {
+    /// Exact box of everything (the root's), tested in `f64` once per ray.
+    min: [f64; 3],
+    max: [f64; 3],
+    /// Reference of the root (`None`: empty tree).
+    root: Option<u32>,
+    inner: Vec<WalkInner>,
+    leaves: Vec<WalkLeaf>,
+}
+
+impl Walk {
+    /// The walk over `nodes` (children before parents, root last).
+    fn of(nodes: &[ActiveNode]) -> Walk {
+        let Some(root) = nodes.last() else {
+            return Walk::default();
+        };
+        // Largest coordinate magnitude the walk meets: the slab test's rounding error is
+        // relative to it (rays start on the root box, see `segments`).
+        let scale = (0..3)
+            .map(|a| root.min[a].abs().max(root.max[a].abs()))
+            .fold(0.0f64, f64::max)
+            .max(f64::MIN_POSITIVE);
+        // How far the `f32` boxes are widened: about a hundred times the slab test's
+        // rounding (a few units of 2^-24 of `scale`) for a ray that starts on the root box.
+        let pad = scale * (2.0f64).powi(-16);
+        let mut walk = Walk {
+            min: root.min,
+            max: root.max,
+            root: None,
+            inner: Vec::new(),
+            leaves: Vec::new(),
+        };
+        let lo32 = |v: f64| {
+            let x = (v - pad) as f32;
+            if f64::from(x) > v - pad {
+                x.next_down()
+            } else {
+                x
+            }
+        };
+        let hi32 = |v: f64| {
+            let x = (v + pad) as f32;
+            if f64::from(x) < v + pad {
+                x.next_up()
+            } else {
+                x
+            }
+        };
+        // Top-down from the root; an inner node's slot is filled once its children have
+        // references.
+        let mut todo: Vec<(u32, Option<(usize, usize)>)> = vec![((nodes.len() - 1) as u32, None)];
+        while let Some((n, parent)) = todo.pop() {
+            let node = &nodes[n as usize];
+            let r = if node.axis == LEAF {
+                walk.leaves.push(WalkLeaf {
+                    min: node.min,
+                    max: node.max,
+                    region: node.a,
+                    first: node.b,
+                    lattices: node.lattices,
+                    inexact: node.inexact,
+                });
+                LEAF_REF | (walk.leaves.len() - 1) as u32
+            } else {
+                let i = walk.inner.len();
+                let (a, b) = (&nodes[node.a as usize], &nodes[node.b as usize]);
+                walk.inner.push(WalkInner {
+                    lo: std::array::from_fn(|k| [lo32(a.min[k]), lo32(b.min[k])]),
+                    hi: std::array::from_fn(|k| [hi32(a.max[k]), hi32(b.max[k])]),
+                    child: [u32::MAX; 2],
+                    axis: node.axis,
+                });
+                todo.push((node.b, Some((i, 1))));
+                todo.push((node.a, Some((i, 0))));
+                i as u32
+            };
+            match parent {
+                None => walk.root = Some(r),
+                Some((p, side)) => walk.inner[p].child[side] = r,
+            }
+        }
+        walk
+    }
+}
+
+/// Whether the ray `o + t d` meets each child box of `node` for some `t` in `[t0, t1]`.
+/// `inv` is `1/d` with every infinite component (a ray parallel to that axis) replaced
+/// by `±f32::MAX`: then no `0 · ∞` arises, so no NaN, and the test needs no branch; a
+/// parallel ray outside a slab gets a huge entry or a huge negative exit and is rejected,
+/// one inside it gets no constraint. Straight-line code over both children, which the
+/// compiler keeps in vector registers.
+#[inline(always)]
+fn meets(node: &WalkInner, o: &[f32; 3], inv: &[f32; 3], t0: f32, t1: f32) -> [bool; 2] {
+    let (mut near, mut far) = ([t0; 2], [t1; 2]);
+    for a in 0..3 {
+        for c in 0..2 {
+            let ta = (node.lo[a][c] - o[a]) * inv[a];
+            let tb = (node.hi[a][c] - o[a]) * inv[a];
+            let (enter, exit) = if ta < tb { (ta, tb) } else { (tb, ta) };
+            near[c] = if enter > near[c] { enter } else { near[c] };
+            far[c] = if exit < far[c] { exit } else { far[c] };
+        }
+    }
+    [near[0] <= far[0], near[1] <= far[1]]
 }
 
 impl ActiveTree {
@@ -163,11 +305,12 @@ impl ActiveTree {
         if let Some(better) = surface_area_tree(&nodes) {
             nodes = better;
         }
+        let walk = Walk::of(&nodes);
         Some(ActiveTree {
             field,
             value_bits: value.to_bits(),
-            nodes,
             lattices,
+            walk,
         })
     }
 
@@ -186,46 +329,84 @@ impl ActiveTree {
         stack: &mut Vec<(u32, f64, f64)>,
         mut f: F,
     ) {
-        if self.nodes.is_empty() || t_min >= t_max || t_min.is_nan() || t_max.is_nan() {
+        let walk = &self.walk;
+        let Some(root) = walk.root else {
+            return;
+        };
+        if t_min >= t_max || t_min.is_nan() || t_max.is_nan() {
             return;
         }
         let inv = inverse(&d);
+        let Some((r0, r1)) = ray_box(&walk.min, &walk.max, &o, &inv, t_min, t_max) else {
+            return;
+        };
+        // The `f32` tests run on the ray moved to start where it enters the root box, so
+        // that their rounding is relative to the data's size, not to the camera's
+        // distance; the widened boxes cover it. A ray parallel to every axis (no finite
+        // entry) keeps its origin: only the parallel checks apply to it.
+        let (o32, t_hi): ([f32; 3], f32) = if r0.is_finite() && r1.is_finite() {
+            let start: [f64; 3] = std::array::from_fn(|a| o[a] + r0 * d[a]);
+            (start.map(|v| v as f32), ((r1 - r0) * (1.0 + 1e-4)) as f32)
+        } else {
+            (o.map(|v| v as f32), f32::INFINITY)
+        };
+        let t_lo = -t_hi.min(1.0) * 1e-4 - f32::MIN_POSITIVE;
+        let inv32 = inv.map(|v| {
+            let x = v as f32;
+            if x.is_finite() {
+                x
+            } else {
+                f32::MAX.copysign(x)
+            }
+        });
         stack.clear();
-        stack.push(((self.nodes.len() - 1) as u32, t_min, t_max));
-        while let Some((mut n, _, _)) = stack.pop() {
-            loop {
-                let node = &self.nodes[n as usize];
-                let Some((s0, s1)) = ray_box(&node.min, &node.max, &o, &inv, t_min, t_max) else {
-                    break;
-                };
-                if node.axis == LEAF {
-                    let [mn, mx] = vol.range(node.a as usize, self.field);
-                    let first = node.b as usize;
-                    let lattices = self
-                        .lattices
-                        .get(first..first + usize::from(node.lattices))
-                        .unwrap_or(&[]);
-                    let seg = Segment {
-                        region: node.a,
-                        t0: s0,
-                        t1: s1,
-                        min: mn,
-                        max: mx,
-                    };
-                    if !f(seg, lattices, node.inexact) {
-                        return;
-                    }
-                    break;
-                }
+        let mut next = Some(root);
+        loop {
+            let Some(mut r) = next.take().or_else(|| stack.pop().map(|e| e.0)) else {
+                return;
+            };
+            while r & LEAF_REF == 0 {
+                let node = &walk.inner[r as usize];
+                let hit = meets(node, &o32, &inv32, t_lo, t_hi);
                 // The two children lie on the two sides of the split plane: the one on
                 // the side the ray starts from comes first.
-                let (near, far) = if d[node.axis as usize] > 0.0 {
-                    (node.a, node.b)
+                let (near, far) = if d[usize::from(node.axis)] > 0.0 {
+                    (0, 1)
                 } else {
-                    (node.b, node.a)
+                    (1, 0)
                 };
-                stack.push((far, 0.0, 0.0));
-                n = near;
+                match (hit[near], hit[far]) {
+                    (true, true) => {
+                        stack.push((node.child[far], 0.0, 0.0));
+                        r = node.child[near];
+                    }
+                    (true, false) => r = node.child[near],
+                    (false, true) => r = node.child[far],
+                    (false, false) => break,
+                }
+            }
+            if r & LEAF_REF == 0 {
+                continue;
+            }
+            let leaf = &walk.leaves[(r & !LEAF_REF) as usize];
+            let Some((s0, s1)) = ray_box(&leaf.min, &leaf.max, &o, &inv, t_min, t_max) else {
+                continue;
+            };
+            let [mn, mx] = vol.range(leaf.region as usize, self.field);
+            let first = leaf.first as usize;
+            let lattices = self
+                .lattices
+                .get(first..first + usize::from(leaf.lattices))
+                .unwrap_or(&[]);
+            let seg = Segment {
+                region: leaf.region,
+                t0: s0,
+                t1: s1,
+                min: mn,
+                max: mx,
+            };
+            if !f(seg, lattices, leaf.inexact) {
+                return;
             }
         }
     }
@@ -409,8 +590,8 @@ mod tests {
     }
 
     /// Rays from anywhere in every direction, rays along cell faces and level boundaries
-    /// (axis-parallel, on whole coordinates), rays starting inside, negative `t` ranges,
-    /// and data placed at 1e6: the active walk lists exactly the regions the file's walk
+    /// (axis-parallel, on whole coordinates), rays starting inside or far away, negative
+    /// `t` ranges, and data placed at 1e6: the active walk lists exactly the regions the file's walk
     /// lets `exact` search, in the same order, with bit-identical `t`.
     #[test]
     fn the_active_walk_gives_the_file_walks_segments_bit_for_bit() {
@@ -447,6 +628,18 @@ mod tests {
                         rays.push((o, d2, (0.0, 100.0)));
                     }
                 }
+                // Rays from far away (the walk's `f32` boxes are tested on the ray
+                // moved to the data's box) aimed at whole and half coordinates, where
+                // region faces and level boundaries lie.
+                for k in 0..200 {
+                    let target: [f64; 3] = std::array::from_fn(|a| {
+                        c[a] + ((24.0 * (lcg(&mut seed) - 0.5)) * 2.0).round() / 2.0
+                    });
+                    let d: [f64; 3] = std::array::from_fn(|_| lcg(&mut seed) - 0.5);
+                    let far = [1e2, 1e4, 1e6][k % 3];
+                    let o: [f64; 3] = std::array::from_fn(|a| target[a] - far * d[a]);
+                    rays.push((o, d, (0.0, f64::INFINITY)));
+                }
                 for (o, d, t) in rays {
                     let [file, active] = both(&vol, iso, o, d, t);
                     assert_eq!(file, active, "iso {iso}, ray {o:?} + t {d:?}, t in {t:?}");
@@ -471,7 +664,7 @@ mod tests {
         let mut stack = Vec::new();
         for iso in [-1e3, 1e3, f64::NAN] {
             let tree = ActiveTree::build(&vol, 0, iso).expect("a valid tree");
-            assert!(tree.nodes.is_empty(), "iso {iso}");
+            assert!(tree.walk.root.is_none(), "iso {iso}");
             let mut n = 0;
             tree.segments(
                 &vol,
@@ -488,7 +681,7 @@ mod tests {
             assert_eq!(n, 0);
         }
         let a = vol.active_tree(0, 3.0).expect("field 0");
-        assert!(!a.nodes.is_empty());
+        assert!(a.walk.root.is_some());
         assert!(std::sync::Arc::ptr_eq(
             &a,
             &vol.active_tree(0, 3.0).expect("field 0")
