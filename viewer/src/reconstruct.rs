@@ -77,6 +77,32 @@ fn brick_axes(b: &BrickN, p: &[f64; 3]) -> Option<[Axis; 3]> {
     Some(axes)
 }
 
+/// A brick of a region as `exact` reads it along one ray segment (see
+/// [`Volume::dual_bricks`]): the numbers of [`BrickN`] the dual-cell test and the cubic use,
+/// with the row and slice strides.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct DualBrick {
+    origin: [f64; 3],
+    inv_w: f64,
+    dims: [i64; 3],
+    first: usize,
+    nx: usize,
+    nxy: usize,
+}
+
+/// [`brick_axes`] from the continuous cell index `u` already computed.
+#[inline(always)]
+fn dual_axes(b: &DualBrick, u: &[f64; 3]) -> Option<[Axis; 3]> {
+    let mut axes = [Axis::default(); 3];
+    for a in 0..3 {
+        axes[a] = axis_cells(u[a], b.dims[a], b.inv_w);
+        if axes[a].n == 0 {
+            return None;
+        }
+    }
+    Some(axes)
+}
+
 /// Coefficients (in `x = (t - ta) / h`, `x ∈ [0, 1]`) of `g(t) = Σ H_C(t) (v_C - iso)` along a
 /// ray over an interval lying in one dual cell of every lattice of the region — there `g`
 /// is a cubic. `g` and `B - iso` have the same sign and the same roots where `Σ H > 0`.
@@ -283,9 +309,164 @@ impl Volume<'_> {
         })
     }
 
+    /// The bricks of region `r` as [`Volume::cubic_in`] reads them, into `out` (cleared
+    /// first): `exact` converts them from the file once per region segment instead of once
+    /// per interval.
+    pub(crate) fn dual_bricks(&self, r: usize, out: &mut Vec<DualBrick>) {
+        out.clear();
+        out.extend(self.region_brick_ids(r).iter().map(|b| {
+            let br = self.brick(b.to_native());
+            let nx = br.dims[0] as usize;
+            DualBrick {
+                origin: br.origin,
+                inv_w: br.inv_w,
+                dims: br.dims,
+                first: br.first,
+                nx,
+                nxy: nx * br.dims[1] as usize,
+            }
+        }));
+    }
+
+    /// The cubic `g(x) = Σ H_C (v_C - iso)` along `o + t d` for `t = ta + x (tb - ta)`,
+    /// valid when `[ta, tb]` lies inside one dual cell of every lattice of the region whose
+    /// bricks are `bricks` (from [`Volume::dual_bricks`]; cells are collected at the
+    /// interval's midpoint).
+    ///
+    /// The same numbers as [`Volume::cubic`] (same cells, same operations in the same
+    /// order), with the brick conversions hoisted out and, where all eight corners of a
+    /// brick's dual cell exist (everywhere but its outer cell layer), the dual-cell test
+    /// read as eight fixed offsets instead of the general per-axis loops.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    pub(crate) fn cubic_in(
+        &self,
+        bricks: &[DualBrick],
+        o: &[f64; 3],
+        d: &[f64; 3],
+        ta: f64,
+        tb: f64,
+        f: usize,
+        iso: f64,
+    ) -> Cubic {
+        let tm = 0.5 * (ta + tb);
+        let pm: [f64; 3] = std::array::from_fn(|a| o[a] + tm * d[a]);
+        let (mut any_above, mut any_below) = (false, false);
+        let vals = self.values[f];
+        for br in bricks {
+            let u: [f64; 3] = std::array::from_fn(|a| (pm[a] - br.origin[a]) * br.inv_w);
+            let inner = (0..3).all(|a| u[a] >= 0.0 && u[a] < (br.dims[a] - 1) as f64);
+            if inner {
+                // floor(u) ≥ 0 and floor(u) + 1 < dim on every axis: all eight corners, in
+                // the order the general loops visit them (the order does not matter to
+                // the test, only to the sums below, which keep the general loops).
+                let i = u.map(|x| x as usize);
+                let base = br.first + i[0] + i[1] * br.nx + i[2] * br.nxy;
+                let (nx, nxy) = (br.nx, br.nxy);
+                for off in [0, nx, nxy, nxy + nx] {
+                    let a = vals[base + off].to_native() as f64 - iso;
+                    let b = vals[base + off + 1].to_native() as f64 - iso;
+                    any_above |= (a >= 0.0) | (b >= 0.0);
+                    any_below |= (a < 0.0) | (b < 0.0);
+                }
+            } else {
+                let Some([ax, ay, az]) = dual_axes(br, &u) else {
+                    continue;
+                };
+                for k in 0..az.n {
+                    let zoff = br.first + az.idx[k] as usize * br.nxy;
+                    for j in 0..ay.n {
+                        let yoff = zoff + ay.idx[j] as usize * br.nx;
+                        for i in 0..ax.n {
+                            let v = vals[yoff + ax.idx[i] as usize].to_native() as f64 - iso;
+                            any_above |= v >= 0.0;
+                            any_below |= v < 0.0;
+                        }
+                    }
+                }
+            }
+            if any_above && any_below {
+                // Both sides seen: the polynomial is needed whatever the other bricks hold.
+                break;
+            }
+        }
+        if !(any_above && any_below) {
+            return Cubic {
+                c: [0.0; 4],
+                weight: [0.0; 4],
+                any_above,
+                any_below,
+            };
+        }
+        let h = tb - ta;
+        let mut c = [0.0f64; 4];
+        let mut wc = [0.0f64; 4];
+        for br in bricks {
+            let u: [f64; 3] = std::array::from_fn(|a| (pm[a] - br.origin[a]) * br.inv_w);
+            let Some(axes) = dual_axes(br, &u) else {
+                continue;
+            };
+            // Tent of each candidate cell as a linear function `l0 + l1 x` of x.
+            let mut lin = [[[0.0f64; 2]; 2]; 3];
+            for a in 0..3 {
+                let u0 = (o[a] + ta * d[a] - br.origin[a]) * br.inv_w;
+                let du = h * d[a] * br.inv_w;
+                for k in 0..axes[a].n {
+                    let i = axes[a].idx[k] as f64;
+                    // Sign of (u - i) over the interval, from the midpoint.
+                    lin[a][k] = if u[a] >= i {
+                        [1.0 - (u0 - i), -du]
+                    } else {
+                        [1.0 + (u0 - i), du]
+                    };
+                }
+            }
+            let [ax, ay, az] = axes;
+            for k in 0..az.n {
+                let zoff = br.first + az.idx[k] as usize * br.nxy;
+                let lz = lin[2][k];
+                for j in 0..ay.n {
+                    let yoff = zoff + ay.idx[j] as usize * br.nx;
+                    let ly = lin[1][j];
+                    // Σ_i (v - iso) lx_i: a linear function.
+                    let (mut s0, mut s1) = (0.0, 0.0);
+                    let (mut w0, mut w1) = (0.0, 0.0);
+                    for i in 0..ax.n {
+                        w0 += lin[0][i][0];
+                        w1 += lin[0][i][1];
+                        let v = vals[yoff + ax.idx[i] as usize].to_native() as f64 - iso;
+                        s0 += v * lin[0][i][0];
+                        s1 += v * lin[0][i][1];
+                    }
+                    // × ly × lz.
+                    let q = [s0 * ly[0], s0 * ly[1] + s1 * ly[0], s1 * ly[1]];
+                    c[0] += q[0] * lz[0];
+                    c[1] += q[0] * lz[1] + q[1] * lz[0];
+                    c[2] += q[1] * lz[1] + q[2] * lz[0];
+                    c[3] += q[2] * lz[1];
+                    let q = [w0 * ly[0], w0 * ly[1] + w1 * ly[0], w1 * ly[1]];
+                    wc[0] += q[0] * lz[0];
+                    wc[1] += q[0] * lz[1] + q[1] * lz[0];
+                    wc[2] += q[1] * lz[1] + q[2] * lz[0];
+                    wc[3] += q[2] * lz[1];
+                }
+            }
+        }
+        Cubic {
+            c,
+            weight: wc,
+            any_above,
+            any_below,
+        }
+    }
+
     /// The cubic `g(x) = Σ H_C (v_C - iso)` along `o + t d` for `t = ta + x (tb - ta)`,
     /// valid when `[ta, tb]` lies inside one dual cell of every lattice of region `r`
     /// (cells are collected at the interval's midpoint).
+    ///
+    /// The straightforward evaluation (bricks read from the file per call) that
+    /// [`Volume::cubic_in`] must reproduce bit for bit.
+    #[cfg(test)]
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn cubic(
         &self,

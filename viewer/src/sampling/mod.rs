@@ -233,6 +233,8 @@ pub struct Tracer<'v> {
     probe_hint: Option<u32>,
     /// The regions `exact` walks for the current iso value (fetched on its first ray).
     active: Option<std::sync::Arc<crate::active::ActiveTree>>,
+    /// The bricks of the region `exact` is searching (scratch, refilled per segment).
+    bricks: Vec<crate::reconstruct::DualBrick>,
 }
 
 impl<'v> Tracer<'v> {
@@ -245,6 +247,7 @@ impl<'v> Tracer<'v> {
             stack: Vec::with_capacity(64),
             probe_hint: None,
             active: None,
+            bricks: Vec::new(),
         }
     }
 
