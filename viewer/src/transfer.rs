@@ -132,8 +132,15 @@ impl Transfer {
     #[inline]
     pub(crate) fn may_contribute(&self, min: f32, max: f32) -> bool {
         let (lo, hi) = self.band();
-        (max as f64) >= lo && (min as f64) <= hi
+        range_meets(min, max, lo, hi)
     }
+}
+
+/// Whether the value range `[min, max]` meets the band `[lo, hi]`: the one test of
+/// which regions can contribute.
+#[inline]
+pub(crate) fn range_meets(min: f32, max: f32, lo: f64, hi: f64) -> bool {
+    (max as f64) >= lo && (min as f64) <= hi
 }
 
 /// Bins of the [`PreIntegrated`] table over the band.

@@ -49,6 +49,15 @@ pub struct RegionN {
     pub finest_w: f64,
 }
 
+/// Field and band (as bits) of an [`ActiveBox`].
+type ActiveBoxKey = (usize, u64, u64);
+/// A local box, `min > max` when empty.
+type ActiveBox = ([f64; 3], [f64; 3]);
+
+/// How many bands' boxes a volume keeps (a view, its shadow rays, a window flipping
+/// between a few values).
+const KEEP_BOXES: usize = 4;
+
 /// The volume as the ray caster sees it.
 pub struct Volume<'a> {
     /// World position of the local frame's origin (`world = local + frame`).
@@ -67,6 +76,9 @@ pub struct Volume<'a> {
     packed: Vec<std::sync::OnceLock<crate::traverse::Packed>>,
     /// The last few trees of regions that one iso value can touch (see [`crate::active`]).
     active: crate::active::ActiveCache,
+    /// The last few boxes of the regions that can contribute to a band (see
+    /// [`Volume::active_box`]), newest last.
+    active_boxes: std::sync::Mutex<Vec<(ActiveBoxKey, ActiveBox)>>,
     /// Every region's box (its KD leaf's cell) and step width, derived on first use: the
     /// file stores neither (format 3).
     region_table: std::sync::OnceLock<Vec<RegionN>>,
@@ -123,6 +135,7 @@ impl<'a> Volume<'a> {
                 .collect(),
             active: Default::default(),
             region_table: std::sync::OnceLock::new(),
+            active_boxes: Default::default(),
             finest_w: if finest_w.is_finite() { finest_w } else { 1.0 },
         })
     }
@@ -244,6 +257,40 @@ impl<'a> Volume<'a> {
         self.region_table().iter().copied()
     }
 
+    /// The box (local frame) of every region whose range of field `f` meets `[lo, hi]`;
+    /// empty (`min > max`) when none does. One pass over the regions the first time a
+    /// (field, band) is asked for; a frame asks once, and the volume keeps the last few
+    /// answers, so frames of an unchanged view cost nothing here.
+    pub fn active_box(&self, f: usize, lo: f64, hi: f64) -> ([f64; 3], [f64; 3]) {
+        let key = (f, lo.to_bits(), hi.to_bits());
+        // A poisoned lock only means another thread panicked while holding it; the list
+        // itself is always whole.
+        let mut boxes = self.active_boxes.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(i) = boxes.iter().position(|(k, _)| *k == key) {
+            let entry = boxes.remove(i);
+            boxes.push(entry);
+            return entry.1;
+        }
+        let mut min = [f64::INFINITY; 3];
+        let mut max = [f64::NEG_INFINITY; 3];
+        if f < self.fields.len() {
+            for (r, reg) in self.regions().enumerate() {
+                let [mn, mx] = self.range(r, f);
+                if crate::transfer::range_meets(mn, mx, lo, hi) {
+                    for a in 0..3 {
+                        min[a] = min[a].min(reg.min[a]);
+                        max[a] = max[a].max(reg.max[a]);
+                    }
+                }
+            }
+        }
+        if boxes.len() == KEEP_BOXES {
+            boxes.remove(0);
+        }
+        boxes.push((key, (min, max)));
+        (min, max)
+    }
+
     /// Local cell width of a segment's region (the finest width for a skipped subtree).
     #[inline]
     pub fn step_width(&self, region: u32) -> f64 {
@@ -285,5 +332,59 @@ impl<'a> Volume<'a> {
     #[inline]
     pub(crate) fn value(&self, f: usize, idx: usize) -> f32 {
         self.values[f][idx].to_native()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testvol;
+
+    /// The box of the regions that can contribute is the union over exactly those regions
+    /// (checked by brute force over every region), for bands that meet some, all or none;
+    /// asking again gives the kept answer, and other bands and fields get their own.
+    #[test]
+    fn active_box_is_the_union_of_the_regions_meeting_the_band() {
+        let f = |p: [f64; 3]| p[0] + 0.25 * p[1] - 0.5 * p[2];
+        let g = |p: [f64; 3]| -p[0];
+        let file = testvol::nested(6, [3.0, -2.0, 1e5], &[("f", &f), ("g", &g)], 3);
+        let view = testvol::open(&file).expect("opens");
+        let vol = Volume::new(&view).expect("volume");
+        // f runs over about -50003..-49982 and g over -15..-3 in the grid.
+        for (field, lo, hi, some) in [
+            (0, -49995.0, -49995.0, true),
+            (0, -49990.0, -49985.0, true),
+            (1, -10.0, -8.0, true),
+            (0, -1e9, 1e9, true),
+            (0, 1e9, 2e9, false),
+        ] {
+            let (mut min, mut max) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+            let mut any = false;
+            for r in 0..vol.region_count() {
+                let [mn, mx] = vol.range(r, field);
+                if (mx as f64) >= lo && (mn as f64) <= hi {
+                    any = true;
+                    let reg = vol.region(r);
+                    for a in 0..3 {
+                        min[a] = min[a].min(reg.min[a]);
+                        max[a] = max[a].max(reg.max[a]);
+                    }
+                }
+            }
+            let got = vol.active_box(field, lo, hi);
+            assert_eq!(got, (min, max), "field {field}, band {lo}..{hi}");
+            assert_eq!(any, some, "field {field}, band {lo}..{hi}");
+            assert_eq!(any, (0..3).all(|a| got.0[a] <= got.1[a]));
+            if field == 1 {
+                // g = -x between -10 and -8: a slab, narrower in x than the data.
+                assert!(
+                    (0..3).any(|a| got.0[a] > vol.bounds_min[a] || got.1[a] < vol.bounds_max[a])
+                );
+            }
+            assert_eq!(vol.active_box(field, lo, hi), got, "kept");
+        }
+        // A field the file does not have: nothing contributes.
+        let (min, max) = vol.active_box(7, -1e9, 1e9);
+        assert!(min[0] > max[0]);
     }
 }

@@ -121,20 +121,9 @@ impl Params {
     /// the strategies that track the side of skipped space take an entry sample in the first
     /// region they process, so nothing is lost by starting there.
     pub fn clip_to_active(&mut self, vol: &Volume) {
-        let tf = self.tf;
-        let mut lo = [f64::INFINITY; 3];
-        let mut hi = [f64::NEG_INFINITY; 3];
-        for (r, reg) in vol.regions().enumerate() {
-            let [mn, mx] = vol.range(r, self.field);
-            if tf.may_contribute(mn, mx) {
-                for a in 0..3 {
-                    lo[a] = lo[a].min(reg.min[a]);
-                    hi[a] = hi[a].max(reg.max[a]);
-                }
-            }
-        }
+        let (lo, hi) = self.tf.band();
         // Nothing can contribute: an empty box (min > max) that no ray enters.
-        self.clip = Some((lo, hi));
+        self.clip = Some(vol.active_box(self.field, lo, hi));
     }
 }
 
