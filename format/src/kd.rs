@@ -420,16 +420,17 @@ impl WalkNodes for FileNodes<'_> {
 }
 
 /// Per node of `tree` reached from its root, in depth-first, left-first order (parents
-/// before children): the node, its children's positions in this list, the range of one
-/// field over its subtree (`range(region)` gives a region's) and whether every leaf below
-/// holds a region. Empty leaves get the empty range (`+∞..−∞`). What a reader that skips
-/// by subtree ranges builds once per field (the file stores no per-node ranges).
+/// before children, the root first): the node with its children as positions in this
+/// list, the range of one field over its subtree (`range(region)` gives a region's) and
+/// whether every leaf below holds a region. Empty leaves get the empty range (`+∞..−∞`).
+/// What a reader that skips by subtree ranges builds once per field (the file stores no
+/// per-node ranges); the list is itself a [`WalkNodes`] store (the viewer walks it).
 pub fn subtree_ranges<T: KdTree + ?Sized>(
     tree: &T,
     range: impl Fn(u32) -> Option<(f32, f32)>,
-) -> Vec<SubtreeEntry> {
+) -> Vec<RangedNode> {
     let empty = (f32::INFINITY, f32::NEG_INFINITY);
-    let mut out: Vec<SubtreeEntry> = Vec::with_capacity(tree.node_count() * 2 + 1);
+    let mut out: Vec<RangedNode> = Vec::with_capacity(tree.node_count() * 2 + 1);
     let mut budget = tree.node_count().saturating_mul(2).saturating_add(1);
     // (reference, parent position and side)
     let mut todo: Vec<(u32, Option<(usize, bool)>)> = vec![(tree.root(), None)];
@@ -438,57 +439,113 @@ pub fn subtree_ranges<T: KdTree + ?Sized>(
             break;
         }
         budget -= 1;
-        let node = tree.node(n).unwrap_or(Node::Leaf(None));
         let i = out.len();
-        let (range, full) = match node {
-            Node::Leaf(Some(r)) => (range(r).unwrap_or(empty), true),
-            Node::Leaf(None) => (empty, false),
-            Node::Inner { left, right, .. } => {
+        out.push(match tree.node(n).unwrap_or(Node::Leaf(None)) {
+            Node::Inner {
+                axis,
+                split,
+                left,
+                right,
+            } => {
                 todo.push((right, Some((i, false))));
                 todo.push((left, Some((i, true))));
-                (empty, true)
+                RangedNode::inner(axis, split, empty)
             }
-        };
-        out.push(SubtreeEntry {
-            node,
-            children: [u32::MAX; 2],
-            range,
-            full,
+            Node::Leaf(Some(r)) => RangedNode::leaf(Some(r), range(r).unwrap_or(empty)),
+            Node::Leaf(None) => RangedNode::leaf(None, empty),
         });
         if let Some((p, left)) = parent {
-            out[p].children[usize::from(!left)] = i as u32;
+            if left {
+                out[p].a = i as u32;
+            } else {
+                out[p].b = i as u32;
+            }
         }
     }
     // Children come after parents: fold back to front.
     for i in (0..out.len()).rev() {
-        if !matches!(out[i].node, Node::Inner { .. }) {
+        if out[i].axis == RangedNode::LEAF {
             continue;
         }
-        let (mut full, mut range) = (true, empty);
-        for c in out[i].children {
+        let (mut full, mut lo, mut hi) = (true, empty.0, empty.1);
+        for c in [out[i].a, out[i].b] {
             match out.get(c as usize) {
                 Some(child) => {
                     full &= child.full;
-                    range = (range.0.min(child.range.0), range.1.max(child.range.1));
+                    lo = lo.min(child.min);
+                    hi = hi.max(child.max);
                 }
                 None => full = false,
             }
         }
         out[i].full = full;
-        out[i].range = range;
+        out[i].min = lo;
+        out[i].max = hi;
     }
     out
 }
 
-/// One node of [`subtree_ranges`].
+/// A node of [`subtree_ranges`] with its subtree's range of one field (32 bytes: half a
+/// cache line, so a walk reads node and range with one load).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SubtreeEntry {
-    pub node: Node,
-    /// Positions of the left and right child in the list (`u32::MAX`: none, a leaf).
-    pub children: [u32; 2],
+pub struct RangedNode {
+    /// Split plane as stored (inner nodes).
+    pub split: f64,
+    /// Inner: position of the left child; leaf: the region, or `u32::MAX` for empty space.
+    pub a: u32,
+    /// Inner: position of the right child.
+    pub b: u32,
     /// Range of the field over the subtree.
-    pub range: (f32, f32),
+    pub min: f32,
+    pub max: f32,
+    /// 0..=2: inner node splitting this axis; [`RangedNode::LEAF`]: a leaf.
+    pub axis: u8,
+    /// Every leaf below holds a region.
     pub full: bool,
+}
+
+impl RangedNode {
+    /// [`RangedNode::axis`] of a leaf.
+    pub const LEAF: u8 = 3;
+
+    fn inner(axis: usize, split: f64, (min, max): (f32, f32)) -> Self {
+        RangedNode {
+            split,
+            a: u32::MAX,
+            b: u32::MAX,
+            min,
+            max,
+            axis: axis.min(2) as u8,
+            full: true,
+        }
+    }
+
+    fn leaf(region: Option<u32>, (min, max): (f32, f32)) -> Self {
+        RangedNode {
+            split: 0.0,
+            a: region.unwrap_or(u32::MAX),
+            b: 0,
+            min,
+            max,
+            axis: Self::LEAF,
+            full: region.is_some(),
+        }
+    }
+
+    /// The node, its children as positions in its list.
+    #[inline(always)]
+    pub fn node(&self) -> Node {
+        if self.axis < Self::LEAF {
+            Node::Inner {
+                axis: usize::from(self.axis),
+                split: self.split,
+                left: self.a,
+                right: self.b,
+            }
+        } else {
+            Node::Leaf((self.a != u32::MAX).then_some(self.a))
+        }
+    }
 }
 
 /// Calls `f` for every region the ray `o + t d` crosses within `[t_min, t_max]`, front to

@@ -320,3 +320,49 @@ fn deep_tree_spills_the_stack_and_stays_correct() {
     assert_eq!(query::region_at(f, [99.5, 0.5, 0.5]), Some(99));
     assert_eq!(query::region_at(f, [0.0, 0.5, 0.5]), Some(0));
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    /// The per-subtree ranges a reader derives (`kd::subtree_ranges`) against brute force:
+    /// every node's range is the union of its leaves' region ranges, `full` says no leaf
+    /// below is empty, parents come before children, and every region is one leaf.
+    #[test]
+    fn subtree_ranges_match_brute_force(seed in any::<u64>()) {
+        let (view, _) = open(seed);
+        let file = view.file();
+        let nf = file.fields.len();
+        let field = (seed % nf as u64) as usize;
+        let range = |r: u32| query::region_range(file, r, field);
+        let list = kd::subtree_ranges(&kd::file_tree(file), range);
+        prop_assert!(!list.is_empty());
+        // Leaves below each position, by recursion over the list.
+        fn leaves(list: &[kd::RangedNode], i: usize, out: &mut Vec<Option<u32>>) {
+            match list[i].node() {
+                kd::Node::Inner { left, right, .. } => {
+                    assert!(left as usize > i && right as usize > i, "parent first");
+                    leaves(list, left as usize, out);
+                    leaves(list, right as usize, out);
+                }
+                kd::Node::Leaf(r) => out.push(r),
+            }
+        }
+        for (i, n) in list.iter().enumerate() {
+            let mut below = Vec::new();
+            leaves(&list, i, &mut below);
+            prop_assert_eq!(n.full, below.iter().all(|r| r.is_some()));
+            let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+            for r in below.into_iter().flatten() {
+                let (a, b) = range(r).expect("region range");
+                lo = lo.min(a);
+                hi = hi.max(b);
+            }
+            prop_assert_eq!((n.min, n.max), (lo, hi), "node {}", i);
+        }
+        let mut all = Vec::new();
+        leaves(&list, 0, &mut all);
+        let mut regions: Vec<u32> = all.into_iter().flatten().collect();
+        regions.sort_unstable();
+        prop_assert_eq!(regions, (0..file.regions.len() as u32).collect::<Vec<_>>());
+    }
+}

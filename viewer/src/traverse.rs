@@ -10,68 +10,26 @@
 //! and a field that is never traversed is never packed.
 
 pub use format::kd::{inverse, ray_box, Segment, Skip, SKIPPED};
-use format::kd::{Node, WalkNodes};
+use format::kd::{Node, RangedNode, WalkNodes};
 
 use crate::volume::Volume;
 
-/// A KD node with one field's range and fullness (one half cache line).
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct PackedNode {
-    /// Split plane as stored (world), inner nodes.
-    split: f64,
-    /// Inner: left child; leaf: region or `u32::MAX` for empty space.
-    a: u32,
-    /// Inner: right child.
-    b: u32,
-    min: f32,
-    max: f32,
-    /// 0..=2: inner node splitting this axis; 3: leaf.
-    axis: u8,
-    full: bool,
-}
-
-/// A field's packed tree.
-pub(crate) struct Packed(Vec<PackedNode>);
+/// A field's packed tree: [`format::kd::subtree_ranges`] of the file's tree, node, range
+/// and fullness in one 32-byte record per node, the root first.
+pub(crate) struct Packed(Vec<RangedNode>);
 
 impl Packed {
-    /// Field `field`'s packed tree: nodes in depth-first, left-first order, the root
-    /// first.
     pub fn build(file: &format::ArchivedBrickFile, field: usize) -> Packed {
         let nf = file.fields.len();
-        let entries = format::kd::subtree_ranges(&format::kd::file_tree(file), |r| {
-            let v = file
-                .region_ranges
-                .get((r as usize).checked_mul(nf)? + field)?;
-            (field < nf).then(|| (v.min.to_native(), v.max.to_native()))
-        });
-        Packed(
-            entries
-                .iter()
-                .map(|e| {
-                    let (min, max) = e.range;
-                    match e.node {
-                        Node::Inner { axis, split, .. } => PackedNode {
-                            split,
-                            a: e.children[0],
-                            b: e.children[1],
-                            min,
-                            max,
-                            axis: axis.min(2) as u8,
-                            full: e.full,
-                        },
-                        Node::Leaf(r) => PackedNode {
-                            split: 0.0,
-                            a: r.unwrap_or(u32::MAX),
-                            b: 0,
-                            min,
-                            max,
-                            axis: 3,
-                            full: e.full,
-                        },
-                    }
-                })
-                .collect(),
-        )
+        Packed(format::kd::subtree_ranges(
+            &format::kd::file_tree(file),
+            |r| {
+                let v = file
+                    .region_ranges
+                    .get((r as usize).checked_mul(nf)? + field)?;
+                (field < nf).then(|| (v.min.to_native(), v.max.to_native()))
+            },
+        ))
     }
 }
 
@@ -97,17 +55,7 @@ impl WalkNodes for Packed {
     }
     #[inline(always)]
     fn node(&self, n: u32) -> Option<Node> {
-        let p = self.0.get(n as usize)?;
-        Some(if p.axis < 3 {
-            Node::Inner {
-                axis: usize::from(p.axis),
-                split: p.split,
-                left: p.a,
-                right: p.b,
-            }
-        } else {
-            Node::Leaf((p.a != u32::MAX).then_some(p.a))
-        })
+        self.0.get(n as usize).map(RangedNode::node)
     }
     #[inline(always)]
     fn range(&self, n: u32) -> Option<(f32, f32)> {
@@ -120,17 +68,7 @@ impl WalkNodes for Packed {
     #[inline(always)]
     fn get(&self, n: u32) -> Option<format::kd::NodeEntry> {
         let p = self.0.get(n as usize)?;
-        let node = if p.axis < 3 {
-            Node::Inner {
-                axis: usize::from(p.axis),
-                split: p.split,
-                left: p.a,
-                right: p.b,
-            }
-        } else {
-            Node::Leaf((p.a != u32::MAX).then_some(p.a))
-        };
-        Some((node, Some((p.min, p.max)), p.full))
+        Some((p.node(), Some((p.min, p.max)), p.full))
     }
 }
 
