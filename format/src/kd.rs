@@ -228,7 +228,8 @@ pub fn locate<T: KdTree + ?Sized>(tree: &T, p: [f64; 3], shift: [f64; 3]) -> Opt
 }
 
 /// Calls `f(region, min, max)` for every leaf holding a region, with its cell (the box
-/// `min..max` cut by the splits on the way down, every number minus `shift`), in
+/// `min..max` cut by the splits on the way down, each clamped to its node's cell, every
+/// number minus `shift`), in
 /// depth-first, left-first order. A malformed tree yields fewer leaves (the walk stops
 /// after as many steps as a tree of that many nodes takes).
 pub fn leaf_cells<T: KdTree + ?Sized, F: FnMut(u32, [f64; 3], [f64; 3])>(
@@ -255,7 +256,9 @@ pub fn leaf_cells<T: KdTree + ?Sized, F: FnMut(u32, [f64; 3], [f64; 3])>(
                 right,
             }) => {
                 let a = axis.min(2);
-                let s = split - shift[a];
+                // Clamped to the cell: a split outside it leaves one child empty, as the
+                // descent and the ray walk see it, and no box reaches past its parent's.
+                let s = (split - shift[a]).max(lo[a]).min(hi[a]);
                 let (mut lhi, mut rlo) = (hi, lo);
                 lhi[a] = s;
                 rlo[a] = s;

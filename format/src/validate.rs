@@ -106,6 +106,17 @@ pub enum ValidationError {
     KdAxis { node: u32, axis: u8 },
     #[error("kd_nodes[{node}].split: NaN")]
     KdSplitNan { node: u32 },
+    /// A split outside the file's bounds on its axis would give a region a box reaching
+    /// past the data (a ray then stepped through 1e30 units of cells: found by the
+    /// `qbk_open` fuzz target).
+    #[error("kd_nodes[{node}].split: {split} on axis {axis} is outside the bounds {min}..{max}")]
+    KdSplitOutsideBounds {
+        node: u32,
+        split: f64,
+        axis: u8,
+        min: f64,
+        max: f64,
+    },
     #[error("kd_nodes[{node}]: child {child} out of range ({nodes} nodes)")]
     KdChildOutOfRange { node: u32, child: u32, nodes: usize },
     /// A node reached twice from the root (a node with two parents) or a child stored
@@ -357,8 +368,23 @@ fn check_kd(file: &ArchivedBrickFile) -> Result<(), ValidationError> {
                 axis: axes[n],
             });
         }
-        if node.split.to_native().is_nan() {
+        let split = node.split.to_native();
+        if split.is_nan() {
             return Err(ValidationError::KdSplitNan { node: i });
+        }
+        let a = usize::from(axes[n]);
+        let (lo, hi) = (
+            file.bounds.min[a].to_native(),
+            file.bounds.max[a].to_native(),
+        );
+        if !(split >= lo && split <= hi) {
+            return Err(ValidationError::KdSplitOutsideBounds {
+                node: i,
+                split,
+                axis: axes[n],
+                min: lo,
+                max: hi,
+            });
         }
         for child in [node.left.to_native(), node.right.to_native()] {
             if child & LEAF != 0 {

@@ -177,6 +177,18 @@ fn each_broken_invariant_is_named() {
     let mut f = base();
     f.kd_nodes[0].split = f64::NAN;
     refused!(f, "kd_nodes[0].split", V::KdSplitNan { node: 0 });
+    // A split far outside the bounds (the `qbk_open` fuzz target's timeout: a region's box
+    // reached 1e30 past the data, and `exact` stepped through it cell by cell).
+    for split in [1e30, -1e30, f64::INFINITY] {
+        let mut f = base();
+        let last = f.kd_nodes.len() - 1;
+        f.kd_nodes[last].split = split;
+        let e = refused(&f, "is outside the bounds");
+        assert!(
+            matches!(e, V::KdSplitOutsideBounds { node, .. } if node as usize == last),
+            "{e:?}"
+        );
+    }
     let mut f = base();
     for node in &mut f.kd_nodes {
         for c in [&mut node.left, &mut node.right] {

@@ -168,3 +168,50 @@ fn level_width_far_from_its_bricks_is_refused() {
     assert_eq!(vol.step_width(0), finest);
     assert_eq!(vol.region(0).finest_w, finest);
 }
+
+/// Fuzz timeout 2 (format 3): a KD split moved far outside the data gave a region a box
+/// reaching 1e30 units past it, and `exact` stepped through that box cell by cell for
+/// minutes. A split outside the bounds is now refused; a split inside the bounds but
+/// outside its own node's cell still opens, and every region's box stays inside the
+/// data (the cells are clamped), so every walk stays short.
+#[test]
+fn a_split_outside_its_cell_gives_no_box_past_the_data() {
+    let base = small_volume();
+    assert!(base.kd_nodes.len() > 2);
+    let mut far = base.clone();
+    let last = far.kd_nodes.len() - 1;
+    far.kd_nodes[last].split = 1e30;
+    let err = open(&far, "far_split.qbk").expect_err("a split outside the bounds");
+    assert!(
+        matches!(
+            err.kind,
+            FormatErrorKind::Invalid(ValidationError::KdSplitOutsideBounds { .. })
+        ) && err.to_string().contains("far_split.qbk"),
+        "{err}"
+    );
+    // Inside the bounds, outside the cell: every deeper node's split moved to a corner of
+    // the data, on its axis.
+    for corner in [0, 1] {
+        let mut odd = base.clone();
+        for (n, node) in odd.kd_nodes.iter_mut().enumerate().skip(1) {
+            let a = usize::from(base.kd_axes[n]);
+            node.split = if corner == 0 {
+                base.bounds.min[a]
+            } else {
+                base.bounds.max[a]
+            };
+        }
+        let view = open(&odd, "odd_split.qbk").expect("splits inside the bounds open");
+        let vol = Volume::new(&view).expect("volume");
+        for r in 0..vol.region_count() {
+            let reg = vol.region(r);
+            for a in 0..3 {
+                assert!(
+                    reg.min[a] >= vol.bounds_min[a] && reg.max[a] <= vol.bounds_max[a],
+                    "region {r} reaches past the data: {reg:?}"
+                );
+            }
+        }
+        walk(&view);
+    }
+}
