@@ -60,7 +60,7 @@ struct ActiveNode {
 /// searches, whether it walks the active tree or the file's.
 #[inline]
 pub(crate) fn range_holds(mn: f32, mx: f32, value: f64) -> bool {
-    mn as f64 <= value && value <= mx as f64
+    crate::transfer::range_meets(mn, mx, value, value)
 }
 
 /// The regions whose range of one field holds one value, in the file's tree order.

@@ -8,7 +8,7 @@
 //! slope), so the gradient is the one-sided derivative on lattice planes and the exact
 //! derivative everywhere else.
 
-use crate::volume::{BrickN, Volume};
+use crate::volume::{BrickN, StoredF32, Volume};
 
 /// Below this weight sum a point is treated as outside the data (outer support boundary).
 pub(crate) const MIN_WEIGHT: f64 = 1e-9;
@@ -67,14 +67,8 @@ fn axis_cells(u: f64, dim: i64, inv_w: f64) -> Axis {
 
 #[inline(always)]
 fn brick_axes(b: &BrickN, p: &[f64; 3]) -> Option<[Axis; 3]> {
-    let mut axes = [Axis::default(); 3];
-    for a in 0..3 {
-        axes[a] = axis_cells((p[a] - b.origin[a]) * b.inv_w, b.dims[a], b.inv_w);
-        if axes[a].n == 0 {
-            return None;
-        }
-    }
-    Some(axes)
+    let u: [f64; 3] = std::array::from_fn(|a| (p[a] - b.origin[a]) * b.inv_w);
+    cells_at(&u, &b.dims, b.inv_w)
 }
 
 /// A brick of a region as `exact` reads it along one ray segment (see
@@ -93,14 +87,97 @@ pub(crate) struct DualBrick {
 /// [`brick_axes`] from the continuous cell index `u` already computed.
 #[inline(always)]
 fn dual_axes(b: &DualBrick, u: &[f64; 3]) -> Option<[Axis; 3]> {
+    cells_at(u, &b.dims, b.inv_w)
+}
+
+/// The candidate cells on every axis at cell coordinates `u` of a brick of `dims` cells;
+/// `None` when an axis has none.
+#[inline(always)]
+fn cells_at(u: &[f64; 3], dims: &[i64; 3], inv_w: f64) -> Option<[Axis; 3]> {
     let mut axes = [Axis::default(); 3];
     for a in 0..3 {
-        axes[a] = axis_cells(u[a], b.dims[a], b.inv_w);
+        axes[a] = axis_cells(u[a], dims[a], inv_w);
         if axes[a].n == 0 {
             return None;
         }
     }
     Some(axes)
+}
+
+/// What the cubic's polynomial part reads of one brick (a [`BrickN`] or a [`DualBrick`]).
+struct BrickPart<'b> {
+    origin: &'b [f64; 3],
+    inv_w: f64,
+    first: usize,
+    nx: usize,
+    nxy: usize,
+}
+
+impl BrickPart<'_> {
+    /// Adds this brick's share of `Σ H_C (v_C − iso)` and of `Σ H_C` over `[ta, ta + h]`
+    /// (as cubics in `x`) to `c` and `wc`: `axes` are its candidate cells at the
+    /// interval's midpoint, whose cell coordinates are `u`.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn add_cubic(
+        &self,
+        vals: &[StoredF32],
+        axes: &[Axis; 3],
+        u: &[f64; 3],
+        o: &[f64; 3],
+        d: &[f64; 3],
+        ta: f64,
+        h: f64,
+        iso: f64,
+        c: &mut [f64; 4],
+        wc: &mut [f64; 4],
+    ) {
+        // Tent of each candidate cell as a linear function `l0 + l1 x` of x.
+        let mut lin = [[[0.0f64; 2]; 2]; 3];
+        for a in 0..3 {
+            let u0 = (o[a] + ta * d[a] - self.origin[a]) * self.inv_w;
+            let du = h * d[a] * self.inv_w;
+            for k in 0..axes[a].n {
+                let i = axes[a].idx[k] as f64;
+                // Sign of (u - i) over the interval, from the midpoint.
+                lin[a][k] = if u[a] >= i {
+                    [1.0 - (u0 - i), -du]
+                } else {
+                    [1.0 + (u0 - i), du]
+                };
+            }
+        }
+        let [ax, ay, az] = axes;
+        for k in 0..az.n {
+            let zoff = self.first + az.idx[k] as usize * self.nxy;
+            let lz = lin[2][k];
+            for j in 0..ay.n {
+                let yoff = zoff + ay.idx[j] as usize * self.nx;
+                let ly = lin[1][j];
+                // Σ_i (v - iso) lx_i: a linear function.
+                let (mut s0, mut s1) = (0.0, 0.0);
+                let (mut w0, mut w1) = (0.0, 0.0);
+                for i in 0..ax.n {
+                    w0 += lin[0][i][0];
+                    w1 += lin[0][i][1];
+                    let v = vals[yoff + ax.idx[i] as usize].to_native() as f64 - iso;
+                    s0 += v * lin[0][i][0];
+                    s1 += v * lin[0][i][1];
+                }
+                // × ly × lz.
+                let q = [s0 * ly[0], s0 * ly[1] + s1 * ly[0], s1 * ly[1]];
+                c[0] += q[0] * lz[0];
+                c[1] += q[0] * lz[1] + q[1] * lz[0];
+                c[2] += q[1] * lz[1] + q[2] * lz[0];
+                c[3] += q[2] * lz[1];
+                let q = [w0 * ly[0], w0 * ly[1] + w1 * ly[0], w1 * ly[1]];
+                wc[0] += q[0] * lz[0];
+                wc[1] += q[0] * lz[1] + q[1] * lz[0];
+                wc[2] += q[1] * lz[1] + q[2] * lz[0];
+                wc[3] += q[2] * lz[1];
+            }
+        }
+    }
 }
 
 /// Coefficients (in `x = (t - ta) / h`, `x ∈ [0, 1]`) of `g(t) = Σ H_C(t) (v_C - iso)` along a
@@ -406,51 +483,14 @@ impl Volume<'_> {
             let Some(axes) = dual_axes(br, &u) else {
                 continue;
             };
-            // Tent of each candidate cell as a linear function `l0 + l1 x` of x.
-            let mut lin = [[[0.0f64; 2]; 2]; 3];
-            for a in 0..3 {
-                let u0 = (o[a] + ta * d[a] - br.origin[a]) * br.inv_w;
-                let du = h * d[a] * br.inv_w;
-                for k in 0..axes[a].n {
-                    let i = axes[a].idx[k] as f64;
-                    // Sign of (u - i) over the interval, from the midpoint.
-                    lin[a][k] = if u[a] >= i {
-                        [1.0 - (u0 - i), -du]
-                    } else {
-                        [1.0 + (u0 - i), du]
-                    };
-                }
-            }
-            let [ax, ay, az] = axes;
-            for k in 0..az.n {
-                let zoff = br.first + az.idx[k] as usize * br.nxy;
-                let lz = lin[2][k];
-                for j in 0..ay.n {
-                    let yoff = zoff + ay.idx[j] as usize * br.nx;
-                    let ly = lin[1][j];
-                    // Σ_i (v - iso) lx_i: a linear function.
-                    let (mut s0, mut s1) = (0.0, 0.0);
-                    let (mut w0, mut w1) = (0.0, 0.0);
-                    for i in 0..ax.n {
-                        w0 += lin[0][i][0];
-                        w1 += lin[0][i][1];
-                        let v = vals[yoff + ax.idx[i] as usize].to_native() as f64 - iso;
-                        s0 += v * lin[0][i][0];
-                        s1 += v * lin[0][i][1];
-                    }
-                    // × ly × lz.
-                    let q = [s0 * ly[0], s0 * ly[1] + s1 * ly[0], s1 * ly[1]];
-                    c[0] += q[0] * lz[0];
-                    c[1] += q[0] * lz[1] + q[1] * lz[0];
-                    c[2] += q[1] * lz[1] + q[2] * lz[0];
-                    c[3] += q[2] * lz[1];
-                    let q = [w0 * ly[0], w0 * ly[1] + w1 * ly[0], w1 * ly[1]];
-                    wc[0] += q[0] * lz[0];
-                    wc[1] += q[0] * lz[1] + q[1] * lz[0];
-                    wc[2] += q[1] * lz[1] + q[2] * lz[0];
-                    wc[3] += q[2] * lz[1];
-                }
-            }
+            let part = BrickPart {
+                origin: &br.origin,
+                inv_w: br.inv_w,
+                first: br.first,
+                nx: br.nx,
+                nxy: br.nxy,
+            };
+            part.add_cubic(vals, &axes, &u, o, d, ta, h, iso, &mut c, &mut wc);
         }
         Cubic {
             c,
@@ -523,54 +563,16 @@ impl Volume<'_> {
             let Some(axes) = brick_axes(br, &pm) else {
                 continue;
             };
-            // Tent of each candidate cell as a linear function `l0 + l1 x` of x.
-            let mut lin = [[[0.0f64; 2]; 2]; 3];
-            for a in 0..3 {
-                let u0 = (o[a] + ta * d[a] - br.origin[a]) * br.inv_w;
-                let du = h * d[a] * br.inv_w;
-                for k in 0..axes[a].n {
-                    let i = axes[a].idx[k] as f64;
-                    // Sign of (u - i) over the interval, from the midpoint.
-                    let um = (pm[a] - br.origin[a]) * br.inv_w;
-                    lin[a][k] = if um >= i {
-                        [1.0 - (u0 - i), -du]
-                    } else {
-                        [1.0 + (u0 - i), du]
-                    };
-                }
-            }
-            let [ax, ay, az] = axes;
+            let u: [f64; 3] = std::array::from_fn(|a| (pm[a] - br.origin[a]) * br.inv_w);
             let nx = br.dims[0] as usize;
-            let nxy = nx * br.dims[1] as usize;
-            for k in 0..az.n {
-                let zoff = br.first + az.idx[k] as usize * nxy;
-                let lz = lin[2][k];
-                for j in 0..ay.n {
-                    let yoff = zoff + ay.idx[j] as usize * nx;
-                    let ly = lin[1][j];
-                    // Σ_i (v - iso) lx_i: a linear function.
-                    let (mut s0, mut s1) = (0.0, 0.0);
-                    let (mut w0, mut w1) = (0.0, 0.0);
-                    for i in 0..ax.n {
-                        w0 += lin[0][i][0];
-                        w1 += lin[0][i][1];
-                        let v = self.value(f, yoff + ax.idx[i] as usize) as f64 - iso;
-                        s0 += v * lin[0][i][0];
-                        s1 += v * lin[0][i][1];
-                    }
-                    // × ly × lz.
-                    let q = [s0 * ly[0], s0 * ly[1] + s1 * ly[0], s1 * ly[1]];
-                    c[0] += q[0] * lz[0];
-                    c[1] += q[0] * lz[1] + q[1] * lz[0];
-                    c[2] += q[1] * lz[1] + q[2] * lz[0];
-                    c[3] += q[2] * lz[1];
-                    let q = [w0 * ly[0], w0 * ly[1] + w1 * ly[0], w1 * ly[1]];
-                    wc[0] += q[0] * lz[0];
-                    wc[1] += q[0] * lz[1] + q[1] * lz[0];
-                    wc[2] += q[1] * lz[1] + q[2] * lz[0];
-                    wc[3] += q[2] * lz[1];
-                }
-            }
+            let part = BrickPart {
+                origin: &br.origin,
+                inv_w: br.inv_w,
+                first: br.first,
+                nx,
+                nxy: nx * br.dims[1] as usize,
+            };
+            part.add_cubic(vals, &axes, &u, o, d, ta, h, iso, &mut c, &mut wc);
         }
         Cubic {
             c,

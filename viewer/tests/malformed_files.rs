@@ -211,6 +211,14 @@ fn a_split_outside_its_cell_gives_no_box_past_the_data() {
                     "region {r} reaches past the data: {reg:?}"
                 );
             }
+            // Clamped cells still partition the data: no two boxes share interior (an
+            // unclamped cell of a split outside its node reaches into its neighbours).
+            for q in r + 1..vol.region_count() {
+                let other = vol.region(q);
+                let overlap =
+                    (0..3).all(|a| reg.min[a] < other.max[a] && other.min[a] < reg.max[a]);
+                assert!(!overlap, "regions {r} and {q} overlap: {reg:?} {other:?}");
+            }
         }
         walk(&view);
     }
