@@ -212,7 +212,69 @@ fn meets(node: &WalkInner, o: &[f32; 3], inv: &[f32; 3], t0: f32, t1: f32) -> [b
     [near[0] <= far[0], near[1] <= far[1]]
 }
 
+/// Where the walks of a group of rays start in an [`ActiveTree`] (see
+/// [`ActiveTree::start_in`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Start {
+    /// At the root: any ray.
+    Root,
+    /// At this node (a [`Walk`] reference): everything outside it lies outside the
+    /// group's frustum.
+    At(u32),
+    /// Nowhere: no region of the tree lies in the group's frustum.
+    Nothing,
+}
+
 impl ActiveTree {
+    /// Where the rays inside `frustum` can start their walk: the deepest node above
+    /// every region whose box may lie in the frustum, found by descending while only one
+    /// child's box may (the walk reads the same children in the same order below it, so
+    /// every ray of the group gets the same segments as from the root, after fewer
+    /// tests), or [`Start::Nothing`] when no box may. A tile of pixels beside the
+    /// surface then skips the walk altogether.
+    pub(crate) fn start_in(&self, frustum: &crate::camera::Frustum) -> Start {
+        let walk = &self.walk;
+        let Some(mut r) = walk.root else {
+            return Start::Nothing;
+        };
+        if !frustum.may_meet(&walk.min, &walk.max) {
+            return Start::Nothing;
+        }
+        // A tree's depth bounds the descent; the count only guards a malformed walk.
+        for _ in 0..=walk.inner.len() {
+            if r & LEAF_REF != 0 {
+                let Some(leaf) = walk.leaves.get((r & !LEAF_REF) as usize) else {
+                    return Start::Root;
+                };
+                return if frustum.may_meet(&leaf.min, &leaf.max) {
+                    Start::At(r)
+                } else {
+                    Start::Nothing
+                };
+            }
+            let Some(node) = walk.inner.get(r as usize) else {
+                return Start::Root;
+            };
+            let child_box = |c: usize| -> ([f64; 3], [f64; 3]) {
+                (
+                    std::array::from_fn(|a| f64::from(node.lo[a][c])),
+                    std::array::from_fn(|a| f64::from(node.hi[a][c])),
+                )
+            };
+            let [m0, m1] = [0, 1].map(|c| {
+                let (lo, hi) = child_box(c);
+                frustum.may_meet(&lo, &hi)
+            });
+            r = match (m0, m1) {
+                (true, true) => return Start::At(r),
+                (true, false) => node.child[0],
+                (false, true) => node.child[1],
+                (false, false) => return Start::Nothing,
+            };
+        }
+        Start::Root
+    }
+
     /// Whether this tree answers for `value` in field `field`.
     pub(crate) fn is_for(&self, field: usize, value: f64) -> bool {
         self.field == field && self.value_bits == value.to_bits()
@@ -319,9 +381,11 @@ impl ActiveTree {
     /// cell lattices and whether it has more than are listed; `f` returns `false` to stop.
     /// `stack` is scratch space reused between calls.
     #[allow(clippy::too_many_arguments)]
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn segments<F: FnMut(Segment, &[Lattice], bool) -> bool>(
         &self,
         vol: &Volume,
+        start: Start,
         o: [f64; 3],
         d: [f64; 3],
         t_min: f64,
@@ -330,8 +394,10 @@ impl ActiveTree {
         mut f: F,
     ) {
         let walk = &self.walk;
-        let Some(root) = walk.root else {
-            return;
+        let root = match (walk.root, start) {
+            (None, _) | (_, Start::Nothing) => return,
+            (Some(root), Start::Root) => root,
+            (Some(_), Start::At(node)) => node,
         };
         if t_min >= t_max || t_min.is_nan() || t_max.is_nan() {
             return;
@@ -571,13 +637,22 @@ mod tests {
         });
         let tree = ActiveTree::build(vol, 0, iso).expect("a valid tree");
         let mut active = Vec::new();
-        tree.segments(vol, o, d, t.0, t.1, &mut stack, |s, l, inexact| {
-            let want = Lattices::of(vol, s.region as usize);
-            assert_eq!(l, want.as_slice(), "lattices of region {}", s.region);
-            assert_eq!(inexact, want.inexact);
-            active.push((s.region, s.t0.to_bits(), s.t1.to_bits()));
-            true
-        });
+        tree.segments(
+            vol,
+            Start::Root,
+            o,
+            d,
+            t.0,
+            t.1,
+            &mut stack,
+            |s, l, inexact| {
+                let want = Lattices::of(vol, s.region as usize);
+                assert_eq!(l, want.as_slice(), "lattices of region {}", s.region);
+                assert_eq!(inexact, want.inexact);
+                active.push((s.region, s.t0.to_bits(), s.t1.to_bits()));
+                true
+            },
+        );
         [file, active]
     }
 
@@ -668,6 +743,7 @@ mod tests {
             let mut n = 0;
             tree.segments(
                 &vol,
+                Start::Root,
                 [-50.0; 3],
                 [1.0, 1.0, 1.0],
                 0.0,
@@ -695,5 +771,131 @@ mod tests {
             &vol.active_tree(0, 3.0).expect("field 0")
         ));
         assert!(vol.active_tree(1, 3.0).is_none(), "no field 1");
+    }
+
+    /// The segments of one ray walked from `start`.
+    fn from(vol: &Volume, tree: &ActiveTree, start: Start, o: [f64; 3], d: [f64; 3]) -> Vec<Seg> {
+        let mut stack = Vec::new();
+        let mut out = Vec::new();
+        tree.segments(
+            vol,
+            start,
+            o,
+            d,
+            0.0,
+            f64::INFINITY,
+            &mut stack,
+            |s, _, _| {
+                out.push((s.region, s.t0.to_bits(), s.t1.to_bits()));
+                true
+            },
+        );
+        out
+    }
+
+    /// Every camera ray through a group of pixels (at the group's corners and edges, at
+    /// pixel centres and at random sub-pixel offsets) gets from the group's start exactly
+    /// the segments it gets from the root: perspective cameras outside, inside and far
+    /// from the data, looking along an axis (rays on cell faces and level boundaries) and
+    /// obliquely, orthographic ones, images whose last groups are cut, data at 1e6. Groups
+    /// that see nothing and groups that start below the root both occur.
+    #[test]
+    fn a_group_of_camera_rays_gets_the_same_segments_from_its_start_as_from_the_root() {
+        use crate::camera::{Camera, Projection};
+        use glam::DVec3;
+        let mut seed = 11;
+        let (mut nothing, mut below_root, mut rays_met) = (0, 0, 0);
+        for offset in [[0.0; 3], [1e6, -1e6, 1e6]] {
+            let shell = move |p: [f64; 3]| {
+                let r2: f64 = (0..3).map(|a| (p[a] - offset[a] - 8.3).powi(2)).sum();
+                r2.sqrt()
+            };
+            let file = testvol::nested(8, offset, &[("r", &shell)], 3);
+            let view = testvol::open(&file).expect("opens");
+            let vol = Volume::new(&view).expect("volume");
+            let frame = DVec3::from_array(vol.frame);
+            let at = |p: [f64; 3]| std::array::from_fn(|a| p[a] + offset[a]);
+            let persp = |fov_deg| Projection::Perspective { fov_deg };
+            let cameras = [
+                // Outside, oblique.
+                (at([30.0, -20.0, 14.0]), at([8.0, 8.0, 8.0]), persp(30.0)),
+                // Inside the data, near the shell.
+                (at([8.2, 8.1, 8.4]), at([14.0, 9.0, 7.0]), persp(70.0)),
+                // Along the z axis through whole coordinates: rays on cell faces.
+                (at([8.0, 8.0, 40.0]), at([8.0, 8.0, 0.0]), persp(20.0)),
+                // Far away.
+                (at([8e4, 3e4, -5e4]), at([8.0, 8.0, 8.0]), persp(0.02)),
+                // Orthographic, along x, one pixel per cell.
+                (
+                    at([-20.0, 8.0, 8.0]),
+                    at([8.0, 8.0, 8.0]),
+                    Projection::Orthographic { width: 22.0 },
+                ),
+                // Orthographic, oblique.
+                (
+                    at([20.0, 25.0, 30.0]),
+                    at([8.0, 8.0, 8.0]),
+                    Projection::Orthographic { width: 13.0 },
+                ),
+            ];
+            for iso in [2.5, 4.5] {
+                let tree = ActiveTree::build(&vol, 0, iso).expect("a valid tree");
+                for (eye, look_at, projection) in cameras {
+                    let cam = Camera {
+                        eye,
+                        look_at,
+                        up: [0.0, 0.0, 1.0],
+                        projection,
+                    };
+                    let (w, h) = (22u32, 19u32);
+                    let rays = cam.ray_generator(w, h);
+                    for gy in (0..h).step_by(4) {
+                        for gx in (0..w).step_by(4) {
+                            let (x1, y1) = ((gx + 4).min(w), (gy + 4).min(h));
+                            let (x0, y0) = (f64::from(gx), f64::from(gy));
+                            let (x1, y1) = (f64::from(x1), f64::from(y1));
+                            let start = tree.start_in(&rays.frustum(x0, y0, x1, y1, frame));
+                            match start {
+                                Start::Nothing => nothing += 1,
+                                Start::At(r) if Some(r) != tree.walk.root => below_root += 1,
+                                _ => {}
+                            }
+                            let mut points = vec![
+                                (x0, y0),
+                                (x1, y0),
+                                (x0, y1),
+                                (x1, y1),
+                                (0.5 * (x0 + x1), y0),
+                                (x0, 0.5 * (y0 + y1)),
+                            ];
+                            for _ in 0..12 {
+                                points.push((
+                                    x0 + (x1 - x0) * lcg(&mut seed),
+                                    y0 + (y1 - y0) * lcg(&mut seed),
+                                ));
+                            }
+                            for (x, y) in points {
+                                let ray = rays.ray(x, y);
+                                let o = vol.to_local(ray.origin.to_array());
+                                let d = ray.dir.to_array();
+                                let want = from(&vol, &tree, Start::Root, o, d);
+                                let got = from(&vol, &tree, start, o, d);
+                                assert_eq!(
+                                    got, want,
+                                    "camera {cam:?}, iso {iso}, pixel ({x}, {y}), start {start:?}"
+                                );
+                                rays_met += usize::from(!want.is_empty());
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        assert!(nothing > 50, "only {nothing} groups saw nothing");
+        assert!(
+            below_root > 50,
+            "only {below_root} groups started below the root"
+        );
+        assert!(rays_met > 1000, "only {rays_met} rays met a region");
     }
 }

@@ -87,6 +87,69 @@ impl RayGen {
     }
 }
 
+impl RayGen {
+    /// The rays of every point of the pixel rectangle `[x0, x1] × [y0, y1]` (any
+    /// sub-pixel offset), with `frame` subtracted from positions as the volume's local
+    /// frame does: see [`Frustum`].
+    pub(crate) fn frustum(&self, x0: f64, y0: f64, x1: f64, y1: f64, frame: DVec3) -> Frustum {
+        let b = &self.basis;
+        // Normalised device coordinates: x grows to the right, y upwards (so from y1).
+        let (sx0, sx1) = (2.0 * x0 / self.w - 1.0, 2.0 * x1 / self.w - 1.0);
+        let (sy0, sy1) = (1.0 - 2.0 * y1 / self.h, 1.0 - 2.0 * y0 / self.h);
+        let (ax0, ax1) = (sx0 * self.half_w, sx1 * self.half_w);
+        let (ay0, ay1) = (sy0 * self.half_h, sy1 * self.half_h);
+        // A point `eye + s (forward + a right + c up)` (perspective, s ≥ 0) or
+        // `eye + a right + c up + s forward` (orthographic) of the group has
+        // a ∈ [ax0, ax1] and c ∈ [ay0, ay1]: four half-spaces `n·(X − eye) ≥ k`.
+        let planes = if self.ortho {
+            [(b.right, ax0), (-b.right, -ax1), (b.up, ay0), (-b.up, -ay1)]
+        } else {
+            [
+                (b.right - ax0 * b.forward, 0.0),
+                (ax1 * b.forward - b.right, 0.0),
+                (b.up - ay0 * b.forward, 0.0),
+                (ay1 * b.forward - b.up, 0.0),
+            ]
+        };
+        Frustum {
+            eye: self.eye - frame,
+            planes,
+        }
+    }
+}
+
+/// The rays of a rectangle of pixels as four half-spaces that contain every one of them
+/// (for a perspective camera, the pyramid from the eye through the rectangle; for an
+/// orthographic one, the prism along the view). A box wholly outside one half-space is
+/// met by none of those rays, so a group of pixels can skip what its frustum misses.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Frustum {
+    eye: DVec3,
+    /// `(n, k)`: the rays lie where `n·(X − eye) ≥ k`.
+    planes: [(DVec3, f64); 4],
+}
+
+impl Frustum {
+    /// Whether some ray of the frustum may meet the box `min..max` (same frame as the
+    /// frustum). Never false for a box a ray meets: the test allows a billionth of the
+    /// distances involved for round-off in the rays (computed point by point) and here,
+    /// and anything non-finite counts as "may meet".
+    pub(crate) fn may_meet(&self, min: &[f64; 3], max: &[f64; 3]) -> bool {
+        let (lo, hi) = (DVec3::from_array(*min), DVec3::from_array(*max));
+        let centre = 0.5 * (lo + hi) - self.eye;
+        let half = 0.5 * (hi - lo);
+        let size =
+            centre.abs().element_sum() + half.abs().element_sum() + self.eye.abs().element_sum();
+        self.planes.iter().all(|&(n, k)| {
+            // Largest `n·(X − eye) − k` over the box.
+            let most = n.dot(centre) + n.abs().dot(half) - k;
+            let slack = 1e-9 * (n.abs().element_sum() * size + k.abs());
+            // NaN compares false: "may meet".
+            most.partial_cmp(&-slack) != Some(std::cmp::Ordering::Less)
+        })
+    }
+}
+
 fn finite_vec(a: [f64; 3]) -> Option<DVec3> {
     let v = DVec3::from_array(a);
     v.is_finite().then_some(v)
@@ -384,5 +447,56 @@ mod tests {
             ortho,
             serde_json::from_str::<Camera>(&s).expect("deserialize")
         );
+    }
+
+    /// A group's frustum holds a small box around every point of every ray through its
+    /// rectangle (corners and random offsets, both projections), rejects boxes beside,
+    /// behind the side planes and far off, and takes a non-finite box as "may meet".
+    #[test]
+    fn a_frustum_holds_its_rays_and_rejects_boxes_beside_them() {
+        let mut seed = 3u64;
+        let mut rnd = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for projection in [
+            Projection::Perspective { fov_deg: 40.0 },
+            Projection::Orthographic { width: 6.0 },
+        ] {
+            let cam = Camera {
+                eye: [1e3 + 5.0, -3.0, 4.0],
+                look_at: [1e3, 0.5, 0.0],
+                up: [0.0, 0.0, 1.0],
+                projection,
+            };
+            let rays = cam.ray_generator(64, 48);
+            let frame = DVec3::new(1e3, 0.0, 0.0);
+            let (x0, y0, x1, y1) = (20.0, 12.0, 24.0, 16.0);
+            let fr = rays.frustum(x0, y0, x1, y1, frame);
+            let mut points = vec![(x0, y0), (x1, y0), (x0, y1), (x1, y1)];
+            for _ in 0..200 {
+                points.push((x0 + 4.0 * rnd(), y0 + 4.0 * rnd()));
+            }
+            for (x, y) in points {
+                let ray = rays.ray(x, y);
+                let t = 20.0 * rnd();
+                let p = (ray.at(t) - frame).to_array();
+                let tiny = p.map(|v| v + 1e-12);
+                assert!(
+                    fr.may_meet(&p, &tiny),
+                    "{projection:?}: ray ({x}, {y}) at t {t}"
+                );
+            }
+            // A box on the ray through the centre of the next group to the right, or
+            // below, lies outside.
+            for (x, y) in [(x1 + 2.0, 0.5 * (y0 + y1)), (0.5 * (x0 + x1), y1 + 2.0)] {
+                let p = (rays.ray(x, y).at(8.0) - frame).to_array();
+                let q = p.map(|v| v + 0.05);
+                assert!(!fr.may_meet(&p, &q), "{projection:?}: box at ({x}, {y})");
+            }
+            assert!(fr.may_meet(&[f64::NAN; 3], &[f64::NAN; 3]));
+        }
     }
 }

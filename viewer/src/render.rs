@@ -15,6 +15,7 @@ use std::sync::{Arc, Mutex};
 use rayon::prelude::*;
 use serde::Serialize;
 
+use crate::active::Start;
 use crate::camera::RayGen;
 use crate::film::Film;
 use crate::mesh::Meshes;
@@ -28,6 +29,11 @@ pub use crate::ray::jitter;
 
 /// Tile edge in pixels.
 pub(crate) const TILE: u32 = 16;
+
+/// Edge in pixels of the groups whose rays share one start in the active tree
+/// ([`crate::sampling::Tracer::start_group`]): small enough that most groups beside a
+/// thin surface see none of it, large enough that finding the start costs little per ray.
+const GROUP: u32 = 4;
 
 /// Everything a ray needs, resolved once per frame.
 pub struct Scene<'a> {
@@ -212,11 +218,35 @@ pub(crate) fn render_tiles(
         let n = ((tile.x1 - tile.x0) * (tile.y1 - tile.y0)) as usize;
         let mut sum = Vec::with_capacity(n);
         let mut hit_samples = Vec::with_capacity(n);
+        // Where the walks of each group of pixels start (every sample of a group's pixels,
+        // at any sub-pixel offset, is a ray through its rectangle).
+        let frame = glam::DVec3::from_array(scene.vol.frame);
+        let groups_x = (tile.x1 - tile.x0).div_ceil(GROUP);
+        let starts: Vec<Start> = (tile.y0..tile.y1)
+            .step_by(GROUP as usize)
+            .flat_map(|gy| {
+                (tile.x0..tile.x1)
+                    .step_by(GROUP as usize)
+                    .map(move |gx| (gx, gy))
+            })
+            .map(|(gx, gy)| {
+                let frustum = scene.rays.frustum(
+                    f64::from(gx),
+                    f64::from(gy),
+                    f64::from((gx + GROUP).min(tile.x1)),
+                    f64::from((gy + GROUP).min(tile.y1)),
+                    frame,
+                );
+                caster.main.group_start(&frustum)
+            })
+            .collect();
         for y in tile.y0..tile.y1 {
             if !cancel.start_row() {
                 return false;
             }
             for x in tile.x0..tile.x1 {
+                let group = (y - tile.y0) / GROUP * groups_x + (x - tile.x0) / GROUP;
+                caster.main.set_start(starts[group as usize]);
                 let mut c = [0.0f64; 3];
                 let hits_before = caster.hits;
                 for s in samples.clone() {
@@ -552,4 +582,74 @@ pub fn render_with_threads(
     threads: usize,
 ) -> Result<Frame, rayon::ThreadPoolBuildError> {
     Ok(Renderer::new(Some(threads))?.render(scene))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::{Camera, Projection};
+    use crate::testvol;
+
+    /// A frame whose pixel groups start their walks below the root (or skip them) has
+    /// the colours and the work counters of the same pixels traced one by one from the
+    /// root, with one and with four samples per pixel (jittered rays reach the groups'
+    /// edges), from outside and from inside the data.
+    #[test]
+    fn group_starts_change_no_pixel_and_no_counter() {
+        let field =
+            |p: [f64; 3]| (p[0] / 4.0).sin() * (p[1] / 5.0).cos() + 0.3 * (p[2] / 3.0).sin();
+        let file = testvol::nested(16, [0.0; 3], &[("q", &field), ("speed", &field)], 8);
+        let view = testvol::open(&file).expect("open");
+        let vol = Volume::new(&view).expect("volume");
+        let meshes = Meshes::empty();
+        let mut grouped_away = 0;
+        for (eye, spp) in [([50.0, -30.0, 40.0], 1), ([14.0, 15.0, 16.0], 4)] {
+            let mut st = ViewState::default_for_volume(&vol);
+            st.width = 37;
+            st.height = 29;
+            st.iso = 0.4;
+            st.spp = spp;
+            st.strategy = Strategy::Exact;
+            st.camera = Camera {
+                eye,
+                look_at: [16.0, 16.0, 16.0],
+                up: [0.0, 0.0, 1.0],
+                projection: Projection::Perspective { fov_deg: 50.0 },
+            };
+            let scene = Scene::new(&vol, &st, &meshes).expect("scene");
+            let frame = render(&scene);
+            let mut caster = RayCaster::new(&scene);
+            let mut rgb = Vec::new();
+            for y in 0..st.height {
+                for x in 0..st.width {
+                    let mut c = [0.0f64; 3];
+                    for s in 0..spp {
+                        let v = caster.sample(x, y, s);
+                        for a in 0..3 {
+                            c[a] += v[a];
+                        }
+                    }
+                    rgb.push(c.map(|v| (v / f64::from(spp)) as f32));
+                }
+            }
+            assert!(frame.hits > 0 && frame.hits < frame.rays, "eye {eye:?}");
+            assert_eq!(frame.rgb, rgb, "eye {eye:?}");
+            assert_eq!(frame.stats, caster.stats(), "eye {eye:?}");
+            assert_eq!((frame.rays, frame.hits), (caster.rays, caster.hits));
+            // The groups did start below the root somewhere.
+            let tree = vol.active_tree(scene.params.field, st.iso).expect("tree");
+            let f = glam::DVec3::from_array(vol.frame);
+            for gy in (0..st.height).step_by(GROUP as usize) {
+                for gx in (0..st.width).step_by(GROUP as usize) {
+                    let (x0, y0) = (f64::from(gx), f64::from(gy));
+                    let fr = scene.rays.frustum(x0, y0, x0 + 4.0, y0 + 4.0, f);
+                    grouped_away += usize::from(tree.start_in(&fr) != Start::Root);
+                }
+            }
+        }
+        assert!(
+            grouped_away > 20,
+            "only {grouped_away} groups started below the root"
+        );
+    }
 }

@@ -3,7 +3,7 @@
 //! such interval whose cells straddle the iso value is solved for its first root.
 
 use super::{Event, Tracer, MAX_LATTICES};
-use crate::active::range_holds;
+use crate::active::{range_holds, Start};
 use crate::reconstruct::Cubic;
 use crate::traverse::{inverse, ray_box, Segment, Skip, SKIPPED};
 use crate::volume::Volume;
@@ -23,9 +23,10 @@ impl Tracer<'_> {
     ) -> Option<(f64, Option<u32>)> {
         let vol = self.vol;
         let (field, iso) = (self.params.field, self.params.tf.iso);
-        let tree = match self.active.take() {
-            Some(t) if t.is_for(field, iso) => Some(t),
-            _ => vol.active_tree(field, iso),
+        // The group start belongs to the tree the caller put in `self.active`.
+        let (tree, start) = match self.active.take() {
+            Some(t) if t.is_for(field, iso) => (Some(t), self.start),
+            _ => (vol.active_tree(field, iso), Start::Root),
         };
         let mut found = None;
         let mut stack = std::mem::take(&mut self.stack);
@@ -35,15 +36,24 @@ impl Tracer<'_> {
                 // skipped, as the file's walk reports the subtrees it steps over.
                 let data = ray_box(&vol.bounds_min, &vol.bounds_max, &o, &inverse(&d), t0, t1);
                 let mut covered = data.map(|(a, _)| a);
-                tree.segments(vol, o, d, t0, t1, &mut stack, |seg, lattices, inexact| {
-                    if let Some(c) = covered.filter(|&c| seg.t0 > c) {
-                        self.enter_gap(c, seg.t0);
-                    }
-                    covered = Some(covered.map_or(seg.t1, |c| c.max(seg.t1)));
-                    self.enter_segment(&seg, false);
-                    found = self.exact_in_segment(&seg, &o, &d, iso, lattices, inexact);
-                    found.is_none()
-                });
+                tree.segments(
+                    vol,
+                    start,
+                    o,
+                    d,
+                    t0,
+                    t1,
+                    &mut stack,
+                    |seg, lattices, inexact| {
+                        if let Some(c) = covered.filter(|&c| seg.t0 > c) {
+                            self.enter_gap(c, seg.t0);
+                        }
+                        covered = Some(covered.map_or(seg.t1, |c| c.max(seg.t1)));
+                        self.enter_segment(&seg, false);
+                        found = self.exact_in_segment(&seg, &o, &d, iso, lattices, inexact);
+                        found.is_none()
+                    },
+                );
                 if found.is_none() {
                     if let (Some((_, end)), Some(c)) = (data, covered) {
                         if end > c {

@@ -34,7 +34,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::reconstruct::Eval;
 use crate::transfer::PreIntegrated;
-use crate::transfer::Transfer;
+use crate::transfer::{Mode, Transfer};
 use crate::volume::Volume;
 
 mod dvr;
@@ -222,6 +222,9 @@ pub struct Tracer<'v> {
     probe_hint: Option<u32>,
     /// The regions `exact` walks for the current iso value (fetched on its first ray).
     active: Option<std::sync::Arc<crate::active::ActiveTree>>,
+    /// Where `exact` starts walking `active` for the next rays: set by the frame loop for
+    /// each group of pixels (see [`Tracer::group_start`]), the root otherwise.
+    start: crate::active::Start,
     /// The bricks of the region `exact` is searching (scratch, refilled per segment).
     bricks: Vec<crate::reconstruct::DualBrick>,
 }
@@ -236,8 +239,32 @@ impl<'v> Tracer<'v> {
             stack: Vec::with_capacity(64),
             probe_hint: None,
             active: None,
+            start: crate::active::Start::Root,
             bricks: Vec::new(),
         }
+    }
+
+    /// Where `exact`'s walks can start for rays inside `frustum` (the pixels of one
+    /// group, see [`crate::active::ActiveTree::start_in`]); fetches the active tree for
+    /// them. Other strategies and modes walk the file's tree: for them, the root.
+    pub(crate) fn group_start(&mut self, frustum: &crate::camera::Frustum) -> crate::active::Start {
+        if self.params.strategy != Strategy::Exact || self.params.tf.mode != Mode::Iso {
+            return crate::active::Start::Root;
+        }
+        let (field, iso) = (self.params.field, self.params.tf.iso);
+        if !self.active.as_ref().is_some_and(|t| t.is_for(field, iso)) {
+            self.active = self.vol.active_tree(field, iso);
+        }
+        match &self.active {
+            Some(tree) => tree.start_in(frustum),
+            None => crate::active::Start::Root,
+        }
+    }
+
+    /// Where the next rays' walks start: a [`Tracer::group_start`] of this tracer for a
+    /// frustum that holds them, or the root.
+    pub(crate) fn set_start(&mut self, start: crate::active::Start) {
+        self.start = start;
     }
 
     /// `[t0, t1]` clipped to the active box.
