@@ -221,3 +221,37 @@ pub fn brick_support(brick: &ArchivedBrick) -> Aabb {
         }),
     }
 }
+
+/// The same queries on a file in memory (what the baker holds before writing, and what
+/// its tests read back), with the same edge rules.
+impl crate::BrickFile {
+    /// The KD-tree as [`kd`]'s walks read it.
+    pub fn kd_tree(&self) -> kd::Stored<'_, crate::KdNode> {
+        kd::Stored {
+            root: self.kd_root,
+            nodes: &self.kd_nodes,
+            axes: &self.kd_axes,
+        }
+    }
+
+    /// Region containing the world point `p` (as [`region_at`]).
+    pub fn region_at(&self, p: [f64; 3]) -> Option<u32> {
+        let b = &self.bounds;
+        if !(0..3).all(|a| p[a] >= b.min[a] && p[a] < b.max[a]) {
+            return None;
+        }
+        kd::locate(&self.kd_tree(), p, [0.0; 3])
+    }
+
+    /// Brick ids of region `r` (as [`region_bricks`]); empty when `r` is out of range.
+    pub fn bricks_of(&self, r: u32) -> &[u32] {
+        self.regions
+            .get(r as usize)
+            .and_then(|reg| {
+                let start = reg.bricks_start as usize;
+                self.region_bricks
+                    .get(start..start.checked_add(reg.bricks_len as usize)?)
+            })
+            .unwrap_or_default()
+    }
+}

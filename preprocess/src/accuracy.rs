@@ -219,29 +219,10 @@ fn field_index(file: &BrickFile, name: &'static str) -> Result<usize, AccuracyEr
         .ok_or(AccuracyError::MissingField(name))
 }
 
-/// Region containing `p` by KD-tree descent (inside the bounds, a leaf's cell is its
-/// region's box).
-fn locate(file: &BrickFile, p: [f64; 3]) -> Option<u32> {
-    let b = &file.bounds;
-    if !(0..3).all(|a| p[a] >= b.min[a] && p[a] < b.max[a]) {
-        return None;
-    }
-    let tree = format::kd::Stored {
-        root: file.kd_root,
-        nodes: &file.kd_nodes,
-        axes: &file.kd_axes,
-    };
-    format::kd::locate(&tree, p, [0.0; 3])
-}
-
 /// The basis-method reconstruction at `p` over the bricks of the region holding it.
 fn reconstruct(file: &BrickFile, f: usize, p: [f64; 3]) -> Option<f64> {
-    let r = locate(file, p)?;
-    let reg = file.regions.get(r as usize)?;
-    let ids = file
-        .region_bricks
-        .get(reg.bricks_start as usize..(reg.bricks_start + reg.bricks_len) as usize)?;
-    reconstruct_over(file, ids, f, p)
+    let r = file.region_at(p)?;
+    reconstruct_over(file, file.bricks_of(r), f, p)
 }
 
 /// The basis-method reconstruction at `p` over the bricks `ids` (`Σ H v / Σ H`, tents of

@@ -1,6 +1,6 @@
 //! Bake pipeline on in-memory grids sampled from closed-form flows.
 
-use crate::common::bake::{cells, field, locate, reconstruct, region_boxes};
+use crate::common::bake::{cells, field, reconstruct, region_boxes};
 use crate::common::Rng;
 use format::BrickFile;
 use qbricks_preprocess::bake::{bake, BakeError, BakeOptions};
@@ -205,16 +205,14 @@ fn region_bounds_are_conservative_and_kd_tree_finds_regions() {
         let brute = boxes
             .iter()
             .position(|r| (0..3).all(|a| p[a] >= r.min[a] && p[a] < r.max[a]));
-        let found = locate(&file, p);
+        let found = file.region_at(p);
         assert_eq!(
             found,
             brute.map(|r| r as u32),
             "kd-tree vs brute force at {p:?}"
         );
         let Some(r) = found else { continue };
-        let reg = &file.regions[r as usize];
-        let ids = &file.region_bricks
-            [reg.bricks_start as usize..(reg.bricks_start + reg.bricks_len) as usize];
+        let ids = file.bricks_of(r);
         let all: Vec<u32> = (0..file.bricks.len() as u32).collect();
         for f in 0..nf {
             let Some(v) = reconstruct(&file, ids, f, p) else {
@@ -404,11 +402,9 @@ fn odd_layouts_keep_regions_and_bounds_exact() {
         let brute = boxes
             .iter()
             .position(|r| (0..3).all(|a| p[a] >= r.min[a] && p[a] < r.max[a]));
-        assert_eq!(locate(&file, p), brute.map(|r| r as u32));
+        assert_eq!(file.region_at(p), brute.map(|r| r as u32));
         let Some(r) = brute else { continue };
-        let reg = &file.regions[r];
-        let ids = &file.region_bricks
-            [reg.bricks_start as usize..(reg.bricks_start + reg.bricks_len) as usize];
+        let ids = file.bricks_of(r as u32);
         for f in 0..nf {
             let v_all = reconstruct(&file, &all, f, p);
             let v = reconstruct(&file, ids, f, p);

@@ -43,42 +43,17 @@ pub fn field(file: &BrickFile, name: &str) -> usize {
         .unwrap_or_else(|| panic!("field {name} missing"))
 }
 
-/// The file's KD-tree.
-pub fn tree(file: &BrickFile) -> format::kd::Stored<'_, format::KdNode> {
-    format::kd::Stored {
-        root: file.kd_root,
-        nodes: &file.kd_nodes,
-        axes: &file.kd_axes,
-    }
-}
-
-/// Region containing `p` by KD-tree descent (the file's own, [`format::kd::locate`]);
-/// inside the bounds a leaf's cell is its region's box.
-pub fn locate(file: &BrickFile, p: [f64; 3]) -> Option<u32> {
-    let b = &file.bounds;
-    if !(0..3).all(|a| p[a] >= b.min[a] && p[a] < b.max[a]) {
-        return None;
-    }
-    format::kd::locate(&tree(file), p, [0.0; 3])
-}
-
 /// Every region's box (its leaf's cell), by region.
 pub fn region_boxes(file: &BrickFile) -> Vec<format::Aabb> {
     let mut out = vec![format::Aabb::EMPTY; file.regions.len()];
     format::kd::leaf_cells(
-        &tree(file),
+        &file.kd_tree(),
         file.bounds.min,
         file.bounds.max,
         [0.0; 3],
         |r, min, max| out[r as usize] = format::Aabb { min, max },
     );
     out
-}
-
-/// Brick ids of region `r`.
-pub fn region_bricks(file: &BrickFile, r: u32) -> &[u32] {
-    let reg = &file.regions[r as usize];
-    &file.region_bricks[reg.bricks_start as usize..(reg.bricks_start + reg.bricks_len) as usize]
 }
 
 /// Reconstruction over the given bricks: `Σ H v / Σ H` with tents
@@ -89,6 +64,6 @@ pub fn reconstruct(file: &BrickFile, bricks: &[u32], f: usize, p: [f64; 3]) -> O
 
 /// Reconstruction at `p` through the KD-tree (None outside the data).
 pub fn sample(file: &BrickFile, f: usize, p: [f64; 3]) -> Option<f64> {
-    let r = locate(file, p)?;
-    reconstruct(file, region_bricks(file, r), f, p)
+    let r = file.region_at(p)?;
+    reconstruct(file, file.bricks_of(r), f, p)
 }
