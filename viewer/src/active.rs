@@ -30,8 +30,13 @@ use std::sync::Arc;
 
 use format::kd::{inverse, ray_box, Node, Segment, WalkNodes};
 
+use crate::dual_mask::DualMask;
 use crate::sampling::{Lattice, Lattices};
 use crate::volume::Volume;
+
+/// A region's dual-cell mask, built by the first ray that searches the region (`None`
+/// when the region's box is too large for one).
+pub(crate) type MaskSlot = std::sync::OnceLock<Option<DualMask>>;
 
 /// Marker of "no node".
 const NONE: u32 = u32::MAX;
@@ -54,6 +59,8 @@ struct ActiveNode {
     inexact: bool,
     /// Leaf: how many of [`ActiveTree::lattices`], from `b` on, are its region's.
     lattices: u8,
+    /// Leaf: its region's index in [`ActiveTree::masks`], or [`NONE`].
+    mask: u32,
 }
 
 /// Whether the range `[mn, mx]` holds `value`: the one test of which regions `exact`
@@ -72,6 +79,9 @@ pub(crate) struct ActiveTree {
     /// their planes, and listing them once here spares each segment a pass over the
     /// region's bricks.
     lattices: Vec<Lattice>,
+    /// The dual-cell masks of the leaves' regions of one lattice ([`crate::dual_mask`]),
+    /// each built on first use.
+    masks: Vec<MaskSlot>,
     /// What the ray walk reads (built from the tree of [`ActiveNode`]s).
     walk: Walk,
 }
@@ -102,6 +112,8 @@ struct WalkLeaf {
     first: u32,
     lattices: u8,
     inexact: bool,
+    /// Index in [`ActiveTree::masks`], or [`NONE`].
+    mask: u32,
 }
 
 /// The active tree as the ray walk reads it.
@@ -167,6 +179,7 @@ impl Walk {
                     first: node.b,
                     lattices: node.lattices,
                     inexact: node.inexact,
+                    mask: node.mask,
                 });
                 LEAF_REF | (walk.leaves.len() - 1) as u32
             } else {
@@ -289,6 +302,7 @@ impl ActiveTree {
         let holds = |mn: f32, mx: f32| range_holds(mn, mx, value);
         let mut nodes: Vec<ActiveNode> = Vec::new();
         let mut lattices: Vec<Lattice> = Vec::new();
+        let mut masks: Vec<MaskSlot> = Vec::new();
         // Post-order without recursion (a valid tree may still be deep): `(node, expanded)`.
         let mut todo: Vec<(u32, bool)> = Vec::with_capacity(64);
         // The active-tree node each finished subtree became, or `NONE`.
@@ -319,6 +333,7 @@ impl ActiveTree {
                             axis: axis.min(2) as u8,
                             inexact: false,
                             lattices: 0,
+                            mask: NONE,
                         });
                         (nodes.len() - 1) as u32
                     }
@@ -342,6 +357,13 @@ impl ActiveTree {
                         let l = Lattices::of(vol, r as usize);
                         let first = u32::try_from(lattices.len()).ok()?;
                         lattices.extend_from_slice(l.as_slice());
+                        // A region of one lattice gets a slot for its dual-cell mask,
+                        // built when a ray first searches it.
+                        let mut mask = NONE;
+                        if let ([_], false) = (l.as_slice(), l.inexact) {
+                            mask = u32::try_from(masks.len()).ok()?;
+                            masks.push(std::sync::OnceLock::new());
+                        }
                         nodes.push(ActiveNode {
                             min: reg.min,
                             max: reg.max,
@@ -350,6 +372,7 @@ impl ActiveTree {
                             axis: LEAF,
                             inexact: l.inexact,
                             lattices: l.as_slice().len() as u8,
+                            mask,
                         });
                         done.push((nodes.len() - 1) as u32);
                     } else {
@@ -372,6 +395,7 @@ impl ActiveTree {
             field,
             value_bits: value.to_bits(),
             lattices,
+            masks,
             walk,
         })
     }
@@ -382,7 +406,7 @@ impl ActiveTree {
     /// `stack` is scratch space reused between calls.
     #[allow(clippy::too_many_arguments)]
     #[allow(clippy::too_many_arguments)]
-    pub(crate) fn segments<F: FnMut(Segment, &[Lattice], bool) -> bool>(
+    pub(crate) fn segments<F: FnMut(Segment, &[Lattice], bool, Option<&MaskSlot>) -> bool>(
         &self,
         vol: &Volume,
         start: Start,
@@ -471,7 +495,8 @@ impl ActiveTree {
                 min: mn,
                 max: mx,
             };
-            if !f(seg, lattices, leaf.inexact) {
+            let mask = self.masks.get(leaf.mask as usize);
+            if !f(seg, lattices, leaf.inexact, mask) {
                 return;
             }
         }
@@ -567,6 +592,7 @@ fn surface_area_tree(tree: &[ActiveNode]) -> Option<Vec<ActiveNode>> {
             axis: axis as u8,
             inexact: false,
             lattices: 0,
+            mask: NONE,
         };
         work.push((lo, lo + k, left));
         work.push((lo + k, hi, right));
@@ -645,7 +671,7 @@ mod tests {
             t.0,
             t.1,
             &mut stack,
-            |s, l, inexact| {
+            |s, l, inexact, _| {
                 let want = Lattices::of(vol, s.region as usize);
                 assert_eq!(l, want.as_slice(), "lattices of region {}", s.region);
                 assert_eq!(inexact, want.inexact);
@@ -749,7 +775,7 @@ mod tests {
                 0.0,
                 1e3,
                 &mut stack,
-                |_, _, _| {
+                |_, _, _, _| {
                     n += 1;
                     true
                 },
@@ -785,7 +811,7 @@ mod tests {
             0.0,
             f64::INFINITY,
             &mut stack,
-            |s, _, _| {
+            |s, _, _, _| {
                 out.push((s.region, s.t0.to_bits(), s.t1.to_bits()));
                 true
             },

@@ -14,6 +14,7 @@ pub mod camera;
 pub mod chart;
 pub mod colormap;
 pub mod dataset;
+mod dual_mask;
 pub mod film;
 pub mod info;
 pub mod integrate;

@@ -405,29 +405,17 @@ impl Volume<'_> {
         }));
     }
 
-    /// The cubic `g(x) = Σ H_C (v_C - iso)` along `o + t d` for `t = ta + x (tb - ta)`,
-    /// valid when `[ta, tb]` lies inside one dual cell of every lattice of the region whose
-    /// bricks are `bricks` (from [`Volume::dual_bricks`]; cells are collected at the
-    /// interval's midpoint).
-    ///
-    /// The same numbers as [`Volume::cubic`] (same cells, same operations in the same
-    /// order), with the brick conversions hoisted out and, where all eight corners of a
-    /// brick's dual cell exist (everywhere but its outer cell layer), the dual-cell test
-    /// read as eight fixed offsets instead of the general per-axis loops.
-    #[allow(clippy::too_many_arguments)]
-    #[inline]
-    pub(crate) fn cubic_in(
+    /// Whether some cell that the dual cells at local point `pm` read (over `bricks`, as
+    /// [`Volume::cubic_in`] picks them) has `v ≥ iso`, and whether some has `v < iso`;
+    /// stops reading once both are seen.
+    #[inline(always)]
+    pub(crate) fn dual_cell_sides(
         &self,
         bricks: &[DualBrick],
-        o: &[f64; 3],
-        d: &[f64; 3],
-        ta: f64,
-        tb: f64,
+        pm: &[f64; 3],
         f: usize,
         iso: f64,
-    ) -> Cubic {
-        let tm = 0.5 * (ta + tb);
-        let pm: [f64; 3] = std::array::from_fn(|a| o[a] + tm * d[a]);
+    ) -> (bool, bool) {
         let (mut any_above, mut any_below) = (false, false);
         let vals = self.values[f];
         for br in bricks {
@@ -467,6 +455,34 @@ impl Volume<'_> {
                 break;
             }
         }
+        (any_above, any_below)
+    }
+
+    /// The cubic `g(x) = Σ H_C (v_C - iso)` along `o + t d` for `t = ta + x (tb - ta)`,
+    /// valid when `[ta, tb]` lies inside one dual cell of every lattice of the region whose
+    /// bricks are `bricks` (from [`Volume::dual_bricks`]; cells are collected at the
+    /// interval's midpoint).
+    ///
+    /// The same numbers as [`Volume::cubic`] (same cells, same operations in the same
+    /// order), with the brick conversions hoisted out and, where all eight corners of a
+    /// brick's dual cell exist (everywhere but its outer cell layer), the dual-cell test
+    /// read as eight fixed offsets instead of the general per-axis loops.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    pub(crate) fn cubic_in(
+        &self,
+        bricks: &[DualBrick],
+        o: &[f64; 3],
+        d: &[f64; 3],
+        ta: f64,
+        tb: f64,
+        f: usize,
+        iso: f64,
+    ) -> Cubic {
+        let tm = 0.5 * (ta + tb);
+        let pm: [f64; 3] = std::array::from_fn(|a| o[a] + tm * d[a]);
+        let (any_above, any_below) = self.dual_cell_sides(bricks, &pm, f, iso);
+        let vals = self.values[f];
         if !(any_above && any_below) {
             return Cubic {
                 c: [0.0; 4],
