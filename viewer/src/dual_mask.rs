@@ -21,6 +21,11 @@ use crate::volume::Volume;
 /// Most dual cells a region's mask covers (beyond that the region reads its corners).
 const MAX_CELLS: usize = 1 << 18;
 
+/// Most (dual cell, brick) pairs one mask may test: building it is a ray's work, so a
+/// region far larger than the bricks' cells (which a valid file may hold) reads its
+/// corners instead of stalling the ray that reaches it first.
+const MAX_WORK: usize = 1 << 21;
+
 /// How close (in cells) to a lattice plane a midpoint may be for its bit to be trusted.
 const PLANE_MARGIN: f64 = 1e-6;
 
@@ -40,7 +45,8 @@ pub(crate) struct DualMask {
 
 impl DualMask {
     /// The mask of a region whose bricks (`bricks`, all of `lattice`) cover the local box
-    /// `min..max`, for `iso` in field `f`; `None` when the box is not finite or too large.
+    /// `min..max`, for `iso` in field `f`; `None` when the box is not finite or the mask
+    /// too large to build ([`MAX_CELLS`], [`MAX_WORK`]).
     pub(crate) fn build(
         vol: &Volume,
         bricks: &[DualBrick],
@@ -62,7 +68,7 @@ impl DualMask {
             n[a] = (u1.floor() as i64 - lo[a] + 1) as usize;
         }
         let cells = n[0].checked_mul(n[1])?.checked_mul(n[2])?;
-        if cells > MAX_CELLS {
+        if cells > MAX_CELLS || cells.saturating_mul(bricks.len()) > MAX_WORK {
             return None;
         }
         let mut bits = vec![0u64; cells.div_ceil(64)];
@@ -120,5 +126,44 @@ impl DualMask {
             stride *= self.n[a];
         }
         Some(self.bits[i / 64] >> (i % 64) & 1 == 1)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sampling::Lattices;
+
+    /// A box too large for a mask, or not finite, gets none (its region reads its
+    /// corners); the region's own box gets one, which cannot tell a point outside it or on
+    /// a lattice plane.
+    #[test]
+    fn masks_have_bounded_size_and_answer_only_inside() {
+        let f = |p: [f64; 3]| p[0] + 0.5 * p[1] - 0.25 * p[2];
+        let file = crate::testvol::nested(8, [0.0; 3], &[("f", &f)], 4);
+        let view = crate::testvol::open(&file).expect("opens");
+        let vol = Volume::new(&view).expect("volume");
+        let r = (0..vol.region_count())
+            .find(|&r| Lattices::of(&vol, r).as_slice().len() == 1)
+            .expect("a region of one lattice");
+        let lattices = Lattices::of(&vol, r);
+        let lattice = &lattices.as_slice()[0];
+        let mut bricks = Vec::new();
+        vol.dual_bricks(r, &mut bricks);
+        let reg = vol.region(r);
+        let build = |min: [f64; 3], max: [f64; 3]| {
+            DualMask::build(&vol, &bricks, lattice, &min, &max, 0, 3.0)
+        };
+        assert!(build([-1e4; 3], [1e4; 3]).is_none(), "2e4 cells a side");
+        assert!(build([f64::NAN; 3], reg.max).is_none());
+        assert!(build(reg.min, [f64::INFINITY; 3]).is_none());
+        let mask = build(reg.min, reg.max).expect("the region's box");
+        let (w, _, origin) = *lattice;
+        // Far outside, and on a lattice plane (a cell centre coordinate) inside.
+        assert_eq!(mask.may_cross(&[1e3; 3]), None);
+        let centre: [f64; 3] = std::array::from_fn(|a| 0.5 * (reg.min[a] + reg.max[a]));
+        let mut on_plane = centre;
+        on_plane[0] = origin[0] + ((centre[0] - origin[0]) / w).round() * w;
+        assert_eq!(mask.may_cross(&on_plane), None);
     }
 }
