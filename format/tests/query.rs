@@ -98,6 +98,46 @@ proptest! {
         prop_assert_eq!(query::region_boxes(file), boxes);
     }
 
+    /// A point's descent finds for any other point what a descent from the root finds:
+    /// points a little away along one axis (a shading normal's neighbours), points on
+    /// region faces, points anywhere, with and without a shift of the coordinates.
+    #[test]
+    fn locate_near_a_descent_matches_locate(seed in any::<u64>()) {
+        let (view, boxes) = open(seed);
+        let tree = kd::file_tree(view.file());
+        let b = query::bounds(view.file());
+        let mut rng = Rng::new(seed ^ 0x5EED);
+        for shift in [[0.0; 3], [0.75, -2.5, 1e3]] {
+            let local = |p: [f64; 3]| -> [f64; 3] { std::array::from_fn(|a| p[a] - shift[a]) };
+            for _ in 0..50 {
+                let p = random_point(&mut rng, &b);
+                let near = kd::Descent::of(&tree, local(p), shift);
+                prop_assert_eq!(near.locate(&tree, local(p), shift), kd::locate(&tree, local(p), shift));
+                let mut others = vec![random_point(&mut rng, &b)];
+                for a in 0..3 {
+                    for h in [1e-9, 0.01, 0.3, 2.0] {
+                        let mut q = p;
+                        q[a] += h;
+                        others.push(q);
+                        q[a] = p[a] - h;
+                        others.push(q);
+                    }
+                }
+                if !boxes.is_empty() {
+                    let r = &boxes[rng.below(boxes.len() as u64) as usize];
+                    others.extend([r.min, r.max]);
+                }
+                for q in others {
+                    prop_assert_eq!(
+                        near.locate(&tree, local(q), shift),
+                        kd::locate(&tree, local(q), shift),
+                        "from {:?} to {:?}", p, q
+                    );
+                }
+            }
+        }
+    }
+
     #[test]
     fn ray_regions_match_brute_force(seed in any::<u64>()) {
         let (view, boxes) = open(seed);
@@ -316,6 +356,15 @@ fn deep_tree_spills_the_stack_and_stays_correct() {
             assert_eq!(k.region, b.region);
             assert!(close(k.t_enter, b.t_enter) && close(k.t_exit, b.t_exit));
         }
+    }
+    // Deeper than a descent keeps: its neighbours are found from the root.
+    let tree = kd::file_tree(f);
+    let near = kd::Descent::of(&tree, [99.5, 0.5, 0.5], [0.0; 3]);
+    for x in [99.5, 98.9, 0.2, 64.5, 63.5] {
+        assert_eq!(
+            near.locate(&tree, [x, 0.5, 0.5], [0.0; 3]),
+            kd::locate(&tree, [x, 0.5, 0.5], [0.0; 3])
+        );
     }
     assert_eq!(query::region_at(f, [99.5, 0.5, 0.5]), Some(99));
     assert_eq!(query::region_at(f, [0.0, 0.5, 0.5]), Some(0));

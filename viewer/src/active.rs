@@ -30,13 +30,11 @@ use std::sync::Arc;
 
 use format::kd::{inverse, ray_box, Node, Segment, WalkNodes};
 
-use crate::dual_mask::DualMask;
+use rayon::prelude::*;
+
+use crate::dual_mask::{DualMask, SubBox};
 use crate::sampling::{Lattice, Lattices};
 use crate::volume::Volume;
-
-/// A region's dual-cell mask, built by the first ray that searches the region (`None`
-/// when the region's box is too large for one).
-pub(crate) type MaskSlot = std::sync::OnceLock<Option<DualMask>>;
 
 /// Marker of "no node".
 const NONE: u32 = u32::MAX;
@@ -61,6 +59,9 @@ struct ActiveNode {
     lattices: u8,
     /// Leaf: its region's index in [`ActiveTree::masks`], or [`NONE`].
     mask: u32,
+    /// Leaf of a whole region: its index in the list of the regions' sub-boxes while the
+    /// tree is built ([`ActiveTree::build`]), or [`NONE`].
+    sub: u32,
 }
 
 /// Whether the range `[mn, mx]` holds `value`: the one test of which regions `exact`
@@ -79,9 +80,9 @@ pub(crate) struct ActiveTree {
     /// their planes, and listing them once here spares each segment a pass over the
     /// region's bricks.
     lattices: Vec<Lattice>,
-    /// The dual-cell masks of the leaves' regions of one lattice ([`crate::dual_mask`]),
-    /// each built on first use.
-    masks: Vec<MaskSlot>,
+    /// The dual-cell masks of the leaves' regions of one lattice ([`crate::dual_mask`];
+    /// `None` where the region's box is too large for one).
+    masks: Vec<Option<DualMask>>,
     /// What the ray walk reads (built from the tree of [`ActiveNode`]s).
     walk: Walk,
 }
@@ -294,15 +295,44 @@ impl ActiveTree {
     }
 
     /// The tree of the regions of `vol` whose range of `field` holds `value`, built from
-    /// the field's packed KD-tree (its per-node ranges prune whole subtrees). `None` when
-    /// the file's tree cannot be walked as a tree (the caller then walks the file's
-    /// tree itself).
-    pub fn build(vol: &Volume, field: usize, value: f64) -> Option<ActiveTree> {
+    /// the field's packed KD-tree (its per-node ranges prune whole subtrees), each region
+    /// of one cell lattice cut into the parts where its dual cells can hold the value
+    /// ([`DualMask::sub_boxes`]). `None` when the file's tree cannot be walked as a tree
+    /// (the caller then walks the file's tree itself). `parallel` builds the regions'
+    /// masks on the current rayon pool: only for a caller that holds no lock another job
+    /// of that pool may wait for.
+    pub fn build(vol: &Volume, field: usize, value: f64, parallel: bool) -> Option<ActiveTree> {
+        Self::build_with(vol, field, value, parallel, true)
+    }
+
+    /// [`ActiveTree::build`] with every region whole (what the cut tree is compared with).
+    #[cfg(test)]
+    pub(crate) fn uncut(vol: &Volume, field: usize, value: f64) -> Option<ActiveTree> {
+        Self::build_with(vol, field, value, false, false)
+    }
+
+    /// How many leaves the tree has, and how many regions they belong to.
+    #[cfg(test)]
+    pub(crate) fn leaf_count(&self) -> (usize, usize) {
+        let mut regions: Vec<u32> = self.walk.leaves.iter().map(|l| l.region).collect();
+        regions.sort_unstable();
+        regions.dedup();
+        (self.walk.leaves.len(), regions.len())
+    }
+
+    /// [`ActiveTree::build`]; `cut: false` keeps every region whole (its leaf box is the
+    /// region's box), which the tests compare the cut tree with.
+    fn build_with(
+        vol: &Volume,
+        field: usize,
+        value: f64,
+        parallel: bool,
+        cut: bool,
+    ) -> Option<ActiveTree> {
         let tree = vol.packed(field)?;
         let holds = |mn: f32, mx: f32| range_holds(mn, mx, value);
         let mut nodes: Vec<ActiveNode> = Vec::new();
         let mut lattices: Vec<Lattice> = Vec::new();
-        let mut masks: Vec<MaskSlot> = Vec::new();
         // Post-order without recursion (a valid tree may still be deep): `(node, expanded)`.
         let mut todo: Vec<(u32, bool)> = Vec::with_capacity(64);
         // The active-tree node each finished subtree became, or `NONE`.
@@ -320,24 +350,7 @@ impl ActiveTree {
                 else {
                     return None;
                 };
-                done.push(match (lo, hi) {
-                    (NONE, NONE) => NONE,
-                    (x, NONE) | (NONE, x) => x,
-                    (lo, hi) => {
-                        let (l, h) = (nodes[lo as usize], nodes[hi as usize]);
-                        nodes.push(ActiveNode {
-                            min: std::array::from_fn(|a| l.min[a].min(h.min[a])),
-                            max: std::array::from_fn(|a| l.max[a].max(h.max[a])),
-                            a: lo,
-                            b: hi,
-                            axis: axis.min(2) as u8,
-                            inexact: false,
-                            lattices: 0,
-                            mask: NONE,
-                        });
-                        (nodes.len() - 1) as u32
-                    }
-                });
+                done.push(join(&mut nodes, lo, hi, axis.min(2) as u8));
                 continue;
             }
             if range.is_some_and(|(mn, mx)| !holds(mn, mx)) {
@@ -357,13 +370,6 @@ impl ActiveTree {
                         let l = Lattices::of(vol, r as usize);
                         let first = u32::try_from(lattices.len()).ok()?;
                         lattices.extend_from_slice(l.as_slice());
-                        // A region of one lattice gets a slot for its dual-cell mask,
-                        // built when a ray first searches it.
-                        let mut mask = NONE;
-                        if let ([_], false) = (l.as_slice(), l.inexact) {
-                            mask = u32::try_from(masks.len()).ok()?;
-                            masks.push(std::sync::OnceLock::new());
-                        }
                         nodes.push(ActiveNode {
                             min: reg.min,
                             max: reg.max,
@@ -372,7 +378,8 @@ impl ActiveTree {
                             axis: LEAF,
                             inexact: l.inexact,
                             lattices: l.as_slice().len() as u8,
-                            mask,
+                            mask: NONE,
+                            sub: NONE,
                         });
                         done.push((nodes.len() - 1) as u32);
                     } else {
@@ -387,9 +394,76 @@ impl ActiveTree {
             [root] if *root as usize + 1 == nodes.len() => {}
             _ => return None,
         }
+        // The masks of the regions of one lattice, and where in them the value can lie.
+        let masked: Vec<usize> = (0..nodes.len())
+            .filter(|&i| nodes[i].axis == LEAF && nodes[i].lattices == 1 && !nodes[i].inexact)
+            .collect();
+        let prepare = |&i: &usize| {
+            let leaf = &nodes[i];
+            let mut bricks = Vec::new();
+            vol.dual_bricks(leaf.a as usize, &mut bricks);
+            let mask = DualMask::build(
+                vol,
+                &bricks,
+                &lattices[leaf.b as usize],
+                &leaf.min,
+                &leaf.max,
+                field,
+                value,
+            );
+            let subs = match (&mask, cut) {
+                (Some(m), true) => Some(m.sub_boxes(&leaf.min, &leaf.max)),
+                _ => None,
+            };
+            (mask, subs)
+        };
+        let prepared: Vec<(Option<DualMask>, Option<Vec<SubBox>>)> = if parallel {
+            masked.par_iter().map(prepare).collect()
+        } else {
+            masked.iter().map(prepare).collect()
+        };
+        let mut masks = Vec::with_capacity(prepared.len());
+        let mut subs: Vec<Vec<SubBox>> = Vec::new();
+        for (&i, (mask, sub)) in masked.iter().zip(prepared) {
+            let leaf = &mut nodes[i];
+            leaf.mask = u32::try_from(masks.len()).ok()?;
+            masks.push(mask);
+            if let Some(sub) = sub {
+                // The leaf stands for its parts: their box, or nothing.
+                let (mut mn, mut mx) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+                for b in &sub {
+                    for a in 0..3 {
+                        mn[a] = mn[a].min(b.min[a]);
+                        mx[a] = mx[a].max(b.max[a]);
+                    }
+                }
+                (leaf.min, leaf.max) = (mn, mx);
+                leaf.sub = u32::try_from(subs.len()).ok()?;
+                subs.push(sub);
+            }
+        }
+        // Regions no part of which can hold the value leave the tree.
+        nodes = rewrite(&nodes, |leaf, out| {
+            let empty = leaf.sub != NONE && subs[leaf.sub as usize].is_empty();
+            if !empty {
+                out.push(*leaf);
+            }
+            !empty
+        });
         if let Some(better) = surface_area_tree(&nodes) {
             nodes = better;
         }
+        // Each cut region becomes the tree of its parts.
+        nodes = rewrite(&nodes, |leaf, out| {
+            match subs.get(leaf.sub as usize) {
+                Some(parts) if leaf.sub != NONE => {
+                    let mut parts = parts.clone();
+                    part_tree(&mut parts, leaf, out);
+                }
+                _ => out.push(*leaf),
+            }
+            true
+        });
         let walk = Walk::of(&nodes);
         Some(ActiveTree {
             field,
@@ -400,13 +474,13 @@ impl ActiveTree {
         })
     }
 
-    /// Calls `f` for every region of the tree the ray `o + t d` (local frame) crosses
-    /// within `[t_min, t_max]`, front to back, with the region's range of the field, its
-    /// cell lattices and whether it has more than are listed; `f` returns `false` to stop.
-    /// `stack` is scratch space reused between calls.
+    /// Calls `f` for every leaf of the tree the ray `o + t d` (local frame) crosses
+    /// within `[t_min, t_max]`, front to back (a whole region, or one part of a region
+    /// where its dual cells can hold the value), with the region's range of the field,
+    /// its cell lattices, whether it has more than are listed, and its dual-cell mask;
+    /// `f` returns `false` to stop. `stack` is scratch space reused between calls.
     #[allow(clippy::too_many_arguments)]
-    #[allow(clippy::too_many_arguments)]
-    pub(crate) fn segments<F: FnMut(Segment, &[Lattice], bool, Option<&MaskSlot>) -> bool>(
+    pub(crate) fn segments<F: FnMut(Segment, &[Lattice], bool, Option<&DualMask>) -> bool>(
         &self,
         vol: &Volume,
         start: Start,
@@ -495,12 +569,100 @@ impl ActiveTree {
                 min: mn,
                 max: mx,
             };
-            let mask = self.masks.get(leaf.mask as usize);
+            let mask = self.masks.get(leaf.mask as usize).and_then(Option::as_ref);
             if !f(seg, lattices, leaf.inexact, mask) {
                 return;
             }
         }
     }
+}
+
+/// The node that joins the subtrees `lo` (below a split plane on `axis`) and `hi` (at or
+/// above it) of `nodes`, either of which may be [`NONE`]: a new inner node around both, the
+/// one that is there, or [`NONE`].
+fn join(nodes: &mut Vec<ActiveNode>, lo: u32, hi: u32, axis: u8) -> u32 {
+    match (lo, hi) {
+        (NONE, NONE) => NONE,
+        (x, NONE) | (NONE, x) => x,
+        (lo, hi) => {
+            let (l, h) = (nodes[lo as usize], nodes[hi as usize]);
+            nodes.push(ActiveNode {
+                min: std::array::from_fn(|a| l.min[a].min(h.min[a])),
+                max: std::array::from_fn(|a| l.max[a].max(h.max[a])),
+                a: lo,
+                b: hi,
+                axis,
+                inexact: false,
+                lattices: 0,
+                mask: NONE,
+                sub: NONE,
+            });
+            (nodes.len() - 1) as u32
+        }
+    }
+}
+
+/// `tree` (children before parents, root last) with every leaf replaced by what `leaf`
+/// appends for it (a subtree, children before parents and its root last; `false`: nothing,
+/// the leaf leaves the tree). An inner node left with one child becomes that child, and
+/// inner boxes are those of what remains below them.
+fn rewrite(
+    tree: &[ActiveNode],
+    mut leaf: impl FnMut(&ActiveNode, &mut Vec<ActiveNode>) -> bool,
+) -> Vec<ActiveNode> {
+    let mut out = Vec::with_capacity(tree.len());
+    let mut map = Vec::with_capacity(tree.len());
+    for node in tree {
+        let r = if node.axis == LEAF {
+            if leaf(node, &mut out) {
+                (out.len() - 1) as u32
+            } else {
+                NONE
+            }
+        } else {
+            let (lo, hi) = (map[node.a as usize], map[node.b as usize]);
+            join(&mut out, lo, hi, node.axis)
+        };
+        map.push(r);
+    }
+    out
+}
+
+/// Appends the tree of one region's parts (`leaf` stands for the region): split
+/// recursively between blocks, on the axis along which the parts' blocks spread most,
+/// so that every inner node has a plane between its two sides, as the walk needs.
+/// Children before parents, the root last.
+fn part_tree(parts: &mut [SubBox], leaf: &ActiveNode, out: &mut Vec<ActiveNode>) {
+    if let [p] = parts {
+        out.push(ActiveNode {
+            min: p.min,
+            max: p.max,
+            sub: NONE,
+            ..*leaf
+        });
+        return;
+    }
+    let spread = |a: usize| {
+        let (lo, hi) = parts.iter().fold((u32::MAX, 0), |(lo, hi), p| {
+            (lo.min(p.block[a]), hi.max(p.block[a]))
+        });
+        hi - lo
+    };
+    let axis = (0..3).max_by_key(|&a| spread(a)).unwrap_or(0);
+    parts.sort_unstable_by_key(|p| p.block[axis]);
+    // Below the median block on the axis, and the rest (at least one part each: parts lie
+    // in distinct blocks, so they spread along some axis).
+    let mid = parts[parts.len() / 2].block[axis];
+    let mut k = parts.partition_point(|p| p.block[axis] < mid);
+    if k == 0 {
+        k = parts.partition_point(|p| p.block[axis] <= mid);
+    }
+    let (lo, hi) = parts.split_at_mut(k);
+    part_tree(lo, leaf, out);
+    let a = (out.len() - 1) as u32;
+    part_tree(hi, leaf, out);
+    let b = (out.len() - 1) as u32;
+    join(out, a, b, axis as u8);
 }
 
 /// Above this many regions the active tree keeps the file's splits: the surface-area
@@ -593,6 +755,7 @@ fn surface_area_tree(tree: &[ActiveNode]) -> Option<Vec<ActiveNode>> {
             inexact: false,
             lattices: 0,
             mask: NONE,
+            sub: NONE,
         };
         work.push((lo, lo + k, left));
         work.push((lo + k, hi, right));
@@ -618,17 +781,36 @@ pub(crate) struct ActiveCache(std::sync::Mutex<Vec<Arc<ActiveTree>>>);
 const KEEP: usize = 4;
 
 impl ActiveCache {
-    /// The tree for `value` in `field`, built on first use.
-    pub(crate) fn get(&self, vol: &Volume, field: usize, value: f64) -> Option<Arc<ActiveTree>> {
+    /// The tree for `value` in `field`, built on first use (on the current rayon pool
+    /// when `parallel`, see [`ActiveTree::build`]).
+    pub(crate) fn get(
+        &self,
+        vol: &Volume,
+        field: usize,
+        value: f64,
+        parallel: bool,
+    ) -> Option<Arc<ActiveTree>> {
         // A poisoned lock only means another thread panicked while holding it; the list
         // itself is always whole.
-        let mut trees = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        let lock = || self.0.lock().unwrap_or_else(|e| e.into_inner());
+        {
+            let mut trees = lock();
+            if let Some(i) = trees.iter().position(|t| t.is_for(field, value)) {
+                let t = trees.remove(i);
+                trees.push(t.clone());
+                return Some(t);
+            }
+        }
+        // Built without the lock: a parallel build may run other jobs of its pool while
+        // it waits, and one of them may ask for a tree too.
+        let t = Arc::new(ActiveTree::build(vol, field, value, parallel)?);
+        let mut trees = lock();
         if let Some(i) = trees.iter().position(|t| t.is_for(field, value)) {
+            // Another thread built it meanwhile: everyone shares the first.
             let t = trees.remove(i);
             trees.push(t.clone());
             return Some(t);
         }
-        let t = Arc::new(ActiveTree::build(vol, field, value)?);
         if trees.len() == KEEP {
             trees.remove(0);
         }
@@ -661,7 +843,7 @@ mod tests {
             }
             true
         });
-        let tree = ActiveTree::build(vol, 0, iso).expect("a valid tree");
+        let tree = ActiveTree::uncut(vol, 0, iso).expect("a valid tree");
         let mut active = Vec::new();
         tree.segments(
             vol,
@@ -764,7 +946,7 @@ mod tests {
         let vol = Volume::new(&view).expect("volume");
         let mut stack = Vec::new();
         for iso in [-1e3, 1e3, f64::NAN] {
-            let tree = ActiveTree::build(&vol, 0, iso).expect("a valid tree");
+            let tree = ActiveTree::build(&vol, 0, iso, false).expect("a valid tree");
             assert!(tree.walk.root.is_none(), "iso {iso}");
             let mut n = 0;
             tree.segments(
@@ -865,7 +1047,7 @@ mod tests {
                 ),
             ];
             for iso in [2.5, 4.5] {
-                let tree = ActiveTree::build(&vol, 0, iso).expect("a valid tree");
+                let tree = ActiveTree::build(&vol, 0, iso, false).expect("a valid tree");
                 for (eye, look_at, projection) in cameras {
                     let cam = Camera {
                         eye,

@@ -14,7 +14,7 @@
 //! its corners as before, so the skipped intervals are exactly those the corner test would
 //! have rejected, and the roots are bit-identical.
 
-use crate::reconstruct::DualBrick;
+use crate::reconstruct::{floor_i64, DualBrick};
 use crate::sampling::Lattice;
 use crate::volume::Volume;
 
@@ -29,10 +29,27 @@ const MAX_WORK: usize = 1 << 21;
 /// How close (in cells) to a lattice plane a midpoint may be for its bit to be trusted.
 const PLANE_MARGIN: f64 = 1e-6;
 
+/// Edge, in dual cells, of the blocks a region's mask is cut into for the active tree
+/// ([`DualMask::sub_boxes`]): smaller blocks hug the surface more closely but give the
+/// tree more leaves to walk.
+pub(crate) const BLOCK: usize = 8;
+
+/// A part of a region that `exact` must search ([`DualMask::sub_boxes`]).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct SubBox {
+    /// Local frame.
+    pub(crate) min: [f64; 3],
+    pub(crate) max: [f64; 3],
+    /// The block it lies in (block coordinates inside the mask): boxes of different
+    /// blocks are separated by the planes between the blocks.
+    pub(crate) block: [u32; 3],
+}
+
 /// The dual cells of one region's lattice that can hold the iso value.
 #[derive(Debug, Clone)]
 pub(crate) struct DualMask {
-    /// The lattice's cell width inverse and one cell centre (local frame).
+    /// The lattice's cell width, its inverse and one cell centre (local frame).
+    w: f64,
     inv_w: f64,
     origin: [f64; 3],
     /// Dual-cell index (`floor` of the cell coordinate) of the mask's first cell, and the
@@ -90,12 +107,73 @@ impl DualMask {
             }
         }
         Some(DualMask {
+            w,
             inv_w,
             origin,
             lo,
             n,
             bits,
         })
+    }
+
+    /// The parts of the region box `min..max` (the box the mask was built for) that
+    /// `exact` must search, one per block of [`BLOCK`]³ dual cells: the box around the
+    /// block's dual cells that can hold the value or touch one that can (a midpoint within
+    /// round-off of a plane may read the corners of the dual cell beside it, see
+    /// [`DualMask::may_cross`]). Everywhere else in the region every interval reads corners
+    /// on one side of the value, so a ray that crosses none of these boxes needs no
+    /// interval there. The faces between dual cells are computed from whole cell indices,
+    /// so two boxes that touch share their face coordinate exactly and a ray leaves one
+    /// where it enters the other. Empty when no dual cell can hold the value.
+    pub(crate) fn sub_boxes(&self, min: &[f64; 3], max: &[f64; 3]) -> Vec<SubBox> {
+        let n = self.n;
+        let nb: [usize; 3] = n.map(|k| k.div_ceil(BLOCK));
+        // Per block, the inclusive range of its marked dual cells (mask indices).
+        let mut marked: Vec<([usize; 3], [usize; 3])> =
+            vec![([usize::MAX; 3], [0; 3]); nb[0] * nb[1] * nb[2]];
+        for (wi, &word) in self.bits.iter().enumerate() {
+            let mut word = word;
+            while word != 0 {
+                let i = wi * 64 + word.trailing_zeros() as usize;
+                word &= word - 1;
+                let cell = [i % n[0], i / n[0] % n[1], i / (n[0] * n[1])];
+                // The cell and its neighbours, and the blocks they lie in.
+                let lo = cell.map(|c| c.saturating_sub(1));
+                let hi: [usize; 3] = std::array::from_fn(|a| (cell[a] + 1).min(n[a] - 1));
+                for bz in lo[2] / BLOCK..=hi[2] / BLOCK {
+                    for by in lo[1] / BLOCK..=hi[1] / BLOCK {
+                        for bx in lo[0] / BLOCK..=hi[0] / BLOCK {
+                            let b = [bx, by, bz];
+                            let m = &mut marked[bx + nb[0] * (by + nb[1] * bz)];
+                            for a in 0..3 {
+                                m.0[a] = m.0[a].min(lo[a].max(b[a] * BLOCK));
+                                m.1[a] = m.1[a].max(hi[a].min(b[a] * BLOCK + BLOCK - 1));
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        let face = |a: usize, k: usize| self.origin[a] + (self.lo[a] + k as i64) as f64 * self.w;
+        let mut out = Vec::new();
+        for (i, &(lo, hi)) in marked.iter().enumerate() {
+            if lo[0] == usize::MAX {
+                continue;
+            }
+            let bmin: [f64; 3] = std::array::from_fn(|a| face(a, lo[a]).max(min[a]));
+            let bmax: [f64; 3] = std::array::from_fn(|a| face(a, hi[a] + 1).min(max[a]));
+            // A box that only touches the region (a dual cell past its face) holds no
+            // interval the region's segment would have had.
+            if (0..3).any(|a| bmin[a] > bmax[a] || (bmin[a] == bmax[a] && min[a] < max[a])) {
+                continue;
+            }
+            out.push(SubBox {
+                min: bmin,
+                max: bmax,
+                block: [i % nb[0], i / nb[0] % nb[1], i / (nb[0] * nb[1])].map(|b| b as u32),
+            });
+        }
+        out
     }
 
     /// `Some(false)` when the interval with midpoint `pm` (local) reads only cells on one
@@ -110,10 +188,7 @@ impl DualMask {
             if u.is_nan() || u.abs() >= 1e15 {
                 return None;
             }
-            // floor(u) without a library call (the baseline target has no rounding
-            // instruction); exact for |u| < 2^53.
-            let t = u as i64;
-            let fl = if (t as f64) > u { t - 1 } else { t };
+            let fl = floor_i64(u);
             let frac = u - fl as f64;
             if !(PLANE_MARGIN..=1.0 - PLANE_MARGIN).contains(&frac) {
                 return None;
@@ -133,6 +208,109 @@ impl DualMask {
 mod tests {
     use super::*;
     use crate::sampling::Lattices;
+
+    /// The parts of a region: every dual cell that can hold the value, and every cell
+    /// beside one, lies in exactly one part (so in no two: they do not overlap); each part
+    /// lies inside its block and the region box; an empty mask has no parts, a sparse one
+    /// leaves most of the region out; parts that touch share the face coordinate exactly.
+    #[test]
+    fn parts_cover_the_cells_that_can_hold_the_value_and_their_neighbours() {
+        let mut seed = 3u64;
+        let mut rnd = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 33) as usize
+        };
+        for case in 0..40 {
+            let n = [1 + rnd() % 21, 1 + rnd() % 19, 1 + rnd() % 23];
+            let cells = n[0] * n[1] * n[2];
+            let mut mask = DualMask {
+                w: 0.25,
+                inv_w: 4.0,
+                origin: [0.125, -3.0, 1e3],
+                lo: [-4, 7, 0],
+                n,
+                bits: vec![0; cells.div_ceil(64)],
+            };
+            let set = match case {
+                0 => 0,
+                1..=5 => 1,
+                _ => 1 + rnd() % (cells / 20 + 1),
+            };
+            for _ in 0..set {
+                let i = rnd() % cells;
+                mask.bits[i / 64] |= 1 << (i % 64);
+            }
+            let face = |a: usize, k: i64| mask.origin[a] + (mask.lo[a] + k) as f64 * mask.w;
+            // The region: the mask's dual cells, cut by a quarter cell on the low faces.
+            let min: [f64; 3] = std::array::from_fn(|a| face(a, 0) + 0.25 * mask.w);
+            let max: [f64; 3] = std::array::from_fn(|a| face(a, n[a] as i64));
+            let parts = mask.sub_boxes(&min, &max);
+            if set == 0 {
+                assert!(parts.is_empty());
+                continue;
+            }
+            let bit = |c: [usize; 3]| {
+                let i = c[0] + n[0] * (c[1] + n[1] * c[2]);
+                mask.bits[i / 64] >> (i % 64) & 1 == 1
+            };
+            let mut covered_volume = 0.0;
+            for p in &parts {
+                for a in 0..3 {
+                    let b = i64::from(p.block[a]) * BLOCK as i64;
+                    assert!(
+                        p.min[a] >= face(a, b).max(min[a])
+                            && p.max[a] <= face(a, b + BLOCK as i64).min(max[a])
+                    );
+                    assert!(p.min[a] < p.max[a]);
+                }
+                covered_volume += (0..3).map(|a| p.max[a] - p.min[a]).product::<f64>();
+            }
+            for z in 0..n[2] {
+                for y in 0..n[1] {
+                    for x in 0..n[0] {
+                        let c = [x, y, z];
+                        let near = (0..27).any(|k| {
+                            let o = [k % 3, k / 3 % 3, k / 9];
+                            let q: [Option<usize>; 3] = std::array::from_fn(|a| {
+                                (c[a] + o[a]).checked_sub(1).filter(|&v| v < n[a])
+                            });
+                            matches!(q, [Some(a), Some(b), Some(c)] if bit([a, b, c]))
+                        });
+                        // A point inside the cell (and inside the region).
+                        let p: [f64; 3] =
+                            std::array::from_fn(|a| face(a, c[a] as i64) + 0.6 * mask.w);
+                        let holding = parts
+                            .iter()
+                            .filter(|b| (0..3).all(|a| p[a] >= b.min[a] && p[a] < b.max[a]))
+                            .count();
+                        assert!(holding <= 1, "case {case}: cell {c:?} in {holding} parts");
+                        if near {
+                            assert_eq!(holding, 1, "case {case}: cell {c:?} near a marked one");
+                        }
+                    }
+                }
+            }
+            // One marked cell: its part holds it and its neighbours, nothing more.
+            if parts.len() == 1 && mask.bits.iter().map(|b| b.count_ones()).sum::<u32>() == 1 {
+                assert!(
+                    covered_volume <= 27.0 * mask.w.powi(3) + 1e-12,
+                    "case {case}"
+                );
+            }
+            // Touching parts share their faces bit for bit.
+            for p in &parts {
+                for q in &parts {
+                    for a in 0..3 {
+                        if (p.max[a] - q.min[a]).abs() < 1e-9 {
+                            assert_eq!(p.max[a].to_bits(), q.min[a].to_bits());
+                        }
+                    }
+                }
+            }
+        }
+    }
 
     /// A box too large for a mask, or not finite, gets none (its region reads its
     /// corners); the region's own box gets one, which cannot tell a point outside it or on

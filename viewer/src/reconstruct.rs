@@ -40,15 +40,26 @@ struct Axis {
     dw: [f64; 2],
 }
 
+/// `u.floor()` as an integer without a library call (the baseline x86-64 target has no
+/// SSE4.1 rounding instruction, and a call costs more than the rest of a dual-cell
+/// lookup); exact for `|u| < 2^53`, which the callers check.
+#[inline(always)]
+pub(crate) fn floor_i64(u: f64) -> i64 {
+    let t = u as i64;
+    if (t as f64) > u {
+        t - 1
+    } else {
+        t
+    }
+}
+
 #[inline(always)]
 fn axis_cells(u: f64, dim: i64, inv_w: f64) -> Axis {
     let mut ax = Axis::default();
-    // floor() without a libm call (the baseline x86-64 target has no SSE4.1 round).
     if !(u >= -1.0 && u < dim as f64) {
         return ax;
     }
-    let t = u as i64;
-    let i0 = if (t as f64) > u { t - 1 } else { t };
+    let i0 = floor_i64(u);
     let d = u - i0 as f64; // in [0, 1)
     if i0 >= 0 {
         ax.idx[ax.n] = i0;
@@ -327,11 +338,14 @@ impl Volume<'_> {
             _ => self.region_at(p)? as usize,
         };
         let h = self.finest_w;
-        let at = |q: [f64; 3]| -> Option<f64> {
+        // The neighbour points outside `r0` are found from `p`'s own descent.
+        let mut descent = None;
+        let mut at = |q: [f64; 3]| -> Option<f64> {
             let r = if holds(r0, &q) {
                 r0
             } else {
-                self.region_at(q)? as usize
+                let near = descent.get_or_insert_with(|| self.descent(p));
+                self.region_near(near, q)? as usize
             };
             self.eval_value(r, q, f)
         };

@@ -8,6 +8,7 @@
 //! that data placed at 1e6 keeps sub-cell precision; the traversal and point location
 //! use the same subtraction ([`format::kd`]), so their edge rules agree.
 
+use format::kd::Descent;
 use format::sequence::FieldRange;
 use format::{ArchivedBrickFile, BrickFileView};
 use rkyv::Archived;
@@ -178,7 +179,13 @@ impl<'a> Volume<'a> {
         f: usize,
         value: f64,
     ) -> Option<std::sync::Arc<crate::active::ActiveTree>> {
-        self.active.get(self, f, value)
+        self.active.get(self, f, value, false)
+    }
+
+    /// [`Volume::active_tree`], built on the current rayon pool when it is not kept yet:
+    /// for a frame's set-up, before its rays ask for it one by one.
+    pub(crate) fn prepare_active_tree(&self, f: usize, value: f64) {
+        self.active.get(self, f, value, true);
     }
 
     /// Number of bricks.
@@ -318,13 +325,37 @@ impl<'a> Volume<'a> {
     pub fn region_at(&self, p: [f64; 3]) -> Option<u32> {
         // The packed copy of field 0's tree (when there is one) is the denser read.
         // Inside the bounds a leaf's cell is its region's box.
-        let inside = (0..3).all(|a| p[a] >= self.bounds_min[a] && p[a] < self.bounds_max[a]);
-        if !inside {
+        if !self.inside(&p) {
             return None;
         }
         match self.packed(0) {
             Some(packed) => format::kd::locate(packed, p, self.frame),
             None => format::kd::locate(&format::kd::file_tree(self.file), p, self.frame),
+        }
+    }
+
+    /// Whether the local point `p` lies inside the file's bounds (half-open).
+    fn inside(&self, p: &[f64; 3]) -> bool {
+        (0..3).all(|a| p[a] >= self.bounds_min[a] && p[a] < self.bounds_max[a])
+    }
+
+    /// The KD descent of the local point `p`, for [`Volume::region_near`].
+    pub(crate) fn descent(&self, p: [f64; 3]) -> Descent {
+        match self.packed(0) {
+            Some(packed) => Descent::of(packed, p, self.frame),
+            None => Descent::of(&format::kd::file_tree(self.file), p, self.frame),
+        }
+    }
+
+    /// [`Volume::region_at`] of `q`, found from the descent of a point near it (see
+    /// [`Descent`]).
+    pub(crate) fn region_near(&self, near: &Descent, q: [f64; 3]) -> Option<u32> {
+        if !self.inside(&q) {
+            return None;
+        }
+        match self.packed(0) {
+            Some(packed) => near.locate(packed, q, self.frame),
+            None => near.locate(&format::kd::file_tree(self.file), q, self.frame),
         }
     }
 

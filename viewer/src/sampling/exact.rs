@@ -3,7 +3,7 @@
 //! such interval whose cells straddle the iso value is solved for its first root.
 
 use super::{Event, Tracer, MAX_LATTICES};
-use crate::active::{range_holds, MaskSlot, Start};
+use crate::active::{range_holds, Start};
 use crate::dual_mask::DualMask;
 use crate::reconstruct::Cubic;
 use crate::traverse::{inverse, ray_box, Segment, Skip, SKIPPED};
@@ -102,7 +102,7 @@ impl Tracer<'_> {
     }
 
     /// The first root in one region segment whose range holds the iso value; `mask` is
-    /// the region's dual-cell mask slot (see [`crate::dual_mask`]), when it has one.
+    /// the region's dual-cell mask (see [`crate::dual_mask`]), when it has one.
     #[allow(clippy::too_many_arguments)]
     fn exact_in_segment(
         &mut self,
@@ -112,15 +112,19 @@ impl Tracer<'_> {
         iso: f64,
         lattices: &[Lattice],
         inexact: bool,
-        mask: Option<&MaskSlot>,
+        mask: Option<&DualMask>,
     ) -> Option<(f64, Option<u32>)> {
         let vol = self.vol;
         let field = self.params.field;
         let r = seg.region as usize;
         let mut planes = Planes::new(lattices, o, d, seg.t0);
-        // The region's bricks are converted when the first interval needs its corners.
+        // The region's bricks are converted when the first interval needs its corners, and
+        // kept for the next segment of the same region (the parts of a region the active
+        // tree lists are segments of their own).
         let mut bricks = std::mem::take(&mut self.bricks);
-        bricks.clear();
+        if self.bricks_of != Some(seg.region) {
+            bricks.clear();
+        }
         if inexact {
             self.stats.inexact_segments += 1;
         }
@@ -131,18 +135,7 @@ impl Tracer<'_> {
             if tb <= ta {
                 break;
             }
-            let m = mask.and_then(|slot| {
-                slot.get_or_init(|| {
-                    if bricks.is_empty() {
-                        vol.dual_bricks(r, &mut bricks);
-                    }
-                    let reg = vol.region(r);
-                    let lattice = lattices.first()?;
-                    DualMask::build(vol, &bricks, lattice, &reg.min, &reg.max, field, iso)
-                })
-                .as_ref()
-            });
-            if let Some(m) = m {
+            if let Some(m) = mask {
                 // The interval's midpoint, as `cubic_in` takes it.
                 let tm = 0.5 * (ta + tb);
                 let pm: [f64; 3] = std::array::from_fn(|a| o[a] + tm * d[a]);
@@ -158,6 +151,7 @@ impl Tracer<'_> {
             }
             if bricks.is_empty() {
                 vol.dual_bricks(r, &mut bricks);
+                self.bricks_of = Some(seg.region);
             }
             let cubic = vol.cubic_in(&bricks, o, d, ta, tb, field, iso);
             self.stats.samples += 1;
@@ -611,6 +605,103 @@ mod tests {
         assert!(
             answered > 5_000 && crossing > 1_000 && answered - crossing > 2_000 && unsure > 100,
             "{answered} answered ({crossing} may cross), {unsure} unsure"
+        );
+    }
+
+    /// Exact hits of the ray `o + t d` (local frame) at `iso` with the regions of `tree`.
+    fn hit_with(
+        vol: &Volume,
+        tree: &std::sync::Arc<crate::active::ActiveTree>,
+        iso: f64,
+        o: [f64; 3],
+        d: [f64; 3],
+    ) -> Option<(f64, Option<u32>)> {
+        let params = super::super::Params {
+            strategy: super::super::Strategy::Exact,
+            step: 0.5,
+            tf: crate::transfer::Transfer {
+                mode: crate::transfer::Mode::Iso,
+                iso,
+                band: crate::transfer::Band {
+                    sigma: 0.1,
+                    peak: 1.0,
+                    k: 2.0,
+                },
+            },
+            field: 0,
+            colour_field: None,
+            delta0: 0.5 * vol.finest_w,
+            clip: None,
+            preintegrated: None,
+        };
+        let mut tracer = Tracer::new(vol, params);
+        tracer.active = Some(tree.clone());
+        tracer.iso_exact(o, d, -1e3, 1e3)
+    }
+
+    /// Cutting regions into the parts where their dual cells can hold the iso value
+    /// (`DualMask::sub_boxes`, what `exact` walks) changes which stretches of a ray are
+    /// searched, never what is found: every ray hits in the same region at the same `t`
+    /// (to round-off: a part's segment starts where the ray enters its box, not at the
+    /// lattice plane computed along the ray) as with every region whole, or misses with
+    /// both. On [`noise_rays`] through [`noise_file`] (small regions, level boundaries)
+    /// and through smooth shells in bricks of up to 24 cells, whose regions are cut into
+    /// several parts.
+    #[test]
+    fn cut_regions_find_the_hits_of_whole_regions() {
+        let shell = |p: [f64; 3]| {
+            let r2: f64 = (0..3).map(|a| (p[a] - 16.3).powi(2)).sum();
+            (r2.sqrt() * 0.7).sin()
+        };
+        let files = [
+            (noise_file(), vec![0.5, 0.9]),
+            (
+                crate::testvol::nested(16, [0.0; 3], &[("s", &shell)], 24),
+                vec![0.0, 0.6],
+            ),
+        ];
+        let (mut hits, mut cut_regions) = (0, 0);
+        for (file, isos) in files {
+            let view = crate::testvol::open(&file).expect("opens");
+            let vol = Volume::new(&view).expect("volume");
+            let mut rays = noise_rays(&vol);
+            let mut seed = 5;
+            let c = vol.to_local([16.0; 3]);
+            for _ in 0..1500 {
+                let o: [f64; 3] = std::array::from_fn(|a| c[a] + 40.0 * (lcg(&mut seed) - 0.5));
+                let d: [f64; 3] = std::array::from_fn(|_| lcg(&mut seed) - 0.5);
+                rays.push((o, d));
+            }
+            for iso in isos {
+                let cut = vol.active_tree(0, iso).expect("a tree");
+                let whole = std::sync::Arc::new(
+                    crate::active::ActiveTree::uncut(&vol, 0, iso).expect("a tree"),
+                );
+                let ((cut_leaves, cut_regs), (_, whole_regs)) =
+                    (cut.leaf_count(), whole.leaf_count());
+                assert!(cut_regs <= whole_regs);
+                cut_regions += cut_leaves - cut_regs;
+                for &(o, d) in &rays {
+                    let want = hit_with(&vol, &whole, iso, o, d);
+                    let got = hit_with(&vol, &cut, iso, o, d);
+                    match (want, got) {
+                        (None, None) => {}
+                        (Some((tw, rw)), Some((tg, rg))) => {
+                            assert!(
+                                (tw - tg).abs() <= 1e-9 * (1.0 + tw.abs()) && rw == rg,
+                                "iso {iso}, ray {o:?} + t {d:?}: {want:?} whole, {got:?} cut"
+                            );
+                            hits += 1;
+                        }
+                        _ => panic!("iso {iso}, ray {o:?} + t {d:?}: {want:?} whole, {got:?} cut"),
+                    }
+                }
+            }
+        }
+        assert!(hits > 2_000, "only {hits} hits");
+        assert!(
+            cut_regions > 20,
+            "only {cut_regions} parts beyond one per region"
         );
     }
 

@@ -225,8 +225,10 @@ pub struct Tracer<'v> {
     /// Where `exact` starts walking `active` for the next rays: set by the frame loop for
     /// each group of pixels (see [`Tracer::group_start`]), the root otherwise.
     start: crate::active::Start,
-    /// The bricks of the region `exact` is searching (scratch, refilled per segment).
+    /// The bricks of the region `exact` is searching (scratch, refilled per region), and
+    /// that region.
     bricks: Vec<crate::reconstruct::DualBrick>,
+    bricks_of: Option<u32>,
 }
 
 impl<'v> Tracer<'v> {
@@ -241,6 +243,7 @@ impl<'v> Tracer<'v> {
             active: None,
             start: crate::active::Start::Root,
             bricks: Vec::new(),
+            bricks_of: None,
         }
     }
 
