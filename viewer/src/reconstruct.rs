@@ -472,6 +472,88 @@ impl Volume<'_> {
         (any_above, any_below)
     }
 
+    /// ORs into `sides` what [`Volume::dual_cell_sides`] reads of the brick `br` at the
+    /// centre of every dual cell of a box of `n` dual cells from index `lo` of the lattice
+    /// (inverse width `inv_w`, a cell centre at `origin`) that `br`'s cells lie on (whole
+    /// cells apart): bit 0 for a cell with `v ≥ iso`, bit 1 for one with `v < iso`, one
+    /// byte per dual cell, x fastest. Brick by brick instead of dual cell by dual cell:
+    /// each cell's side is found once, then spread to the up to eight dual cells that
+    /// read it (the cells of a dual cell are the brick's cells `m − o` and `m − o + 1` on
+    /// each axis, for a brick whose first cell is `o` cells on from the box's first dual
+    /// cell, as many of them as the brick has). `scratch` is reused between calls.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn dual_sides_of_brick(
+        &self,
+        br: &DualBrick,
+        origin: &[f64; 3],
+        inv_w: f64,
+        lo: &[i64; 3],
+        n: &[usize; 3],
+        f: usize,
+        iso: f64,
+        sides: &mut [u8],
+        scratch: &mut Vec<u8>,
+    ) {
+        let vals = self.values[f];
+        // Per axis: the brick's first cell from the box's first dual cell, and the dual
+        // cells of the box that read one of its cells.
+        let (mut off, mut m0, mut m1) = ([0i64; 3], [0i64; 3], [0i64; 3]);
+        for a in 0..3 {
+            let o = ((br.origin[a] - origin[a]) * inv_w).round();
+            if !o.is_finite() || o.abs() > 1e15 {
+                return;
+            }
+            off[a] = o as i64 - lo[a];
+            m0[a] = (off[a] - 1).max(0);
+            m1[a] = (off[a] + br.dims[a] - 1).min(n[a] as i64 - 1);
+            if m0[a] > m1[a] {
+                return;
+            }
+        }
+        // The sides of the cells those dual cells read, with the cells the brick does not
+        // have as 0: buffer cell `i` is brick cell `m0 − off + i`.
+        let s: [usize; 3] = std::array::from_fn(|a| (m1[a] - m0[a] + 2) as usize);
+        scratch.clear();
+        scratch.resize(s[0] * s[1] * s[2], 0);
+        let cell = |a: usize, i: usize| {
+            let c = m0[a] - off[a] + i as i64;
+            (0..br.dims[a]).contains(&c).then_some(c as usize)
+        };
+        for k in 0..s[2] {
+            let Some(cz) = cell(2, k) else { continue };
+            for j in 0..s[1] {
+                let Some(cy) = cell(1, j) else { continue };
+                let row = br.first + cy * br.nx + cz * br.nxy;
+                for i in 0..s[0] {
+                    let Some(cx) = cell(0, i) else { continue };
+                    let v = vals[row + cx].to_native() as f64 - iso;
+                    scratch[i + s[0] * (j + s[1] * k)] =
+                        u8::from(v >= 0.0) | u8::from(v < 0.0) << 1;
+                }
+            }
+        }
+        // Dual cell `m` reads buffer cells `m − m0` and `m − m0 + 1` on each axis.
+        let (sx, sxy) = (s[0], s[0] * s[1]);
+        for mz in m0[2]..=m1[2] {
+            for my in m0[1]..=m1[1] {
+                let b = (my - m0[1]) as usize * sx + (mz - m0[2]) as usize * sxy;
+                let out = mz as usize * n[0] * n[1] + my as usize * n[0];
+                for mx in m0[0]..=m1[0] {
+                    let i = b + (mx - m0[0]) as usize;
+                    let or = scratch[i]
+                        | scratch[i + 1]
+                        | scratch[i + sx]
+                        | scratch[i + sx + 1]
+                        | scratch[i + sxy]
+                        | scratch[i + sxy + 1]
+                        | scratch[i + sxy + sx]
+                        | scratch[i + sxy + sx + 1];
+                    sides[out + mx as usize] |= or;
+                }
+            }
+        }
+    }
+
     /// The cubic `g(x) = Σ H_C (v_C - iso)` along `o + t d` for `t = ta + x (tb - ta)`,
     /// valid when `[ta, tb]` lies inside one dual cell of every lattice of the region whose
     /// bricks are `bricks` (from [`Volume::dual_bricks`]; cells are collected at the
@@ -480,7 +562,9 @@ impl Volume<'_> {
     /// The same numbers as [`Volume::cubic`] (same cells, same operations in the same
     /// order), with the brick conversions hoisted out and, where all eight corners of a
     /// brick's dual cell exist (everywhere but its outer cell layer), the dual-cell test
-    /// read as eight fixed offsets instead of the general per-axis loops.
+    /// read as eight fixed offsets instead of the general per-axis loops. `straddles`:
+    /// the caller already knows that the cells read lie on both sides of `iso` (a dual-cell
+    /// mask said so), so they are not tested again.
     #[allow(clippy::too_many_arguments)]
     #[inline]
     pub(crate) fn cubic_in(
@@ -492,10 +576,15 @@ impl Volume<'_> {
         tb: f64,
         f: usize,
         iso: f64,
+        straddles: bool,
     ) -> Cubic {
         let tm = 0.5 * (ta + tb);
         let pm: [f64; 3] = std::array::from_fn(|a| o[a] + tm * d[a]);
-        let (any_above, any_below) = self.dual_cell_sides(bricks, &pm, f, iso);
+        let (any_above, any_below) = if straddles {
+            (true, true)
+        } else {
+            self.dual_cell_sides(bricks, &pm, f, iso)
+        };
         let vals = self.values[f];
         if !(any_above && any_below) {
             return Cubic {
