@@ -32,7 +32,7 @@ use format::kd::{inverse, ray_box, Node, Segment, WalkNodes};
 
 use rayon::prelude::*;
 
-use crate::dual_mask::{DualMask, SubBox};
+use crate::dual_mask::{DualMask, SubBox, MAX_TREE_WORK};
 use crate::sampling::{Lattice, Lattices};
 use crate::volume::Volume;
 
@@ -302,13 +302,27 @@ impl ActiveTree {
     /// masks on the current rayon pool: only for a caller that holds no lock another job
     /// of that pool may wait for.
     pub fn build(vol: &Volume, field: usize, value: f64, parallel: bool) -> Option<ActiveTree> {
-        Self::build_with(vol, field, value, parallel, true)
+        Self::build_with(vol, field, value, parallel, true, MAX_TREE_WORK)
     }
 
     /// [`ActiveTree::build`] with every region whole (what the cut tree is compared with).
     #[cfg(test)]
     pub(crate) fn uncut(vol: &Volume, field: usize, value: f64) -> Option<ActiveTree> {
-        Self::build_with(vol, field, value, false, false)
+        Self::build_with(vol, field, value, false, false, MAX_TREE_WORK)
+    }
+
+    /// [`ActiveTree::build`] with the masks' work bounded by `mask_work` instead of
+    /// [`MAX_TREE_WORK`], and how many regions got a mask.
+    #[cfg(test)]
+    pub(crate) fn with_mask_work(
+        vol: &Volume,
+        field: usize,
+        value: f64,
+        mask_work: usize,
+    ) -> Option<(ActiveTree, usize)> {
+        let tree = Self::build_with(vol, field, value, false, true, mask_work)?;
+        let masks = tree.masks.iter().filter(|m| m.is_some()).count();
+        Some((tree, masks))
     }
 
     /// How many leaves the tree has, and how many regions they belong to.
@@ -321,13 +335,15 @@ impl ActiveTree {
     }
 
     /// [`ActiveTree::build`]; `cut: false` keeps every region whole (its leaf box is the
-    /// region's box), which the tests compare the cut tree with.
+    /// region's box), which the tests compare the cut tree with; the masks are built in
+    /// the tree's order while their work stays within `mask_work`.
     fn build_with(
         vol: &Volume,
         field: usize,
         value: f64,
         parallel: bool,
         cut: bool,
+        mask_work: usize,
     ) -> Option<ActiveTree> {
         let tree = vol.packed(field)?;
         let holds = |mn: f32, mx: f32| range_holds(mn, mx, value);
@@ -394,9 +410,23 @@ impl ActiveTree {
             [root] if *root as usize + 1 == nodes.len() => {}
             _ => return None,
         }
-        // The masks of the regions of one lattice, and where in them the value can lie.
+        // The masks of the regions of one lattice, and where in them the value can lie,
+        // within a bound on the work of them all.
+        let mut mask_budget = mask_work;
         let masked: Vec<usize> = (0..nodes.len())
-            .filter(|&i| nodes[i].axis == LEAF && nodes[i].lattices == 1 && !nodes[i].inexact)
+            .filter(|&i| {
+                let n = &nodes[i];
+                if n.axis != LEAF || n.lattices != 1 || n.inexact {
+                    return false;
+                }
+                let bricks = vol.region_brick_ids(n.a as usize).len();
+                let work = DualMask::work(&lattices[n.b as usize], &n.min, &n.max, bricks);
+                let fits = work <= mask_budget;
+                if fits {
+                    mask_budget -= work;
+                }
+                fits
+            })
             .collect();
         let prepare = |&i: &usize| {
             let leaf = &nodes[i];

@@ -21,10 +21,15 @@ use crate::volume::Volume;
 /// Most dual cells a region's mask covers (beyond that the region reads its corners).
 const MAX_CELLS: usize = 1 << 18;
 
-/// Most (dual cell, brick) pairs one mask may test: building it is a ray's work, so a
-/// region far larger than the bricks' cells (which a valid file may hold) reads its
-/// corners instead of stalling the ray that reaches it first.
+/// Most (dual cell, brick) pairs one mask may test, so that a region far larger than the
+/// bricks' cells (which a valid file may hold) reads its corners instead of stalling the
+/// build of the active tree.
 const MAX_WORK: usize = 1 << 21;
+
+/// Most (dual cell, brick) pairs the masks of one active tree may test together (a
+/// second or so): the regions past it, in the tree's order, read their corners. A
+/// 5 M-cell wake needs about a million at its busiest iso values.
+pub(crate) const MAX_TREE_WORK: usize = 1 << 25;
 
 /// How close (in cells) to a lattice plane a midpoint may be for its bit to be trusted.
 const PLANE_MARGIN: f64 = 1e-6;
@@ -74,17 +79,8 @@ impl DualMask {
         iso: f64,
     ) -> Option<DualMask> {
         let &(w, inv_w, origin) = lattice;
-        let mut lo = [0i64; 3];
-        let mut n = [0usize; 3];
-        for a in 0..3 {
-            let (u0, u1) = ((min[a] - origin[a]) * inv_w, (max[a] - origin[a]) * inv_w);
-            if !(u0.is_finite() && u1.is_finite() && u0 <= u1 && u1 - u0 < 1e6) {
-                return None;
-            }
-            lo[a] = u0.floor() as i64;
-            n[a] = (u1.floor() as i64 - lo[a] + 1) as usize;
-        }
-        let cells = n[0].checked_mul(n[1])?.checked_mul(n[2])?;
+        let (lo, n) = Self::extent(lattice, min, max)?;
+        let cells = n[0] * n[1] * n[2];
         if cells > MAX_CELLS || cells.saturating_mul(bricks.len()) > MAX_WORK {
             return None;
         }
@@ -120,6 +116,33 @@ impl DualMask {
             n,
             bits,
         })
+    }
+
+    /// The first dual cell and the number of dual cells per axis of the mask of the box
+    /// `min..max` on `lattice`; `None` when the box is not finite or absurdly large.
+    fn extent(lattice: &Lattice, min: &[f64; 3], max: &[f64; 3]) -> Option<([i64; 3], [usize; 3])> {
+        let &(_, inv_w, origin) = lattice;
+        let mut lo = [0i64; 3];
+        let mut n = [0usize; 3];
+        for a in 0..3 {
+            let (u0, u1) = ((min[a] - origin[a]) * inv_w, (max[a] - origin[a]) * inv_w);
+            if !(u0.is_finite() && u1.is_finite() && u0 <= u1 && u1 - u0 < 1e6) {
+                return None;
+            }
+            lo[a] = u0.floor() as i64;
+            n[a] = (u1.floor() as i64 - lo[a] + 1) as usize;
+        }
+        n[0].checked_mul(n[1])?.checked_mul(n[2])?;
+        Some((lo, n))
+    }
+
+    /// What building the mask of the box `min..max` of a region of `bricks` bricks costs,
+    /// in (dual cell, brick) pairs (`usize::MAX` when it would not be built).
+    pub(crate) fn work(lattice: &Lattice, min: &[f64; 3], max: &[f64; 3], bricks: usize) -> usize {
+        Self::extent(lattice, min, max)
+            .map(|(_, n)| n[0] * n[1] * n[2])
+            .filter(|&cells| cells <= MAX_CELLS)
+            .map_or(usize::MAX, |cells| cells.saturating_mul(bricks))
     }
 
     /// The parts of the region box `min..max` (the box the mask was built for) that
