@@ -12,13 +12,15 @@
 //!   two sides of its split plane), so the walk is front to back;
 //! - a node's box is the union of its regions' boxes, so a ray that passes beside them
 //!   is rejected at once instead of descending through empty cells;
-//! - a region's segment is the ray clipped to the region's own box, as in the file's
-//!   walk, where the region lies inside its leaf cell: the same numbers come out (a
-//!   slab entry is monotone in the box face), so the pixels do not change.
+//! - a region of one cell lattice is cut into its *parts*, the boxes where its dual cells
+//!   can hold the value ([`DualMask::sub_boxes`]): a ray that crosses the region beside
+//!   them needs no interval there, and a region with none leaves the tree;
+//! - a leaf's segment is the ray clipped to the leaf's own box (a whole region's, as in
+//!   the file's walk, or a part's), and a part's intervals are its region's.
 //!
-//! Building costs one pass over the subtrees whose range holds the value (a few
-//! milliseconds at most); the volume keeps the last few trees, so a still view or a
-//! sequence of frames at one iso value builds once.
+//! Building costs one pass over the subtrees whose range holds the value and the masks of
+//! the regions found (a few milliseconds, on all the render threads); the volume keeps the
+//! last few trees, so a still view or a sequence of frames at one iso value builds once.
 //!
 //! The walk reads a compact copy of the tree ([`Walk`]): every inner node holds both
 //! children's boxes in `f32`, widened outwards, in one 64-byte record, so a ray reads one

@@ -7,7 +7,8 @@
 //! lattice, the answer is the same everywhere inside one dual cell of that lattice: every
 //! brick's dual cell there is the same, and so are the corners read. So the answer is
 //! computed once per dual cell, when the active tree for an iso value is built, and read
-//! back as one bit per interval.
+//! back as one bit per interval. The bits also cut the region into the parts where the
+//! value can lie ([`DualMask::sub_boxes`]), which is all of the region the tree lists.
 //!
 //! An interval whose midpoint lies within round-off of a lattice plane does not trust the
 //! bit (a brick's own cell coordinate could round to the neighbouring dual cell) and reads
