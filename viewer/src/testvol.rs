@@ -387,3 +387,32 @@ pub fn nested(n: u32, offset: [f64; 3], fields: &[FieldFn], max_brick: u32) -> B
     );
     build(&[coarse, fine], fields, max_brick)
 }
+
+/// Tracing parameters for tests: `strategy` at `step` cells in `mode` around `iso` on field
+/// 0, a band of σ 0.1 (peak 1.6, ±2σ), no colour field, no clipping, point-sampled opacity.
+pub fn params(
+    vol: &crate::volume::Volume,
+    strategy: crate::sampling::Strategy,
+    step: f64,
+    mode: crate::transfer::Mode,
+    iso: f64,
+) -> crate::sampling::Params {
+    crate::sampling::Params {
+        strategy,
+        step,
+        tf: crate::transfer::Transfer {
+            mode,
+            iso,
+            band: crate::transfer::Band {
+                sigma: 0.1,
+                peak: 1.6,
+                k: 2.0,
+            },
+        },
+        field: 0,
+        colour_field: None,
+        delta0: 0.5 * vol.finest_w,
+        clip: None,
+        preintegrated: None,
+    }
+}

@@ -621,24 +621,13 @@ mod tests {
         o: [f64; 3],
         d: [f64; 3],
     ) -> Option<(f64, Option<u32>)> {
-        let params = super::super::Params {
-            strategy: super::super::Strategy::Exact,
-            step: 0.5,
-            tf: crate::transfer::Transfer {
-                mode: crate::transfer::Mode::Iso,
-                iso,
-                band: crate::transfer::Band {
-                    sigma: 0.1,
-                    peak: 1.0,
-                    k: 2.0,
-                },
-            },
-            field: 0,
-            colour_field: None,
-            delta0: 0.5 * vol.finest_w,
-            clip: None,
-            preintegrated: None,
-        };
+        let params = crate::testvol::params(
+            vol,
+            super::super::Strategy::Exact,
+            0.5,
+            crate::transfer::Mode::Iso,
+            iso,
+        );
         let mut tracer = Tracer::new(vol, params);
         tracer.active = Some(tree.clone());
         tracer.iso_exact(o, d, -1e3, 1e3)

@@ -9,7 +9,7 @@
 
 use qbricks_viewer::sampling::{Params, Strategy, Tracer};
 use qbricks_viewer::testvol::{self, FieldFn, GridSpec};
-use qbricks_viewer::transfer::{Mode, Transfer};
+use qbricks_viewer::transfer::Mode;
 use qbricks_viewer::volume::Volume;
 
 const STRATEGIES: [Strategy; 4] = [
@@ -25,26 +25,7 @@ pub(crate) const STEP: f64 = 0.5;
 /// Step of the reference.
 pub(crate) const REF_STEP: f64 = 0.01;
 
-pub(crate) fn params(vol: &Volume, strategy: Strategy, step: f64, mode: Mode, iso: f64) -> Params {
-    Params {
-        strategy,
-        step,
-        tf: Transfer {
-            mode,
-            iso,
-            band: qbricks_viewer::transfer::Band {
-                sigma: 0.1,
-                peak: 1.6,
-                k: 2.0,
-            },
-        },
-        field: 0,
-        colour_field: None,
-        delta0: 0.5 * vol.finest_w,
-        clip: None,
-        preintegrated: None,
-    }
-}
+pub(crate) use testvol::params;
 
 /// As [`params`], with rays clipped to the box of regions that can contribute (what
 /// the renderer does).
