@@ -488,7 +488,7 @@ impl ActiveTree {
         // Each cut region becomes the tree of its parts.
         nodes = rewrite(&nodes, |leaf, out| {
             match subs.get(leaf.sub as usize) {
-                Some(parts) if leaf.sub != NONE => {
+                Some(parts) if leaf.sub != NONE && !parts.is_empty() => {
                     let mut parts = parts.clone();
                     part_tree(&mut parts, leaf, out);
                 }
@@ -635,8 +635,8 @@ fn join(nodes: &mut Vec<ActiveNode>, lo: u32, hi: u32, axis: u8) -> u32 {
 }
 
 /// `tree` (children before parents, root last) with every leaf replaced by what `leaf`
-/// appends for it (a subtree, children before parents and its root last; `false`: nothing,
-/// the leaf leaves the tree). An inner node left with one child becomes that child, and
+/// appends for it and returns `true` (a subtree, children before parents and its root
+/// last), or by nothing when it returns `false` (the leaf leaves the tree). An inner node left with one child becomes that child, and
 /// inner boxes are those of what remains below them.
 fn rewrite(
     tree: &[ActiveNode],
@@ -825,22 +825,22 @@ impl ActiveCache {
         // A poisoned lock only means another thread panicked while holding it; the list
         // itself is always whole.
         let lock = || self.0.lock().unwrap_or_else(|e| e.into_inner());
-        {
-            let mut trees = lock();
-            if let Some(i) = trees.iter().position(|t| t.is_for(field, value)) {
-                let t = trees.remove(i);
-                trees.push(t.clone());
-                return Some(t);
-            }
+        // The kept tree for (field, value), moved to the newest place.
+        let kept = |trees: &mut Vec<Arc<ActiveTree>>| {
+            let i = trees.iter().position(|t| t.is_for(field, value))?;
+            let t = trees.remove(i);
+            trees.push(t.clone());
+            Some(t)
+        };
+        if let Some(t) = kept(&mut lock()) {
+            return Some(t);
         }
         // Built without the lock: a parallel build may run other jobs of its pool while
         // it waits, and one of them may ask for a tree too.
         let t = Arc::new(ActiveTree::build(vol, field, value, parallel)?);
         let mut trees = lock();
-        if let Some(i) = trees.iter().position(|t| t.is_for(field, value)) {
-            // Another thread built it meanwhile: everyone shares the first.
-            let t = trees.remove(i);
-            trees.push(t.clone());
+        // Another thread may have built it meanwhile: everyone shares the first.
+        if let Some(t) = kept(&mut trees) {
             return Some(t);
         }
         if trees.len() == KEEP {
