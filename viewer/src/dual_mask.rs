@@ -120,14 +120,17 @@ impl DualMask {
     }
 
     /// The first dual cell and the number of dual cells per axis of the mask of the box
-    /// `min..max` on `lattice`; `None` when the box is not finite or absurdly large.
+    /// `min..max` on `lattice`; `None` when the box is not finite, absurdly large, or
+    /// absurdly far from the lattice's origin (a valid file may place a brick anywhere;
+    /// cell indices then stay far inside `i64`, as [`DualMask::may_cross`] needs).
     fn extent(lattice: &Lattice, min: &[f64; 3], max: &[f64; 3]) -> Option<([i64; 3], [usize; 3])> {
         let &(_, inv_w, origin) = lattice;
         let mut lo = [0i64; 3];
         let mut n = [0usize; 3];
         for a in 0..3 {
             let (u0, u1) = ((min[a] - origin[a]) * inv_w, (max[a] - origin[a]) * inv_w);
-            if !(u0.is_finite() && u1.is_finite() && u0 <= u1 && u1 - u0 < 1e6) {
+            let near = |u: f64| u.abs() < 1e15;
+            if !(near(u0) && near(u1) && u0 <= u1 && u1 - u0 < 1e6) {
                 return None;
             }
             lo[a] = u0.floor() as i64;
@@ -430,6 +433,13 @@ mod tests {
             DualMask::build(&vol, &bricks, lattice, &min, &max, 0, 3.0)
         };
         assert!(build([-1e4; 3], [1e4; 3]).is_none(), "2e4 cells a side");
+        // A box 1e20 cells from the lattice's origin (fuzz: a brick moved far away; its
+        // cell indices overflowed `i64` arithmetic).
+        let far = |x: f64| [reg.min, reg.max].map(|p| p.map(|v| v + x));
+        for x in [1e20, -1e20, 3e15] {
+            let [min, max] = far(x);
+            assert!(build(min, max).is_none(), "{x}");
+        }
         assert!(build([f64::NAN; 3], reg.max).is_none());
         assert!(build(reg.min, [f64::INFINITY; 3]).is_none());
         let mask = build(reg.min, reg.max).expect("the region's box");

@@ -223,3 +223,27 @@ fn a_split_outside_its_cell_gives_no_box_past_the_data() {
         walk(&view);
     }
 }
+
+/// Fuzz crash (2026-11-26): a brick moved about 1e20 cells away from the data. The file
+/// validates (a brick may lie anywhere), and the dual-cell mask of a region reading only
+/// that brick took its cell indices from the brick's far lattice: `i64` arithmetic on
+/// them overflowed (a panic with overflow checks, a garbage mask without). Such a region
+/// gets no mask now, so every strategy walks it (run with overflow checks by `.ci/run`).
+#[test]
+fn a_brick_far_from_the_data_walks() {
+    let base = small_volume();
+    let mut opened = 0;
+    for b in 0..base.bricks.len() {
+        for far in [1e20, -1e20, 3e15] {
+            let mut file = base.clone();
+            for a in 0..3 {
+                file.bricks[b].origin[a] += far;
+            }
+            if let Ok(view) = open(&file, "far.qbk") {
+                walk(&view);
+                opened += 1;
+            }
+        }
+    }
+    assert!(opened > 0, "no file with a far brick opened");
+}
