@@ -8,9 +8,9 @@ use std::path::Path;
 
 use format::validate::ValidationError;
 use format::{BrickFile, BrickFileView, FormatErrorKind};
-use qbricks_viewer::sampling::{Params, Strategy, Tracer};
+use qbricks_viewer::sampling::{Strategy, Tracer};
 use qbricks_viewer::testvol::{self, GridSpec};
-use qbricks_viewer::transfer::{Band, Mode, Transfer};
+use qbricks_viewer::transfer::Mode;
 use qbricks_viewer::volume::Volume;
 
 /// Two nested grids with a smooth field, a few bricks each.
@@ -50,24 +50,8 @@ fn walk(view: &BrickFileView) {
         (Mode::Iso, Strategy::Uniform),
         (Mode::Dvr, Strategy::Bisect),
     ] {
-        let params = Params {
-            strategy,
-            step: 0.5,
-            tf: Transfer {
-                mode,
-                iso: 4.0,
-                band: Band {
-                    sigma: 0.5,
-                    peak: 1.6,
-                    k: 2.0,
-                },
-            },
-            field: 0,
-            colour_field: None,
-            delta0: 0.5 * vol.finest_w,
-            clip: None,
-            preintegrated: None,
-        };
+        let mut params = testvol::params(&vol, strategy, 0.5, mode, 4.0);
+        params.tf.band.sigma = 0.5;
         let mut tr = Tracer::new(&vol, params);
         match mode {
             Mode::Iso => {
