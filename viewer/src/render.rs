@@ -210,10 +210,10 @@ pub(crate) fn render_tiles(
     cancel: &CancelToken,
     sink: &(dyn Fn(TileResult) + Sync),
 ) -> bool {
-    // `exact` builds the tree of the regions it searches once per iso value: here, on
-    // all the pool's threads, before the tiles' rays ask for it.
+    // An iso-surface builds the tree of the regions it searches once per iso value: here,
+    // on all the pool's threads, before the tiles' rays ask for it.
     let params = &scene.params;
-    if params.strategy == Strategy::Exact && params.tf.mode == Mode::Iso {
+    if params.tf.mode == Mode::Iso {
         scene.vol.prepare_active_tree(params.field, params.tf.iso);
     }
     tiles.par_iter().all(|&tile| {

@@ -4,9 +4,10 @@
 //! opposite sides of the iso value bracket a crossing, which is then narrowed to a position.
 //! `exact` has its own search (`exact.rs`).
 
+use super::exact::Gaps;
 use super::positions::Positions;
 use super::{at, bisect_depth, Event, IsoHit, Strategy, Tracer};
-use crate::traverse::{Skip, SKIPPED};
+use crate::traverse::{Segment, Skip, SKIPPED};
 
 #[derive(Debug, Clone, Copy)]
 struct Prev {
@@ -96,7 +97,17 @@ impl Tracer<'_> {
             keep: |a, b| tf.may_contribute(a, b),
             across_gaps: false,
         };
-        vol.segments_skipping(o, d, t0, t1, &mut stack, &skip, |seg| {
+        // The regions where the iso value can lie, cut into the parts where their dual
+        // cells can hold it (the tree `exact` walks, see `crate::active`): everywhere else
+        // the field lies on one side of the value, so no crossing is lost by treating the
+        // stretches between parts as gaps in the data (an exit sample before each, an
+        // entry sample after). Without a tree, the file's walk with skipped subtrees.
+        let (tree, start) = self.take_active();
+        let mut gaps = tree.as_ref().map(|_| Gaps::new(vol, &o, &d, t0, t1));
+        let mut visit = |seg: Segment| {
+            if let Some(g) = gaps.as_mut() {
+                g.before(self, &seg);
+            }
             let r = seg.region as usize;
             let w = vol.step_width(seg.region);
             if seg.t0 > last_t1 + 1e-9 * w {
@@ -184,9 +195,19 @@ impl Tracer<'_> {
                 self.stats.truncated_segments += 1;
             }
             true
-        });
+        };
+        match &tree {
+            Some(tree) => tree.segments(vol, start, o, d, t0, t1, &mut stack, |seg, _, _, _| {
+                visit(seg)
+            }),
+            None => vol.segments_skipping(o, d, t0, t1, &mut stack, &skip, visit),
+        }
         self.stack = stack;
+        self.active = tree;
         if bracket.is_none() {
+            if let Some(g) = &gaps {
+                g.finish(self);
+            }
             // The ray leaves the data (or the clipped box) after its last sample.
             bracket = self.exit_bracket(o, d, prev, last_live, last_t1);
         }

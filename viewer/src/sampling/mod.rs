@@ -247,11 +247,11 @@ impl<'v> Tracer<'v> {
         }
     }
 
-    /// Where `exact`'s walks can start for rays inside `frustum` (the pixels of one
+    /// Where iso-surface walks can start for rays inside `frustum` (the pixels of one
     /// group, see [`crate::active::ActiveTree::start_in`]); fetches the active tree for
-    /// them. Other strategies and modes walk the file's tree: for them, the root.
+    /// them. dvr walks the file's tree: for it, the root.
     pub(crate) fn group_start(&mut self, frustum: &crate::camera::Frustum) -> crate::active::Start {
-        if self.params.strategy != Strategy::Exact || self.params.tf.mode != Mode::Iso {
+        if self.params.tf.mode != Mode::Iso {
             return crate::active::Start::Root;
         }
         let (field, iso) = (self.params.field, self.params.tf.iso);
