@@ -2,11 +2,12 @@
 //! cell lattice present in the region) `Σ H (v − iso)` along the ray is a cubic, so each
 //! such interval whose cells straddle the iso value is solved for its first root.
 
+use super::Gaps;
 use super::{Event, Tracer, MAX_LATTICES};
-use crate::active::{range_holds, ActiveTree, Start};
+use crate::active::range_holds;
 use crate::dual_mask::DualMask;
 use crate::reconstruct::Cubic;
-use crate::traverse::{inverse, ray_box, Segment, Skip, SKIPPED};
+use crate::traverse::{Segment, Skip, SKIPPED};
 use crate::volume::Volume;
 
 impl Tracer<'_> {
@@ -70,32 +71,6 @@ impl Tracer<'_> {
         self.stack = stack;
         self.active = tree;
         found
-    }
-
-    /// The active tree for this tracer's field and iso value, and where the next ray's walk
-    /// starts in it (the group start the caller set belongs to the tree it put in
-    /// `self.active`); the caller puts the tree back.
-    pub(super) fn take_active(&mut self) -> (Option<std::sync::Arc<ActiveTree>>, Start) {
-        let (field, iso) = (self.params.field, self.params.tf.iso);
-        match self.active.take() {
-            Some(t) if t.is_for(field, iso) => (Some(t), self.start),
-            _ => (self.vol.active_tree(field, iso), Start::Root),
-        }
-    }
-
-    /// Counts (and logs) the stretch `[t0, t1]` of the data that a walk of the active tree
-    /// steps over: no region there can hold the iso value.
-    fn enter_gap(&mut self, t0: f64, t1: f64) {
-        self.enter_segment(
-            &Segment {
-                region: SKIPPED,
-                t0,
-                t1,
-                min: f32::NAN,
-                max: f32::NAN,
-            },
-            true,
-        );
     }
 
     /// The first root in one region segment whose range holds the iso value; `mask` is
@@ -168,42 +143,6 @@ impl Tracer<'_> {
         }
         self.bricks = bricks;
         found
-    }
-}
-
-/// The stretches of the data between the leaves a walk of the active tree visits, counted
-/// (and logged) as skipped, as the file's walk reports the subtrees it steps over.
-pub(super) struct Gaps {
-    /// The ray's interval inside the data.
-    data: Option<(f64, f64)>,
-    /// How far along the ray the walk has accounted for.
-    covered: Option<f64>,
-}
-
-impl Gaps {
-    pub(super) fn new(vol: &Volume, o: &[f64; 3], d: &[f64; 3], t0: f64, t1: f64) -> Gaps {
-        let data = ray_box(&vol.bounds_min, &vol.bounds_max, o, &inverse(d), t0, t1);
-        Gaps {
-            data,
-            covered: data.map(|(a, _)| a),
-        }
-    }
-
-    /// Before the walk's segment `seg`: the stretch since the last one.
-    pub(super) fn before(&mut self, tracer: &mut Tracer, seg: &Segment) {
-        if let Some(c) = self.covered.filter(|&c| seg.t0 > c) {
-            tracer.enter_gap(c, seg.t0);
-        }
-        self.covered = Some(self.covered.map_or(seg.t1, |c| c.max(seg.t1)));
-    }
-
-    /// After a walk that went to its end: the stretch to the end of the data.
-    pub(super) fn finish(&self, tracer: &mut Tracer) {
-        if let (Some((_, end)), Some(c)) = (self.data, self.covered) {
-            if end > c {
-                tracer.enter_gap(c, end);
-            }
-        }
     }
 }
 
@@ -436,6 +375,7 @@ pub(crate) fn first_root(c: &Cubic) -> Option<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::traverse::{inverse, ray_box};
 
     fn cubic_from_roots(r: [f64; 3], scale: f64) -> Cubic {
         // scale·(x − r0)(x − r1)(x − r2), weights constant 1.

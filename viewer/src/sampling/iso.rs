@@ -4,9 +4,8 @@
 //! opposite sides of the iso value bracket a crossing, which is then narrowed to a position.
 //! `exact` has its own search (`exact.rs`).
 
-use super::exact::Gaps;
 use super::positions::Positions;
-use super::{at, bisect_depth, Event, IsoHit, Strategy, Tracer};
+use super::{at, bisect_depth, Event, Gaps, IsoHit, Strategy, Tracer};
 use crate::traverse::{Segment, Skip, SKIPPED};
 
 #[derive(Debug, Clone, Copy)]

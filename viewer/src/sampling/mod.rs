@@ -1,18 +1,20 @@
 //! Sampling strategies along one ray: `uniform`, `paper`, `bisect`, `exact`
 //! (see `docs/design.md`, "Sampling strategies").
 //!
-//! All strategies walk the regions front to back ([`Volume::segments`]) and skip a region
-//! whose value bounds miss the transfer function's non-zero band. A skipped region still
-//! tells on which side of the band the field is there: when the last sample before it lies
-//! on the other side, the band was crossed in between and is searched for there, so
-//! skipping never loses a crossing.
+//! In dvr mode all strategies walk the regions front to back ([`Volume::segments`]) and skip
+//! a region whose value bounds miss the transfer function's non-zero band. A skipped region
+//! still tells on which side of the band the field is there: when the last sample before it
+//! lies on the other side, the band was crossed in between and is searched for there, so
+//! skipping never loses a crossing. In iso mode they walk the parts of the regions that can
+//! hold the iso value ([`crate::active`]); the field lies on one side of it everywhere else.
 //!
 //! The files follow the algorithms, because that is what one reads or changes at a time;
 //! what every strategy shares stays here, once:
 //!
 //! - here: the public types ([`Strategy`], [`Params`], [`Stats`], [`Event`], [`IsoHit`]),
 //!   the limits, and [`Tracer`] with the per-segment bookkeeping every walk uses (clipping
-//!   to the active box, counting and logging a segment, probing a point during refinement)
+//!   to the active box, fetching the active tree, counting and logging a segment and the
+//!   gaps between the tree's leaves, probing a point during refinement)
 //!   and the bisection depth that `iso` and `dvr` both refine to under `bisect`;
 //! - `positions`: where the samples of one region segment go (`uniform`'s fixed step carried
 //!   from region to region, `paper`/`bisect` interval midpoints);
@@ -220,9 +222,10 @@ pub struct Tracer<'v> {
     stack: Vec<(u32, f64, f64)>,
     /// Region of the last refinement probe.
     probe_hint: Option<u32>,
-    /// The regions `exact` walks for the current iso value (fetched on its first ray).
+    /// The regions an iso-surface search walks for the current iso value (built before a
+    /// frame's tiles, or fetched on the first ray).
     active: Option<std::sync::Arc<crate::active::ActiveTree>>,
-    /// Where `exact` starts walking `active` for the next rays: set by the frame loop for
+    /// Where an iso-surface search starts walking `active` for the next rays: set by the frame loop for
     /// each group of pixels (see [`Tracer::group_start`]), the root otherwise.
     start: crate::active::Start,
     /// The bricks of the region `exact` is searching (scratch, refilled per region), and
@@ -306,6 +309,37 @@ impl<'v> Tracer<'v> {
         });
     }
 
+    /// The active tree for this tracer's field and iso value, and where the next ray's walk
+    /// starts in it (the group start the caller set belongs to the tree it put in
+    /// `self.active`); the caller puts the tree back.
+    fn take_active(
+        &mut self,
+    ) -> (
+        Option<std::sync::Arc<crate::active::ActiveTree>>,
+        crate::active::Start,
+    ) {
+        let (field, iso) = (self.params.field, self.params.tf.iso);
+        match self.active.take() {
+            Some(t) if t.is_for(field, iso) => (Some(t), self.start),
+            _ => (self.vol.active_tree(field, iso), crate::active::Start::Root),
+        }
+    }
+
+    /// Counts (and logs) the stretch `[t0, t1]` of the data that a walk of the active tree
+    /// steps over: no region there can hold the iso value.
+    fn enter_gap(&mut self, t0: f64, t1: f64) {
+        self.enter_segment(
+            &crate::traverse::Segment {
+                region: crate::traverse::SKIPPED,
+                t0,
+                t1,
+                min: f32::NAN,
+                max: f32::NAN,
+            },
+            true,
+        );
+    }
+
     /// Value at any local point (probe during refinement, regions found by KD descent).
     fn probe(&mut self, p: [f64; 3]) -> Option<f64> {
         self.stats.samples += 1;
@@ -324,6 +358,49 @@ impl<'v> Tracer<'v> {
         };
         self.probe_hint = Some(r);
         vol.eval_value(r as usize, p, self.params.field)
+    }
+}
+
+/// The stretches of the data between the leaves a walk of the active tree visits, counted
+/// (and logged) as skipped, as the file's walk reports the subtrees it steps over.
+struct Gaps {
+    /// The ray's interval inside the data.
+    data: Option<(f64, f64)>,
+    /// How far along the ray the walk has accounted for.
+    covered: Option<f64>,
+}
+
+impl Gaps {
+    fn new(vol: &Volume, o: &[f64; 3], d: &[f64; 3], t0: f64, t1: f64) -> Gaps {
+        let data = crate::traverse::ray_box(
+            &vol.bounds_min,
+            &vol.bounds_max,
+            o,
+            &crate::traverse::inverse(d),
+            t0,
+            t1,
+        );
+        Gaps {
+            data,
+            covered: data.map(|(a, _)| a),
+        }
+    }
+
+    /// Before the walk's segment `seg`: the stretch since the last one.
+    fn before(&mut self, tracer: &mut Tracer, seg: &crate::traverse::Segment) {
+        if let Some(c) = self.covered.filter(|&c| seg.t0 > c) {
+            tracer.enter_gap(c, seg.t0);
+        }
+        self.covered = Some(self.covered.map_or(seg.t1, |c| c.max(seg.t1)));
+    }
+
+    /// After a walk that went to its end: the stretch to the end of the data.
+    fn finish(&self, tracer: &mut Tracer) {
+        if let (Some((_, end)), Some(c)) = (self.data, self.covered) {
+            if end > c {
+                tracer.enter_gap(c, end);
+            }
+        }
     }
 }
 
