@@ -26,7 +26,7 @@ pub enum FormatErrorKind {
     Io(#[from] std::io::Error),
     /// Reading the file whole failed (a directory, a device over the size limit...).
     #[error("{0}")]
-    Input(crate::input::InputErrorKind),
+    Input(files::input::InputErrorKind),
     /// The archive passed rkyv's structural validation but breaks an invariant of the
     /// schema (the error names the element, e.g. `regions[12].bricks[3]`).
     #[error("archive is invalid: {0}")]
@@ -65,6 +65,17 @@ pub enum FormatErrorKind {
     OverwritesInput { input: PathBuf },
     #[error("cannot serialise the archive: {0}")]
     Serialize(String),
+}
+
+impl FormatErrorKind {
+    /// An input error as this crate says it (a plain I/O error as before, the rest with
+    /// the input's own message).
+    pub(crate) fn from_input(kind: files::input::InputErrorKind) -> Self {
+        match kind {
+            files::input::InputErrorKind::Io(e) => FormatErrorKind::Io(e),
+            other => FormatErrorKind::Input(other),
+        }
+    }
 }
 
 fn show_magic(b: &[u8; 8]) -> String {

@@ -10,9 +10,7 @@
 
 pub mod error;
 pub mod header;
-pub mod input;
 pub mod kd;
-pub mod output;
 pub mod query;
 pub mod reader;
 pub mod schema;

@@ -34,8 +34,8 @@ use rkyv::util::AlignedVec;
 
 use crate::error::{one_line, FormatError, FormatErrorKind};
 use crate::header::{Header, HEADER_LEN, PAYLOAD_ALIGN};
-use crate::input::{read_whole, InputErrorKind, Limits};
 use crate::schema::{ArchivedBrickFile, BrickFile};
+use files::input::{read_whole, Limits};
 
 /// Options for [`BrickFileView::open_with`].
 #[derive(Debug, Clone)]
@@ -117,12 +117,10 @@ impl BrickFileView {
     /// Memory-maps `path` and validates it; see the module docs for the checks.
     pub fn open_with(path: &Path, options: &OpenOptions) -> Result<Self, FormatError> {
         let err = |kind| FormatError::new(path, kind);
-        let file = File::open(path).map_err(|e| err(e.into()))?;
-        let meta = file.metadata().map_err(|e| err(e.into()))?;
-        if meta.is_dir() {
-            return Err(err(FormatErrorKind::Input(InputErrorKind::IsDirectory)));
-        }
-        if !meta.is_file() {
+        // Opened without blocking: a FIFO with no writer must not hang the open.
+        let (file, meta, kind) =
+            files::input::open(path).map_err(|k| err(FormatErrorKind::from_input(k)))?;
+        if kind != files::input::Kind::Regular {
             // A pipe or device cannot be mapped (mmap says "No such device"): read it,
             // within the stream limit.
             drop(file);

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::input::{read_whole, InputErrorKind, Limits};
+use files::input::{read_whole, InputErrorKind, Limits};
 
 /// A file name with one frame-number placeholder: a run of `N` `#` (the number padded with
 /// zeros to N digits) or `%0Nd` / `%d` (printf style). Only the file name may hold it, not

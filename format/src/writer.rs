@@ -1,6 +1,6 @@
 //! Serialises a [`BrickFile`] and writes it atomically.
 //!
-//! [`write`] streams the archive through [`crate::output::write_atomic`] (temporary file
+//! [`write`] streams the archive through [`files::output::write_atomic`] (temporary file
 //! in the target directory, fsync, rename; removed on error or SIGINT/SIGTERM), hashing it
 //! on the way, then writes the header in front. A `.qbk` at the target path is always
 //! either the old complete file or the new complete file, never a partial one. Nothing of the size of the archive is held in memory: a 1 GB file
@@ -10,7 +10,7 @@ use std::fs::File;
 use std::io::{self, BufWriter, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
-use crate::output::same_file;
+use files::output::same_file;
 
 use rkyv::rancor;
 
@@ -125,12 +125,12 @@ impl<W: Write> Write for HashingWriter<W> {
     }
 }
 
-/// [`crate::output::write_atomic`] with the path attached to errors.
+/// [`files::output::write_atomic`] with the path attached to errors.
 pub(crate) fn write_atomically(
     path: &Path,
     body: impl FnOnce(&mut File) -> Result<u64, FormatErrorKind>,
 ) -> Result<u64, FormatError> {
-    crate::output::write_atomic(path, body).map_err(|kind| FormatError::new(path, kind))
+    files::output::write_atomic(path, body).map_err(|kind| FormatError::new(path, kind))
 }
 
 #[cfg(test)]

@@ -1,9 +1,10 @@
 //! Ctrl-C (SIGINT) or SIGTERM in the middle of writing an output leaves no temporary file.
 //!
 //! Each program writes its output to a FIFO that nobody reads: the output goes to a hidden
-//! temporary file first and is copied into the FIFO only once complete, so the process
-//! stops with its temporary file on disk, blocked opening the FIFO — a deterministic
-//! "mid-write" moment. The test waits for the temporary file, sends the signal, and checks
+//! temporary file first (in `TMPDIR`, here the case's directory, since a FIFO's own
+//! directory is no place for it) and is copied into the FIFO only once complete, so the
+//! process stops with its temporary file on disk, blocked opening the FIFO — a
+//! deterministic "mid-write" moment. The test waits for the temporary file, sends the signal, and checks
 //! that the process died of that signal and the temporary file is gone.
 #![cfg(unix)]
 
@@ -44,6 +45,7 @@ fn interrupt(program: &str, args: &[&str], signal: (&str, i32)) {
     let mut child = Command::new(common::bin(program))
         .args(args)
         .current_dir(dir.path())
+        .env("TMPDIR", dir.path())
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()

@@ -31,7 +31,7 @@ fn main() -> anyhow::Result<()> {
         sphere.positions.len(),
         sphere.triangles.len()
     ));
-    format::output::write_atomic(&out, |f| {
+    files::output::write_atomic(&out, |f| {
         use std::io::Write;
         f.write_all(text.as_bytes())
     })

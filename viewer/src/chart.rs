@@ -170,7 +170,7 @@ impl LogLogChart {
             path: path.to_path_buf(),
             error,
         })?;
-        format::output::write_atomic(path, |f| f.write_all(&bytes)).map_err(|error| {
+        files::output::write_atomic(path, |f| f.write_all(&bytes)).map_err(|error| {
             PlotError::Write {
                 path: path.to_path_buf(),
                 error,

@@ -1,6 +1,6 @@
 //! The film: per-pixel sums of ray colours, filled tile by tile and sample wave by
 //! sample wave, resolved to an image; and images to PNG files, written atomically with
-//! `format::output::write_atomic`, so a reader never sees a partial PNG.
+//! `files::output::write_atomic`, so a reader never sees a partial PNG.
 //!
 //! Sums are kept in `f64` and every pixel adds its samples in sample order, so an image
 //! accumulated over several waves is bit-identical to one rendered in a single pass.
@@ -9,6 +9,33 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use crate::render::{Tile, TileResult};
+
+/// Bytes a headless frame holds per pixel: the film's f64 sums and sample counts (28), the
+/// resolved f32 image (12), the 8-bit copy and the PNG encoder's buffer (≈ 6), rounded up.
+pub const FRAME_BYTES_PER_PIXEL: u64 = 48;
+/// Most bytes the frames of one request may take (about 13 000² pixels for one frame),
+/// whatever the machine.
+pub const MAX_FRAME_BYTES: u64 = 8 << 30;
+
+/// Refuses `frames` images of `width`×`height` held at once (a render holds one, `bench` its
+/// reference and the run being measured) when they need more than [`MAX_FRAME_BYTES`] or
+/// the memory limit, before any of it is allocated (a 16384² image takes about 12 GiB).
+pub fn check_frame_memory(
+    width: u32,
+    height: u32,
+    frames: u64,
+) -> Result<(), files::limits::LimitError> {
+    let need = u64::from(width)
+        .saturating_mul(u64::from(height))
+        .saturating_mul(FRAME_BYTES_PER_PIXEL)
+        .saturating_mul(frames);
+    let what = if frames == 1 {
+        format!("a {width}x{height} image")
+    } else {
+        format!("{frames} images of {width}x{height}")
+    };
+    files::limits::check_memory_capped(what, need, MAX_FRAME_BYTES, "8 GiB for images")
+}
 
 /// Accumulated samples of a `width`×`height` image.
 #[derive(Debug, Clone)]
@@ -132,7 +159,7 @@ pub fn save_png(path: &Path, width: u32, height: u32, rgb: &[[f32; 3]]) -> Resul
         path: path.to_path_buf(),
         error,
     })?;
-    format::output::write_atomic(path, |f| f.write_all(&bytes)).map_err(|error| FilmError::Write {
+    files::output::write_atomic(path, |f| f.write_all(&bytes)).map_err(|error| FilmError::Write {
         path: path.to_path_buf(),
         error,
     })

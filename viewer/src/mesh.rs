@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use format::input::{read_whole, InputErrorKind, Limits};
+use files::input::{read_whole, InputErrorKind, Limits};
 pub use glam::{DVec3, Vec3};
 use serde::{Deserialize, Serialize};
 

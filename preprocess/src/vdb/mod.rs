@@ -32,7 +32,7 @@ pub mod write;
 
 use std::path::Path;
 
-use format::input::{read_whole, Limits};
+use files::input::{read_whole, Limits};
 
 pub use codec::MAGIC;
 pub use error::{DecompressError, ErrorKind, Invalid, VdbError};

@@ -8,7 +8,7 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use format::input::{read_whole, InputErrorKind, Limits};
+use files::input::{read_whole, InputErrorKind, Limits};
 use serde::{Deserialize, Serialize};
 
 use crate::camera::{Camera, Projection};
@@ -438,10 +438,10 @@ impl ViewState {
         serde_json::to_string_pretty(self).unwrap_or_default()
     }
 
-    /// Writes the state with [`format::output::write_atomic`] (temporary file next to
+    /// Writes the state with [`files::output::write_atomic`] (temporary file next to
     /// `path`, renamed over it; a device or FIFO is written into).
     pub fn save(&self, path: &Path) -> Result<(), ViewStateError> {
-        format::output::write_atomic(path, |f| {
+        files::output::write_atomic(path, |f| {
             f.write_all(self.to_json().as_bytes())?;
             f.write_all(b"\n")
         })

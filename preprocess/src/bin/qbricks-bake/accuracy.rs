@@ -5,7 +5,7 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::bail;
-use format::output::QuietStdout;
+use files::output::QuietStdout;
 use indicatif::{ProgressBar, ProgressStyle};
 use qbricks_preprocess::accuracy::{accuracy, AccuracyOptions, AccuracyReport, ErrorStats};
 use qbricks_preprocess::derive::Stencil;

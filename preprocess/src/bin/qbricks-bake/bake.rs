@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use clap::ValueEnum;
-use format::output::QuietStdout;
+use files::output::QuietStdout;
 use format::writer::{write_with, WriteOptions};
 use indicatif::{ProgressBar, ProgressStyle};
 use qbricks_preprocess::bake::{bake_with_progress, BakeOptions, BakeSummary, DEFAULT_MAX_BRICK};

@@ -4,7 +4,7 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::Context;
-use format::output::QuietStdout;
+use files::output::QuietStdout;
 use qbricks_preprocess::vdb::{inspect, VdbFile};
 
 #[derive(clap::Args)]

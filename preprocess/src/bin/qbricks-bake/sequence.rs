@@ -8,7 +8,7 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 use anyhow::Context;
-use format::output::QuietStdout;
+use files::output::QuietStdout;
 use indicatif::{ProgressBar, ProgressStyle};
 use qbricks_preprocess::bake::BakeOptions;
 use qbricks_preprocess::inputs::ReadOptions;
@@ -276,7 +276,7 @@ pub fn run(
 
 fn write_manifest(path: &Path, manifest: &Manifest) -> anyhow::Result<()> {
     let text = serde_json::to_string_pretty(manifest)?;
-    format::output::write_atomic(path, |out| {
+    files::output::write_atomic(path, |out| {
         out.write_all(text.as_bytes())?;
         out.write_all(b"\n")
     })

@@ -7,7 +7,7 @@ use std::io::Write;
 
 use anyhow::Context;
 use clap::ValueEnum;
-use format::output::QuietStdout;
+use files::output::QuietStdout;
 use qbricks_preprocess::sequence::FramePattern;
 use qbricks_preprocess::synth::{write_scene, SynthOptions};
 use qbricks_preprocess::vdb::write::Compression;

@@ -24,7 +24,7 @@
 //! block optionally zlib-compressed behind an `i64` size (negative: stored raw).
 //!
 //! Output is deterministic (same grids → same bytes) and atomic: the file is written through
-//! `format::output::write_atomic` (temporary name in the target directory, synced, renamed
+//! `files::output::write_atomic` (temporary name in the target directory, synced, renamed
 //! over the target).
 //!
 //! The modules mirror the reader's, record by record: this one writes the header and the
@@ -290,13 +290,13 @@ fn unique_names(grids: &[AnyGrid]) -> Vec<String> {
         .collect()
 }
 
-/// Writes through `f` with [`format::output::write_atomic`] (temporary file next to
+/// Writes through `f` with [`files::output::write_atomic`] (temporary file next to
 /// `path`, synced, renamed over it; removed on error or SIGINT/SIGTERM).
 fn write_atomically(
     path: &Path,
     f: impl FnOnce(&mut BufWriter<&mut File>) -> std::io::Result<()>,
 ) -> Result<(), WriteError> {
-    format::output::write_atomic(path, |file| {
+    files::output::write_atomic(path, |file| {
         let mut out = BufWriter::with_capacity(1 << 20, file);
         f(&mut out)?;
         out.flush()

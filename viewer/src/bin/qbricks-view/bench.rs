@@ -4,7 +4,7 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::{bail, Context};
-use format::output::QuietStdout;
+use files::output::QuietStdout;
 use qbricks_viewer::bench::{self, BenchOptions, Run};
 use qbricks_viewer::mesh::Meshes;
 use qbricks_viewer::render::Renderer;

@@ -3,7 +3,7 @@
 use std::io::Write;
 use std::path::PathBuf;
 
-use format::output::QuietStdout;
+use files::output::QuietStdout;
 use format::{BrickFileView, OpenOptions};
 
 #[derive(clap::Args)]

@@ -53,7 +53,7 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
-            if format::output::is_broken_pipe(err.as_ref()) {
+            if files::output::is_broken_pipe(err.as_ref()) {
                 return ExitCode::SUCCESS;
             }
             eprintln!("qbricks-view: {err:#}");

@@ -4,8 +4,8 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::{bail, Context};
-use format::input::{read_whole, Limits};
-use format::output::QuietStdout;
+use files::input::{read_whole, Limits};
+use files::output::QuietStdout;
 use qbricks_viewer::probe;
 use qbricks_viewer::volume::Volume;
 

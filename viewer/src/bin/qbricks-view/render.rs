@@ -5,8 +5,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{bail, Context};
-use format::output::same_file;
-use format::output::QuietStdout;
+use files::output::same_file;
+use files::output::QuietStdout;
 use format::sequence::FramePattern;
 use qbricks_viewer::film;
 use qbricks_viewer::mesh::Meshes;
@@ -16,17 +16,6 @@ use qbricks_viewer::volume::Volume;
 
 /// The bundled sample, relative to the current directory.
 pub const DEFAULT_FILE: &str = "data/wake_small.qbk";
-
-/// Most worker threads: far more than any machine's cores, few enough that a typo
-/// (`--threads 100000`) cannot exhaust the process's thread and stack limits.
-pub const MAX_THREADS: usize = 256;
-/// Most `--repeat` (a benchmark's median needs a handful, not billions).
-pub const MAX_REPEAT: u32 = 1000;
-/// Bytes a headless frame holds per pixel: the film's f64 sums and sample counts (28), the
-/// resolved f32 image (12), the 8-bit copy and the PNG encoder's buffer (≈ 6), rounded up.
-pub const FRAME_BYTES_PER_PIXEL: u64 = 48;
-/// Most bytes a headless frame may take (about 13 000² pixels), whatever the machine.
-pub const MAX_FRAME_BYTES: u64 = 8 << 30;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -99,14 +88,8 @@ pub fn open_volume(path: &Path, checksum: bool) -> anyhow::Result<format::BrickF
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let path = resolve_file(args.file.clone())?;
-    if !(1..=MAX_REPEAT).contains(&args.repeat) {
-        bail!("--repeat: expected 1..={MAX_REPEAT}, found {}", args.repeat);
-    }
-    if let Some(t) = args.threads {
-        if !(1..=MAX_THREADS).contains(&t) {
-            bail!("--threads: expected 1..={MAX_THREADS}, found {t}");
-        }
-    }
+    files::limits::repeat(args.repeat)?;
+    files::limits::threads(args.threads)?;
     // A path that exists is one file, even with `#` in its name (as in `qbricks-bake`).
     if !path.exists() {
         if let Some(pattern) = FramePattern::parse(&path)? {
@@ -253,21 +236,9 @@ pub fn check_files(
     Ok(())
 }
 
-/// Refuses an image whose frame needs more than [`MAX_FRAME_BYTES`] or half the machine's
-/// memory, before any of it is allocated (a 16384² image takes about 12 GiB).
+/// Refuses an image too large for the machine (see [`film::check_frame_memory`]).
 pub fn check_frame_memory(width: u32, height: u32) -> anyhow::Result<()> {
-    let limit =
-        format::input::physical_memory().map_or(MAX_FRAME_BYTES, |m| (m / 2).min(MAX_FRAME_BYTES));
-    let need = u64::from(width) * u64::from(height) * FRAME_BYTES_PER_PIXEL;
-    if need > limit {
-        bail!(
-            "a {width}x{height} image needs about {} MiB, more than the limit of {} MiB \
-             (8 GiB, or half of this machine's memory if less); render a smaller image",
-            need >> 20,
-            limit >> 20
-        );
-    }
-    Ok(())
+    Ok(film::check_frame_memory(width, height, 1)?)
 }
 
 /// Writes the PNG (when there is a frame and `-o`) and the `--save-state` file together,
@@ -283,7 +254,7 @@ fn write_outputs(args: &Args, state: &ViewState, frame: Option<&Frame>) -> anyho
         outputs.push((p, format!("{}\n", state.to_json()).into_bytes()));
     }
     let list: Vec<(&Path, &[u8])> = outputs.iter().map(|(p, b)| (*p, b.as_slice())).collect();
-    format::output::write_all_atomic(&list)
+    files::output::write_all_atomic(&list)
         .map_err(|(path, e)| anyhow::anyhow!("{}: {e}", path.display()))
 }
 

@@ -6,7 +6,7 @@ use std::io::Write;
 use std::path::Path;
 
 use anyhow::{bail, Context};
-use format::output::QuietStdout;
+use files::output::QuietStdout;
 use format::sequence::{gaps, FramePattern};
 use qbricks_viewer::dataset::Dataset;
 use qbricks_viewer::film;
@@ -177,7 +177,7 @@ fn render_one(
     let (frame, ms) = render_frame(renderer, &scene, args);
     let png = film::encode_png(frame.width, frame.height, &frame.rgb)
         .map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
-    format::output::write_atomic(out, |f| f.write_all(&png))
+    files::output::write_atomic(out, |f| f.write_all(&png))
         .with_context(|| out.display().to_string())?;
     Ok(FrameReport::new(
         &frame,

@@ -72,7 +72,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let (Some(r), true) = (report, args.json) {
         use std::io::Write;
         writeln!(
-            format::output::QuietStdout::new(),
+            files::output::QuietStdout::new(),
             "{}",
             serde_json::to_string(&r)?
         )?;

@@ -1,70 +1,41 @@
-//! Writing output files, for every output of both programs: `.qbk`, VDB, PNG, view state.
+//! Writing output files, for every output of both programs: `.qbk`, VDB, PNG, view state,
+//! manifests, plots, screenshots.
 //!
-//! [`write_atomic`] writes into a temporary file next to the target (`.NAME.XXXXXX.tmp`, on
-//! the same file system so the final rename is atomic), fsyncs it, then
+//! [`write_atomic`] has the body write into a temporary file and puts it in place only
+//! once it is complete. Where it goes depends on what the output path names:
 //!
-//! * renames it over the target when the target is a regular file or does not exist, so a
+//! * a regular file, or nothing yet: the temporary file is made next to it
+//!   (`.NAME.XXXXXX.tmp`, on the same file system), fsynced and renamed over it, so a
 //!   reader sees the old complete file or the new complete file, never a partial one;
-//! * copies it into the target when the target exists and is not a regular file
-//!   (`/dev/null`, a FIFO, a terminal): renaming would replace the device node itself with
-//!   a regular file, which as root silently breaks `/dev/null`. The copy starts only once
-//!   the whole output has been produced, so a failed run still writes nothing there.
+//! * a symlink: the same, at the file the link points to (followed to its end, even when
+//!   that file does not exist yet). The link stays a link; replacing it with a regular
+//!   file would cut whatever it connected;
+//! * a device, a FIFO, or the process's own standard output or error (`/dev/stdout`,
+//!   `/proc/self/fd/1`, a link to either, or the file stdout is redirected to): written
+//!   into, never replaced, once the whole output has been produced (a failed run still
+//!   writes nothing there). Renaming would replace the device node itself with a regular
+//!   file, which as root silently breaks `/dev/null`; a regular file behind stdout is
+//!   appended to, so `>>` keeps what was there;
+//! * a directory (also through a link): refused.
 //!
-//! On any error the temporary file is removed. While it exists its path is in a registry of
-//! live temporary files; the first write installs a handler for SIGINT, SIGTERM and SIGHUP
-//! that removes every registered file and then ends the process as the signal would have
-//! (so the exit status still says "killed by SIGINT"). Without it, Ctrl-C in the middle of
-//! a large write left a hidden temporary file behind on every run.
+//! On any error the temporary file is removed; while it exists the [`crate::signals`]
+//! handler removes it on SIGINT, SIGTERM or SIGHUP.
 //!
 //! [`QuietStdout`] is the other half of "no lost output": a closed stdout (`… | head -1`)
 //! must not abort a run before its output file is written.
 
 use std::fs::File;
 use std::io::{self, Write};
-use std::path::{Path, PathBuf};
+use std::path::{Component, Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Mutex, Once};
 
-/// Live temporary files, removed by the signal handler.
-static LIVE_TEMPS: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
-static HANDLER: Once = Once::new();
+use crate::signals;
 
 /// Set once a write to [`QuietStdout`] found the reader gone.
 static STDOUT_CLOSED: AtomicBool = AtomicBool::new(false);
 
-/// Installs (once) the handler that removes live temporary files on SIGINT/SIGTERM/SIGHUP.
-fn install_signal_cleanup() {
-    HANDLER.call_once(|| {
-        use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
-        let Ok(mut signals) = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP]) else {
-            // Without the handler a signal still ends the process; only the cleanup of
-            // temporary files is lost. Nothing better to do than write without it.
-            return;
-        };
-        let spawned = std::thread::Builder::new()
-            .name("qbricks-signal-cleanup".into())
-            .spawn(move || {
-                if let Some(signal) = signals.forever().next() {
-                    remove_live_temps();
-                    let _ = signal_hook::low_level::emulate_default_handler(signal);
-                    // A signal whose default is not to terminate cannot reach here (only
-                    // terminating ones are registered); end the process anyway.
-                    std::process::exit(128 + signal);
-                }
-            });
-        drop(spawned);
-    });
-}
-
-fn remove_live_temps() {
-    let live = LIVE_TEMPS.lock().unwrap_or_else(|e| e.into_inner());
-    for p in live.iter() {
-        let _ = std::fs::remove_file(p);
-    }
-    // The lock is held until the process ends, so no new temporary file is registered (or
-    // renamed into place) after the cleanup.
-    std::mem::forget(live);
-}
+/// Most symlinks followed from one output path (as the kernel's `MAXSYMLINKS`).
+const MAX_LINKS: usize = 40;
 
 /// A registered temporary file: removed from disk and from the registry when dropped,
 /// unless it was renamed into place.
@@ -76,7 +47,6 @@ struct TempFile {
 
 impl TempFile {
     fn create(dir: &Path, name: &str) -> io::Result<TempFile> {
-        install_signal_cleanup();
         let prefix = format!(".{name}.");
         let mut builder = tempfile::Builder::new();
         builder.prefix(&prefix).suffix(".tmp");
@@ -89,7 +59,7 @@ impl TempFile {
         }
         // Register under the lock before the file exists, so a signal between creating
         // and registering cannot leave it behind.
-        let mut live = LIVE_TEMPS.lock().unwrap_or_else(|e| e.into_inner());
+        let mut live = signals::registry_with_cleanup();
         let (file, path) = builder
             .tempfile_in(dir)
             .map_err(without_temp_name)?
@@ -108,9 +78,9 @@ impl TempFile {
     /// handler cannot remove it half-way). The open handle is closed on drop; renaming an
     /// open file is fine on Unix.
     fn rename_to(mut self, target: &Path) -> io::Result<()> {
-        let mut live = LIVE_TEMPS.lock().unwrap_or_else(|e| e.into_inner());
+        let mut live = signals::registry();
         std::fs::rename(&self.path, target)?;
-        live.retain(|p| p != &self.path);
+        signals::unregister(&mut live, &self.path);
         self.keep = true;
         Ok(())
     }
@@ -129,16 +99,16 @@ fn without_temp_name(e: io::Error) -> io::Error {
 impl Drop for TempFile {
     fn drop(&mut self) {
         if !self.keep {
-            let mut live = LIVE_TEMPS.lock().unwrap_or_else(|e| e.into_inner());
+            let mut live = signals::registry();
             let _ = std::fs::remove_file(&self.path);
-            live.retain(|p| p != &self.path);
+            signals::unregister(&mut live, &self.path);
         }
     }
 }
 
-/// Runs `body` on a fresh temporary file next to `path`, fsyncs it and puts it in place
-/// (see the module docs); returns what `body` returned. On any error, including errors
-/// of `body`, the temporary file is removed and `path` is untouched.
+/// Runs `body` on a fresh temporary file for `path`, and puts it in place (see the module
+/// docs); returns what `body` returned. On any error, including errors of `body`, the
+/// temporary file is removed and `path` is untouched.
 ///
 /// `body` gets a plain `File` and may seek in it (the `.qbk` writer fills its header in
 /// last), whatever the target is.
@@ -147,7 +117,7 @@ pub fn write_atomic<T, E: From<io::Error>>(
     body: impl FnOnce(&mut File) -> Result<T, E>,
 ) -> Result<T, E> {
     let mut pending = Pending::create(path)?;
-    let value = body(&mut pending.tmp.file)?;
+    let value = body(pending.file())?;
     pending.commit()?;
     Ok(value)
 }
@@ -161,67 +131,189 @@ pub fn write_all_atomic(outputs: &[(&Path, &[u8])]) -> Result<(), (PathBuf, io::
     for (path, bytes) in outputs {
         let named = |e| (path.to_path_buf(), e);
         let mut p = Pending::create(path).map_err(named)?;
-        p.tmp.file.write_all(bytes).map_err(named)?;
-        pending.push(p);
+        p.file().write_all(bytes).map_err(named)?;
+        pending.push((path, p));
     }
-    for p in pending {
-        let path = p.target.clone();
-        p.commit().map_err(|e| (path, e))?;
+    for (path, p) in pending {
+        p.commit().map_err(|e| (path.to_path_buf(), e))?;
     }
     Ok(())
+}
+
+/// Where an output goes, decided before anything is written.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Target {
+    /// A regular file or a name that does not exist yet (the output path, or the end of
+    /// its symlinks): replaced by a rename from its directory.
+    Replace(PathBuf),
+    /// A device, a FIFO, or a file behind the process's stdout or stderr: written into
+    /// (appended to, for a regular file).
+    Into { path: PathBuf, append: bool },
+}
+
+impl Target {
+    /// Decides where an output named `path` goes (see the module docs). Fails for a
+    /// directory, a socket, and a symlink loop.
+    pub fn of(path: &Path) -> io::Result<Target> {
+        let end = follow_links(path)?;
+        let through_proc = end.starts_with("/proc") || end.starts_with("/dev/fd");
+        match std::fs::metadata(&end) {
+            Ok(m) if m.is_dir() => Err(io::Error::new(
+                io::ErrorKind::IsADirectory,
+                "is a directory",
+            )),
+            Ok(m) if crate::input::Kind::of(&m) == crate::input::Kind::Socket => Err(
+                io::Error::new(io::ErrorKind::InvalidInput, "is a socket, not a file"),
+            ),
+            Ok(m) if !m.is_file() => Ok(Target::Into {
+                path: end,
+                append: false,
+            }),
+            Ok(m) if through_proc || is_standard_stream(&m) => Ok(Target::Into {
+                path: end,
+                append: true,
+            }),
+            Ok(_) => Ok(Target::Replace(end)),
+            Err(e) if e.kind() == io::ErrorKind::NotFound && !through_proc => {
+                Ok(Target::Replace(end))
+            }
+            Err(e) => Err(e),
+        }
+    }
+
+    /// Whether the output is written into an existing stream rather than put in place
+    /// as a file of its own.
+    pub fn is_stream(&self) -> bool {
+        matches!(self, Target::Into { .. })
+    }
+}
+
+/// The path a chain of symlinks in the last component of `path` ends at (`path` itself
+/// when it is not a link), also when that end does not exist. Stops at `/proc` and
+/// `/dev/fd`, whose links (`/proc/self/fd/1` → `pipe:[…]`) are not paths but the kernel
+/// opens them as the file they stand for.
+fn follow_links(path: &Path) -> io::Result<PathBuf> {
+    let mut p = path.to_path_buf();
+    for _ in 0..MAX_LINKS {
+        if p.starts_with("/proc") || p.starts_with("/dev/fd") {
+            return Ok(p);
+        }
+        match std::fs::symlink_metadata(&p) {
+            Ok(m) if m.file_type().is_symlink() => {
+                let to = std::fs::read_link(&p)?;
+                p = match p.parent() {
+                    Some(dir) if to.is_relative() => dir.join(to),
+                    _ => to,
+                };
+                p = lexically_normal(&p);
+            }
+            _ => return Ok(p),
+        }
+    }
+    Err(io::Error::new(
+        io::ErrorKind::InvalidInput,
+        format!("more than {MAX_LINKS} symbolic links (a loop?)"),
+    ))
+}
+
+/// `p` with `.` components removed (`..` kept: it may cross a symlinked directory).
+fn lexically_normal(p: &Path) -> PathBuf {
+    p.components()
+        .filter(|c| !matches!(c, Component::CurDir))
+        .collect()
+}
+
+/// Whether `meta` is the file behind this process's standard output or error.
+fn is_standard_stream(meta: &std::fs::Metadata) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::fd::AsFd;
+        use std::os::unix::fs::MetadataExt;
+        // `st_dev`/`st_ino` are u64 here but narrower on some platforms.
+        #[allow(clippy::unnecessary_cast)]
+        let same = |st: rustix::io::Result<rustix::fs::Stat>| {
+            st.is_ok_and(|st| st.st_dev as u64 == meta.dev() && st.st_ino as u64 == meta.ino())
+        };
+        same(rustix::fs::fstat(io::stdout().as_fd()))
+            || same(rustix::fs::fstat(io::stderr().as_fd()))
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = meta;
+        false
+    }
 }
 
 /// An output being written: its temporary file and where it goes.
 struct Pending {
     tmp: TempFile,
-    target: PathBuf,
-    dir: PathBuf,
-    /// The target exists and is not a regular file (nor a directory, which the rename
-    /// refuses with its own message): it is written into, not replaced.
-    special: bool,
+    target: Target,
 }
 
 impl Pending {
     fn create(path: &Path) -> io::Result<Pending> {
-        let dir = match path.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p,
-            _ => Path::new("."),
+        if path.file_name().is_none() {
+            return Err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                "expected a file name",
+            ));
+        }
+        let target = Target::of(path)?;
+        let (dir, name) = match &target {
+            Target::Replace(end) => (
+                match end.parent() {
+                    Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+                    _ => PathBuf::from("."),
+                },
+                end.file_name(),
+            ),
+            // Not next to the target: `/dev` or `/proc/self/fd` is no place for it.
+            Target::Into { path: end, .. } => (std::env::temp_dir(), end.file_name()),
         };
-        let name = path
-            .file_name()
-            .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "expected a file name"))?
-            .to_string_lossy()
-            .into_owned();
-        let special = std::fs::metadata(path)
-            .map(|m| !m.is_file() && !m.is_dir())
-            .unwrap_or(false);
+        let name = name
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "output".to_string());
         Ok(Pending {
-            tmp: TempFile::create(dir, &name)?,
-            target: path.to_path_buf(),
-            dir: dir.to_path_buf(),
-            special,
+            tmp: TempFile::create(&dir, &name)?,
+            target,
         })
     }
 
-    /// Puts the finished temporary file in place (renamed, or copied into a special target).
+    fn file(&mut self) -> &mut File {
+        &mut self.tmp.file
+    }
+
+    /// Puts the finished temporary file in place (renamed, or copied into a stream; the
+    /// temporary file is removed then when it is dropped).
     fn commit(mut self) -> io::Result<()> {
-        if self.special {
-            use std::io::Seek;
-            let f = &mut self.tmp.file;
-            f.flush()?;
-            f.seek(io::SeekFrom::Start(0))?;
-            let mut target = std::fs::OpenOptions::new().write(true).open(&self.target)?;
-            io::copy(f, &mut target)?;
-            return target.flush();
+        match &self.target {
+            Target::Into { path, append } => {
+                use std::io::Seek;
+                let f = &mut self.tmp.file;
+                f.flush()?;
+                f.seek(io::SeekFrom::Start(0))?;
+                let mut target = std::fs::OpenOptions::new()
+                    .write(true)
+                    .append(*append)
+                    .open(path)?;
+                io::copy(f, &mut target)?;
+                target.flush()
+            }
+            Target::Replace(end) => {
+                self.tmp.file.sync_all()?;
+                self.tmp.rename_to(end)?;
+                // Make the rename itself durable. Some file systems refuse to fsync a
+                // directory; the data is already safe then, so this is best effort.
+                let dir = match end.parent() {
+                    Some(p) if !p.as_os_str().is_empty() => p,
+                    _ => Path::new("."),
+                };
+                if let Ok(d) = File::open(dir) {
+                    let _ = d.sync_all();
+                }
+                Ok(())
+            }
         }
-        self.tmp.file.sync_all()?;
-        self.tmp.rename_to(&self.target)?;
-        // Make the rename itself durable. Some file systems refuse to fsync a directory;
-        // the data is already safe then, so this is best effort.
-        if let Ok(d) = File::open(&self.dir) {
-            let _ = d.sync_all();
-        }
-        Ok(())
     }
 }
 
@@ -229,32 +321,7 @@ impl Pending {
 /// compared after resolving symlinks, `.` and `..`, and on Unix also by device and inode,
 /// so hard links count too.
 pub fn same_file(a: &Path, b: &Path) -> bool {
-    if let (Some(ca), Some(cb)) = (canonical(a), canonical(b)) {
-        if ca == cb {
-            return true;
-        }
-    }
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::MetadataExt;
-        if let (Ok(ma), Ok(mb)) = (std::fs::metadata(a), std::fs::metadata(b)) {
-            return ma.dev() == mb.dev() && ma.ino() == mb.ino();
-        }
-    }
-    false
-}
-
-/// Canonical form of `p`; for a path that does not exist yet, of its parent plus its name.
-fn canonical(p: &Path) -> Option<PathBuf> {
-    if let Ok(c) = p.canonicalize() {
-        return Some(c);
-    }
-    let name = p.file_name()?;
-    let parent = match p.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    parent.canonicalize().ok().map(|d| d.join(name))
+    crate::guard::FileKey::of(a).same(&crate::guard::FileKey::of(b))
 }
 
 /// Standard output that treats a closed reader (EPIPE) as the end of interest, not as a
@@ -351,7 +418,7 @@ mod tests {
     }
 
     fn live() -> Vec<PathBuf> {
-        LIVE_TEMPS.lock().expect("registry").clone()
+        crate::signals::live()
     }
 
     #[test]
@@ -459,6 +526,95 @@ mod tests {
         write_atomic(Path::new("/dev/null"), |f| f.write_all(b"discarded")).expect("write");
         let ft = std::fs::metadata("/dev/null").expect("meta").file_type();
         assert!(ft.is_char_device());
+    }
+
+    /// A symlink stays a link; the file it points to gets the output, atomically.
+    #[cfg(unix)]
+    #[test]
+    fn a_symlink_is_written_through_not_replaced() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let sub = dir.path().join("sub");
+        std::fs::create_dir(&sub).expect("mkdir");
+        let real = sub.join("real.png");
+        std::fs::write(&real, b"old").expect("write");
+        let link = dir.path().join("link.png");
+        std::os::unix::fs::symlink("sub/real.png", &link).expect("symlink");
+        write_atomic(&link, |f| f.write_all(b"new")).expect("write");
+        assert!(std::fs::symlink_metadata(&link)
+            .expect("meta")
+            .file_type()
+            .is_symlink());
+        assert_eq!(std::fs::read(&real).expect("read"), b"new");
+        // A dangling link: the file it names is created, the link kept.
+        let dangling = dir.path().join("dangling.png");
+        std::os::unix::fs::symlink("sub/later.png", &dangling).expect("symlink");
+        write_atomic(&dangling, |f| f.write_all(b"made")).expect("write");
+        assert_eq!(std::fs::read(sub.join("later.png")).expect("read"), b"made");
+        assert!(std::fs::symlink_metadata(&dangling)
+            .expect("meta")
+            .file_type()
+            .is_symlink());
+        assert_eq!(
+            leftovers(&sub),
+            vec!["later.png".to_owned(), "real.png".to_owned()]
+        );
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_link_to_a_directory_or_a_loop_is_refused_and_kept() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let link = dir.path().join("d.png");
+        std::os::unix::fs::symlink(".", &link).expect("symlink");
+        let e = write_atomic(&link, |f| f.write_all(b"x")).expect_err("directory");
+        assert_eq!(e.kind(), io::ErrorKind::IsADirectory);
+        let a = dir.path().join("a");
+        let b = dir.path().join("b");
+        std::os::unix::fs::symlink("b", &a).expect("symlink");
+        std::os::unix::fs::symlink("a", &b).expect("symlink");
+        let e = write_atomic(&a, |f| f.write_all(b"x")).expect_err("loop");
+        assert!(e.to_string().contains("symbolic links"), "{e}");
+        assert_eq!(
+            leftovers(dir.path()),
+            vec!["a".to_owned(), "b".to_owned(), "d.png".to_owned()]
+        );
+    }
+
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn standard_streams_and_devices_are_written_into() {
+        assert!(Target::of(Path::new("/dev/null"))
+            .expect("target")
+            .is_stream());
+        assert!(Target::of(Path::new("/dev/stdout"))
+            .expect("target")
+            .is_stream());
+        assert!(Target::of(Path::new("/proc/self/fd/2"))
+            .expect("target")
+            .is_stream());
+        let dir = tempfile::tempdir().expect("tempdir");
+        let link = dir.path().join("out.png");
+        std::os::unix::fs::symlink("/dev/null", &link).expect("symlink");
+        assert!(Target::of(&link).expect("target").is_stream());
+        write_atomic(&link, |f| f.write_all(b"discarded")).expect("write");
+        assert!(std::fs::symlink_metadata(&link)
+            .expect("meta")
+            .file_type()
+            .is_symlink());
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_fifo_is_written_into() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let p = dir.path().join("fifo");
+        rustix::fs::mkfifoat(rustix::fs::CWD, &p, rustix::fs::Mode::from_raw_mode(0o600))
+            .expect("mkfifo");
+        let reader_path = p.clone();
+        let reader = std::thread::spawn(move || std::fs::read(reader_path).expect("read"));
+        write_atomic(&p, |f| f.write_all(b"through the pipe")).expect("write");
+        assert_eq!(reader.join().expect("reader"), b"through the pipe");
+        assert_eq!(leftovers(dir.path()), vec!["fifo".to_owned()]);
     }
 
     #[test]

@@ -1,4 +1,11 @@
-//! Reading a whole input file with a bound on what gets allocated.
+//! Opening inputs without blocking, and reading them whole with a bound on what gets
+//! allocated.
+//!
+//! `File::open` on a FIFO that no program writes to blocks until one does, which may be
+//! never: every input here is opened non-blocking ([`open`]), so the open returns at once
+//! whatever the file is, and only then is the file's kind looked at. A FIFO is read like
+//! any stream (its reads block while a writer is connected, as they should); one with no
+//! writer reads as empty and is reported as such. A socket is refused with its kind.
 //!
 //! Both programs read some inputs whole (VDB files, point lists, view states, OBJ meshes).
 //! `std::fs::read` trusts the file: a regular file's size becomes one allocation, and a
@@ -8,7 +15,7 @@
 //! allocation is a fallible reservation, so an address-space limit (`ulimit -v`) becomes an
 //! error message instead of an abort.
 
-use std::fs::File;
+use std::fs::{File, Metadata};
 use std::io::Read;
 use std::path::{Path, PathBuf};
 
@@ -32,7 +39,7 @@ impl Limits {
     /// anything else up to [`STREAM_LIMIT`].
     pub fn memory() -> Self {
         Self {
-            file: physical_memory().unwrap_or(u64::MAX),
+            file: crate::limits::physical_memory().unwrap_or(u64::MAX),
             stream: STREAM_LIMIT,
         }
     }
@@ -70,6 +77,81 @@ pub enum InputErrorKind {
     StreamTooLarge { limit: u64 },
     #[error("cannot allocate {bytes} bytes to read it")]
     OutOfMemory { bytes: u64 },
+    #[error("is a {0}, not a file")]
+    NotAFile(&'static str),
+    #[error("is a FIFO (named pipe) and no program wrote to it")]
+    EmptyFifo,
+}
+
+/// What an input is, when it is not a regular file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Kind {
+    Regular,
+    Directory,
+    /// A character or block device (`/dev/zero`, a terminal): a stream.
+    Device,
+    /// A FIFO or an anonymous pipe (`/dev/stdin` under `… |`): a stream.
+    Fifo,
+    Socket,
+}
+
+impl Kind {
+    pub fn of(meta: &Metadata) -> Kind {
+        let t = meta.file_type();
+        if t.is_file() {
+            return Kind::Regular;
+        }
+        if t.is_dir() {
+            return Kind::Directory;
+        }
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::FileTypeExt;
+            if t.is_fifo() {
+                return Kind::Fifo;
+            }
+            if t.is_socket() {
+                return Kind::Socket;
+            }
+        }
+        Kind::Device
+    }
+}
+
+/// Opens `path` for reading without blocking (see the module docs) and returns it with
+/// its metadata and kind. Directories and sockets are refused here, with their kind; a
+/// FIFO or device is returned in blocking mode, ready to be read as a stream.
+pub fn open(path: &Path) -> Result<(File, Metadata, Kind), InputErrorKind> {
+    // A socket cannot be opened at all (`ENXIO`, "No such device or address"): say what
+    // it is instead.
+    if let Ok(m) = std::fs::metadata(path) {
+        if Kind::of(&m) == Kind::Socket {
+            return Err(InputErrorKind::NotAFile("socket"));
+        }
+    }
+    let mut options = std::fs::OpenOptions::new();
+    options.read(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        options.custom_flags(rustix::fs::OFlags::NONBLOCK.bits() as i32);
+    }
+    let file = options.open(path)?;
+    let meta = file.metadata()?;
+    let kind = Kind::of(&meta);
+    match kind {
+        Kind::Directory => return Err(InputErrorKind::IsDirectory),
+        Kind::Socket => return Err(InputErrorKind::NotAFile("socket")),
+        _ => {}
+    }
+    // Reads of a stream should wait for its writer, as they would have without the flag.
+    #[cfg(unix)]
+    if kind != Kind::Regular {
+        let flags = rustix::fs::fcntl_getfl(&file).map_err(std::io::Error::from)?;
+        rustix::fs::fcntl_setfl(&file, flags - rustix::fs::OFlags::NONBLOCK)
+            .map_err(std::io::Error::from)?;
+    }
+    Ok((file, meta, kind))
 }
 
 /// Reads all of `path` within `limits` (see the module docs).
@@ -81,12 +163,8 @@ pub fn read_whole(path: &Path, limits: Limits) -> Result<Vec<u8>, InputError> {
 }
 
 fn read_whole_kind(path: &Path, limits: Limits) -> Result<Vec<u8>, InputErrorKind> {
-    let mut file = File::open(path)?;
-    let meta = file.metadata()?;
-    if meta.is_dir() {
-        return Err(InputErrorKind::IsDirectory);
-    }
-    if meta.is_file() {
+    let (mut file, meta, kind) = open(path)?;
+    if kind == Kind::Regular {
         let size = meta.len();
         if size > limits.file {
             return Err(InputErrorKind::TooLarge {
@@ -106,7 +184,11 @@ fn read_whole_kind(path: &Path, limits: Limits) -> Result<Vec<u8>, InputErrorKin
         }
         return Ok(data);
     }
-    read_stream(&mut file, limits.stream)
+    let data = read_stream(&mut file, limits.stream)?;
+    if data.is_empty() && kind == Kind::Fifo {
+        return Err(InputErrorKind::EmptyFifo);
+    }
+    Ok(data)
 }
 
 /// Reads a source of unknown length in 1 MiB steps, each a fallible reservation.
@@ -132,14 +214,6 @@ fn reserve(data: &mut Vec<u8>, extra: u64) -> Result<(), InputErrorKind> {
         .ok()
         .and_then(|n| data.try_reserve_exact(n).ok())
         .ok_or(InputErrorKind::OutOfMemory { bytes: total })
-}
-
-/// Total physical memory from `/proc/meminfo` (Linux); `None` where it cannot be read.
-pub fn physical_memory() -> Option<u64> {
-    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let line = info.lines().find(|l| l.starts_with("MemTotal:"))?;
-    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    kib.checked_mul(1024)
 }
 
 #[cfg(test)]
@@ -197,6 +271,44 @@ mod tests {
             matches!(e.kind, InputErrorKind::StreamTooLarge { .. }),
             "{e}"
         );
-        assert!(physical_memory().is_some_and(|m| m > 1 << 20));
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_fifo_without_a_writer_is_reported_not_waited_for() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let p = dir.path().join("fifo");
+        rustix::fs::mkfifoat(rustix::fs::CWD, &p, rustix::fs::Mode::from_raw_mode(0o600))
+            .expect("mkfifo");
+        let e = read_whole(&p, Limits::both(1 << 20)).expect_err("no writer");
+        assert!(matches!(e.kind, InputErrorKind::EmptyFifo), "{e}");
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_fifo_with_a_writer_is_read_whole() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let p = dir.path().join("fifo");
+        rustix::fs::mkfifoat(rustix::fs::CWD, &p, rustix::fs::Mode::from_raw_mode(0o600))
+            .expect("mkfifo");
+        // The writer opens read-write (which does not wait for a reader), fills the pipe
+        // and closes a little later: the read gets the bytes, then the end of the stream.
+        let (tx, rx) = std::sync::mpsc::channel();
+        let writer_path = p.clone();
+        let writer = std::thread::spawn(move || {
+            use std::io::Write;
+            let mut f = std::fs::OpenOptions::new()
+                .read(true)
+                .write(true)
+                .open(&writer_path)
+                .expect("open read-write");
+            f.write_all(b"0,0,0\n").expect("write");
+            tx.send(()).expect("signal");
+            std::thread::sleep(std::time::Duration::from_millis(200));
+        });
+        rx.recv().expect("written");
+        let data = read_whole(&p, Limits::both(1 << 20)).expect("read");
+        writer.join().expect("writer");
+        assert_eq!(data, b"0,0,0\n");
     }
 }
