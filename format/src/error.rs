@@ -61,8 +61,6 @@ pub enum FormatErrorKind {
          {found:#018x} (file corrupted)"
     )]
     ChecksumMismatch { expected: u64, found: u64 },
-    #[error("refusing to overwrite the input file {}", input.display())]
-    OverwritesInput { input: PathBuf },
     #[error("cannot serialise the archive: {0}")]
     Serialize(String),
 }

@@ -22,4 +22,3 @@ pub use error::{FormatError, FormatErrorKind};
 pub use header::FORMAT_VERSION;
 pub use reader::{BrickFileView, OpenOptions};
 pub use schema::*;
-pub use writer::WriteOptions;

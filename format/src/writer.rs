@@ -8,24 +8,13 @@
 
 use std::fs::File;
 use std::io::{self, BufWriter, Seek, SeekFrom, Write};
-use std::path::{Path, PathBuf};
-
-use files::output::same_file;
+use std::path::Path;
 
 use rkyv::rancor;
 
 use crate::error::{one_line, FormatError, FormatErrorKind};
 use crate::header::{Header, FLAGS, FORMAT_VERSION, HEADER_LEN};
 use crate::schema::BrickFile;
-
-/// Options for [`write_with`].
-#[derive(Debug, Clone, Default)]
-pub struct WriteOptions {
-    /// Refuse to write when the target is this file (compared after resolving symlinks,
-    /// `.`/`..`, and on Unix also by device and inode, so hard links count too).
-    /// `qbricks-bake` passes its input here.
-    pub forbid_overwrite_of: Option<PathBuf>,
-}
 
 /// Bytes of a complete `.qbk` file (header + archive) for `file`.
 pub fn to_bytes(file: &BrickFile) -> Result<Vec<u8>, FormatErrorKind> {
@@ -37,27 +26,10 @@ pub fn to_bytes(file: &BrickFile) -> Result<Vec<u8>, FormatErrorKind> {
     Ok(out)
 }
 
-/// Writes `file` to `path` atomically; returns the number of bytes written.
+/// Writes `file` to `path` atomically; returns the number of bytes written. Whether
+/// `path` may be written at all (not over an input of the run) is the caller's check,
+/// `files::guard`, done before the work that produced `file`.
 pub fn write(path: &Path, file: &BrickFile) -> Result<u64, FormatError> {
-    write_with(path, file, &WriteOptions::default())
-}
-
-/// [`write`] with options.
-pub fn write_with(
-    path: &Path,
-    file: &BrickFile,
-    options: &WriteOptions,
-) -> Result<u64, FormatError> {
-    if let Some(input) = &options.forbid_overwrite_of {
-        if same_file(path, input) {
-            return Err(FormatError::new(
-                path,
-                FormatErrorKind::OverwritesInput {
-                    input: input.clone(),
-                },
-            ));
-        }
-    }
     write_atomically(path, |out| stream_archive(out, file))
 }
 

@@ -7,7 +7,7 @@ use std::path::Path;
 
 use proptest::prelude::*;
 use qbricks_format::header::{Header, HEADER_LEN};
-use qbricks_format::writer::{self, WriteOptions};
+use qbricks_format::writer;
 use qbricks_format::{BrickFileView, FormatErrorKind, OpenOptions, FORMAT_VERSION};
 
 proptest! {
@@ -150,41 +150,6 @@ fn missing_file_and_empty_file_are_clear_errors() {
         matches!(err.kind, FormatErrorKind::BadMagic { .. }),
         "{err}"
     );
-}
-
-#[test]
-fn refuses_to_overwrite_its_input() {
-    let dir = tempfile::tempdir().expect("tempdir");
-    let input = dir.path().join("in.vdb");
-    std::fs::write(&input, b"precious input").expect("write");
-    let sub = dir.path().join("sub");
-    std::fs::create_dir(&sub).expect("mkdir");
-    let file = common::random_file(1);
-    let opts = WriteOptions {
-        forbid_overwrite_of: Some(input.clone()),
-    };
-    let mut targets = vec![input.clone(), sub.join("..").join("in.vdb")];
-    #[cfg(unix)]
-    {
-        let link = dir.path().join("link.qbk");
-        std::os::unix::fs::symlink(&input, &link).expect("symlink");
-        targets.push(link);
-        let hard = dir.path().join("hard.qbk");
-        std::fs::hard_link(&input, &hard).expect("hard link");
-        targets.push(hard);
-    }
-    for target in &targets {
-        let err = writer::write_with(target, &file, &opts).expect_err("must refuse");
-        assert!(
-            matches!(err.kind, FormatErrorKind::OverwritesInput { .. }),
-            "{err}"
-        );
-        assert_eq!(std::fs::read(&input).expect("read"), b"precious input");
-    }
-    // A different target is fine.
-    let out = dir.path().join("out.qbk");
-    writer::write_with(&out, &file, &opts).expect("write next to the input");
-    BrickFileView::open(&out).expect("open");
 }
 
 #[test]

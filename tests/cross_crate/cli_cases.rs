@@ -34,6 +34,14 @@ struct Case {
     code: i32,
     /// Stderr must start with this; empty means stderr must be empty.
     stderr: &'static str,
+    /// Lines stderr must have (one, unless a case says otherwise).
+    lines: usize,
+    /// Stderr must contain each of these too.
+    has: &'static [&'static str],
+    /// Files that must still be symbolic links to the same target afterwards.
+    links: &'static [&'static str],
+    /// Address-space limit of the case, KiB.
+    limit_kib: u64,
     /// Stdout must contain this (ignored when empty or when stdout is closed).
     stdout: &'static str,
     /// Files that must be byte-identical to what the case directory held before.
@@ -60,6 +68,10 @@ const fn case(
         args,
         code,
         stderr,
+        lines: 1,
+        has: &[],
+        links: &[],
+        limit_kib: MEMORY_LIMIT_KIB,
         stdout: "",
         same: &[],
         absent: &[],
@@ -89,6 +101,19 @@ impl Case {
         self.stdout = text;
         self
     }
+    const fn lines(mut self, n: usize, has: &'static [&'static str]) -> Self {
+        self.lines = n;
+        self.has = has;
+        self
+    }
+    const fn links(mut self, files: &'static [&'static str]) -> Self {
+        self.links = files;
+        self
+    }
+    const fn limit_kib(mut self, kib: u64) -> Self {
+        self.limit_kib = kib;
+        self
+    }
 }
 
 /// Malformed first lines of a points file: each must be an error at line 1, not a header.
@@ -105,7 +130,7 @@ const BAD_FIRST_LINES: &[&str] = &[
 const CASES: &[Case] = &[
     // 1. No lost files: an output that is an input is refused and the input kept.
     case(BAKE, &["bake", "w.vdb", "-o", "w.vdb"], 2,
-        "qbricks-bake: w.vdb: refusing to overwrite the input file w.vdb")
+        "qbricks-bake: w.vdb: -o would overwrite the input file w.vdb, an input of this run")
         .same(&["w.vdb"]),
     // 1. Non-regular outputs are written into, not replaced (checked after the table).
     case(BAKE, &["bake", "w.vdb", "-o", "/dev/null"], 0, ""),
@@ -263,6 +288,125 @@ const CASES: &[Case] = &[
         .stdout("\n0,0,0,"),
     case(VIEW, &["probe", "w.qbk", "--line", "nan,0,0:1,0,0:3"], 2,
         "qbricks-view: --line: expected a finite number, found `nan`"),
+    // Issue 32, 1. One output policy: frame patterns are expanded over the frames that
+    // exist before anything is written.
+    case(BAKE, &["bake", "f_####.vdb", "-o", "f_1###.vdb"], 2,
+        "qbricks-bake: f_1001.vdb: -o (frame 1) would overwrite the frame 1001 f_1001.vdb, an input of this run")
+        .same(&["f_0001.vdb", "f_1001.vdb"]),
+    case(VIEW, &["render", "f_####.qbk", "-o", "f_1###.qbk", "--width", "8", "--height", "6"], 2,
+        "qbricks-view: f_1001.qbk: -o (frame 1) would overwrite the frame 1001 f_1001.qbk, an input of this run")
+        .same(&["f_0001.qbk", "f_1001.qbk"]),
+    // 1. Streams are written into, symbolic links written through and kept.
+    case(VIEW, &["render", "w.qbk", "-o", "/dev/stdout", "--width", "8", "--height", "6"], 0, "")
+        .stdout("PNG"),
+    case(BAKE, &["bake", "w.vdb", "-o", "/dev/stdout"], 0, "").stdout("QBRICKS"),
+    case(VIEW, &["render", "w.qbk", "-o", "x.png", "--width", "8", "--height", "6",
+        "--save-state", "/dev/stdout"], 0, "")
+        .stdout("\"camera\"")
+        .made(&[("x.png", "")]),
+    case(VIEW, &["render", "w.qbk", "-o", "ln_fd1", "--width", "8", "--height", "6"], 0, "")
+        .stdout("PNG")
+        .links(&["ln_fd1"]),
+    case(BAKE, &["bake", "w.vdb", "-o", "ln_fd1"], 0, "").stdout("QBRICKS").links(&["ln_fd1"]),
+    case(VIEW, &["render", "w.qbk", "-o", "ln_real.png", "--width", "8", "--height", "6"], 0, "")
+        .links(&["ln_real.png"])
+        .made(&[("real.png", "")]),
+    case(VIEW, &["render", "w.qbk", "-o", "ln_dir.png", "--width", "8", "--height", "6"], 2,
+        "qbricks-view: ln_dir.png: is a directory")
+        .links(&["ln_dir.png"]),
+    case(BAKE, &["bake", "w.vdb", "-o", "ln_dir.png"], 2, "qbricks-bake: ln_dir.png: is a directory")
+        .links(&["ln_dir.png"]),
+    case(VIEW, &["render", "w.qbk", "-o", "x.png", "--save-state", "ln_w.qbk"], 2,
+        "qbricks-view: ln_w.qbk: --save-state would overwrite the brick file w.qbk")
+        .same(&["w.qbk", "ln_w.qbk"])
+        .links(&["ln_w.qbk"])
+        .absent(&["x.png"]),
+    // 1. Every command's outputs against its inputs.
+    case(VIEW, &["bench", "w.qbk", "--plot", "w.qbk", "--size", "8x6"], 2,
+        "qbricks-view: w.qbk: --plot would overwrite the brick file w.qbk, an input of this run")
+        .same(&["w.qbk"]),
+    case(VIEW, &["bench", "w.qbk", "--state", "st.json", "--plot", "st.json"], 2,
+        "qbricks-view: st.json: --plot would overwrite the --state file st.json")
+        .same(&["st.json"]),
+    case(VIEW, &["open", "w.qbk", "--screenshot", "w.qbk"], 2,
+        "qbricks-view: w.qbk: --screenshot would overwrite the brick file w.qbk")
+        .same(&["w.qbk"]),
+    case(VIEW, &["open", "w.qbk", "--state", "st.json", "--screenshot", "ln_st.json"], 2,
+        "qbricks-view: ln_st.json: --screenshot would overwrite the --state file st.json")
+        .same(&["st.json"]),
+    case(VIEW, &["render", "f_####.qbk", "-o", "p_####.png", "--width", "8", "--height", "6",
+        "--save-state", "f_0001.qbk"], 2,
+        "qbricks-view: f_0001.qbk: --save-state would overwrite the frame 1 f_0001.qbk")
+        .same(&["f_0001.qbk"])
+        .absent(&["p_0001.png"]),
+    case(VIEW, &["render", "f_####.qbk", "-o", "p_####.png", "--width", "8", "--height", "6",
+        "--mesh", "s.obj", "--save-state", "s.obj"], 2,
+        "qbricks-view: s.obj: --save-state would overwrite the mesh s.obj")
+        .same(&["s.obj"])
+        .absent(&["p_0001.png"]),
+    case(VIEW, &["render", "f_####.qbk", "-o", "p_####.png", "--state", "st.json",
+        "--save-state", "st.json"], 2,
+        "qbricks-view: st.json: --save-state would overwrite the --state file st.json")
+        .same(&["st.json"]),
+    case(VIEW, &["render", "f_####.qbk", "-o", "p_####.png", "--width", "8", "--height", "6",
+        "--save-state", "p_0001.png"], 2,
+        "qbricks-view: p_0001.png: --save-state and -o (frame 1) name the same file")
+        .absent(&["p_0001.png"]),
+    // 1. A run that fails writes nothing: every frame fails, so no --save-state.
+    case(VIEW, &["render", "bad_####.qbk", "-o", "p_####.png", "--width", "8", "--height", "6",
+        "--save-state", "st.json"], 2, "qbricks-view: bad_####.qbk: no manifest")
+        .lines(3, &["qbricks-view: bad_0001.qbk: ", "1 of 1 frames failed"])
+        .same(&["st.json"])
+        .absent(&["p_0001.png"]),
+    // 2. Sizes bounded before allocating.
+    case(VIEW, &["bench", "w.qbk", "--size", "16384x16384"], 2,
+        "qbricks-view: a 16384x16384 image (2 copies) needs about 24576 MiB, more than the limit of"),
+    case(VIEW, &["probe", "w.qbk", "--points", "big.csv", "--json"], 0, "")
+        .closed()
+        .limit_kib(1 << 20),
+    // 3. Counts bounded the same way in every command.
+    case(VIEW, &["bench", "w.qbk", "--repeat", "100000"], 2,
+        "qbricks-view: --repeat: expected 1..=1000, found 100000"),
+    case(VIEW, &["bench", "w.qbk", "--threads", "100000"], 2,
+        "qbricks-view: --threads: expected 1..=256, found 100000"),
+    case(VIEW, &["open", "w.qbk", "--threads", "100000"], 2,
+        "qbricks-view: --threads: expected 1..=256, found 100000"),
+    case(VIEW, &["open", "w.qbk", "--orbit-frames", "1000000000"], 2,
+        "qbricks-view: --orbit-frames: expected 1..=108000, found 1000000000"),
+    case(BAKE, &["synth", "ring-plume", "-o", "r_####.vdb", "--frames", "1000000"], 2,
+        "qbricks-bake: --frames: expected 1..=100000, found 1000000"),
+    // 4. No blocking opens: a FIFO nobody writes to is reported at once.
+    case(VIEW, &["info", "ff"], 2,
+        "qbricks-view: ff: is a FIFO (named pipe) and no program wrote to it"),
+    case(VIEW, &["render", "w.qbk", "-o", "x.png", "--state", "ff"], 2,
+        "qbricks-view: ff: is a FIFO (named pipe) and no program wrote to it")
+        .absent(&["x.png"]),
+    case(VIEW, &["render", "w.qbk", "-o", "x.png", "--mesh", "ff"], 2,
+        "qbricks-view: ff: is a FIFO (named pipe) and no program wrote to it")
+        .absent(&["x.png"]),
+    case(VIEW, &["probe", "w.qbk", "--points", "ff"], 2,
+        "qbricks-view: ff: is a FIFO (named pipe) and no program wrote to it"),
+    case(BAKE, &["bake", "ff", "-o", "ff.qbk"], 2,
+        "qbricks-bake: ff: is a FIFO (named pipe) and no program wrote to it")
+        .absent(&["ff.qbk"]),
+    case(BAKE, &["inspect", "ff"], 2,
+        "qbricks-bake: ff: is a FIFO (named pipe) and no program wrote to it"),
+    case(VIEW, &["render", "g_####.qbk", "--frames", "1..2", "-o", "p_####.png",
+        "--width", "8", "--height", "6"], 2, "qbricks-view: g_####.qbk: no manifest")
+        .lines(3, &["qbricks-view: g_0002.qbk: is a FIFO (named pipe) and no program wrote to it"])
+        .made(&[("p_0001.png", "")])
+        .absent(&["p_0002.png"]),
+    // 6. No silently wrong answers: the manifest says which files are frames of the bake.
+    case(VIEW, &["render", "m_####.qbk", "-o", "p_####.png", "--width", "8", "--height", "6"], 0,
+        "qbricks-view: m_####.qbk: field ranges of the whole sequence from m_sequence.json")
+        .lines(3, &[
+            "qbricks-view: warning: m_0002.qbk: skipped, its bake failed (in_0002.vdb: truncated)",
+            "qbricks-view: warning: m_0004.qbk: skipped, the manifest of the bake does not list it",
+        ])
+        .made(&[("p_0001.png", ""), ("p_0003.png", "")])
+        .absent(&["p_0002.png", "p_0004.png"]),
+    case(VIEW, &["bench", "w.qbk", "--reference-step", "1e-30", "--size", "8x6"], 2,
+        "qbricks-view: w.qbk: --reference-step: step: expected a finite number ≥ 0.001 (cell widths), found 1e-30"),
 ];
 
 /// Writes the inputs a case may name into `dir`: copies of the bundled sample, a directory,
@@ -314,6 +458,89 @@ fn populate(dir: &Path, case: &Case) {
         .expect("csv");
     }
     std::fs::write(dir.join("header.csv"), "x,y,z\n0.5,0,0\n").expect("csv");
+    populate_issue_32(dir, &wanted);
+}
+
+/// The inputs of the output-policy cases: frames named so that a pattern's output lands
+/// on another input frame, symbolic links (to a file, a directory, the process's stdout,
+/// an input), a FIFO, a sequence with a manifest, a large points list.
+fn populate_issue_32(dir: &Path, wanted: &dyn Fn(&str) -> bool) {
+    let data = common::root().join("data");
+    let qbk = data.join("wake_small.qbk");
+    let copy = |from: &Path, to: &str| {
+        std::fs::copy(from, dir.join(to)).expect("copy");
+    };
+    if wanted("f_####.vdb") {
+        copy(&data.join("wake_small.vdb"), "f_0001.vdb");
+        copy(&data.join("wake_small.vdb"), "f_1001.vdb");
+    }
+    if wanted("f_####.qbk") {
+        copy(&qbk, "f_0001.qbk");
+        copy(&qbk, "f_1001.qbk");
+    }
+    if wanted("bad_####.qbk") {
+        std::fs::write(dir.join("bad_0001.qbk"), b"not a brick file").expect("write");
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::symlink;
+        symlink("/proc/self/fd/1", dir.join("ln_fd1")).expect("symlink");
+        symlink("real.png", dir.join("ln_real.png")).expect("symlink");
+        symlink("dir", dir.join("ln_dir.png")).expect("symlink");
+        symlink("w.qbk", dir.join("ln_w.qbk")).expect("symlink");
+        symlink("st.json", dir.join("ln_st.json")).expect("symlink");
+        let fifo = |name: &str| {
+            let st = std::process::Command::new("mkfifo")
+                .arg(dir.join(name))
+                .status()
+                .expect("mkfifo");
+            assert!(st.success(), "mkfifo {name}");
+        };
+        if wanted("ff") {
+            fifo("ff");
+        }
+        if wanted("g_####.qbk") {
+            copy(&qbk, "g_0001.qbk");
+            fifo("g_0002.qbk");
+        }
+    }
+    if wanted("m_####.qbk") {
+        // Frames 1 and 3 baked, 2 failed (its file left from an earlier bake), 4 not in
+        // the manifest at all.
+        for f in 1..=4 {
+            copy(&qbk, &format!("m_{f:04}.qbk"));
+        }
+        let view = format::BrickFileView::open(&qbk).expect("open sample");
+        let fields: Vec<serde_json::Value> = view
+            .file()
+            .fields
+            .iter()
+            .map(|f| {
+                serde_json::json!({"name": f.name.as_str(), "min": f.min.to_native(), "max": f.max.to_native()})
+            })
+            .collect();
+        let frame = |f: u64| {
+            serde_json::json!({"frame": f, "input": format!("in_{f:04}.vdb"),
+                "output": format!("m_{f:04}.qbk"), "leaf_cells": 1, "fields": fields})
+        };
+        let manifest = serde_json::json!({
+            "input_pattern": "in_####.vdb", "output_pattern": "m_####.qbk",
+            "frames": [frame(1), frame(3)],
+            "failed": [{"frame": 2, "input": "in_0002.vdb", "error": "in_0002.vdb: truncated"}],
+            "missing": [], "fields": fields,
+        });
+        std::fs::write(dir.join("m_sequence.json"), manifest.to_string()).expect("manifest");
+    }
+    if wanted("big.csv") {
+        // 4 M points (36 MB): the report once held every point as a JSON value (≈ 2 GB).
+        use std::io::Write;
+        let f = std::fs::File::create(dir.join("big.csv")).expect("create");
+        let mut w = std::io::BufWriter::new(f);
+        for i in 0..4_000_000u32 {
+            writeln!(w, "{},0,0", f64::from(i % 1000) * 1e-3).expect("write");
+        }
+        w.flush().expect("flush");
+    }
 }
 
 /// View states for the sample: a small valid one, and ones with a colour field the file
@@ -349,13 +576,11 @@ struct Outcome {
 }
 
 /// Runs `program args` in `dir` under the memory limit, killing it after [`TIMEOUT`].
-fn run(program: &str, args: &[&str], dir: &Path, out: Out) -> Outcome {
+fn run(program: &str, args: &[&str], dir: &Path, out: Out, limit_kib: u64) -> Outcome {
     let bin = common::bin(program);
     let mut cmd = Command::new("sh");
     cmd.arg("-c")
-        .arg(format!(
-            "ulimit -v {MEMORY_LIMIT_KIB} && exec \"$0\" \"$@\""
-        ))
+        .arg(format!("ulimit -v {limit_kib} && exec \"$0\" \"$@\""))
         .arg(&bin)
         .args(args)
         .current_dir(dir)
@@ -373,10 +598,11 @@ fn run(program: &str, args: &[&str], dir: &Path, out: Out) -> Outcome {
         s
     });
     let out_thread = match out {
+        // Bytes, shown lossily: some cases write a PNG or a .qbk to stdout.
         Out::Captured => Some(std::thread::spawn(move || {
-            let mut s = String::new();
-            let _ = stdout_pipe.read_to_string(&mut s);
-            s
+            let mut b = Vec::new();
+            let _ = stdout_pipe.read_to_end(&mut b);
+            String::from_utf8_lossy(&b).into_owned()
         })),
         // The reader goes away at once: every write to stdout fails with EPIPE.
         Out::Closed => {
@@ -434,7 +660,18 @@ fn every_case_exits_with_its_code_and_message() {
         let dir = tempfile::tempdir().expect("tempdir");
         populate(dir.path(), case);
         let before = snapshot(dir.path(), case.same);
-        let o = run(case.program, case.args, dir.path(), case.out);
+        let links: Vec<_> = case
+            .links
+            .iter()
+            .map(|f| std::fs::read_link(dir.path().join(f)).ok())
+            .collect();
+        let o = run(
+            case.program,
+            case.args,
+            dir.path(),
+            case.out,
+            case.limit_kib,
+        );
         let shown = format!("{} {}", case.program, case.args.join(" "));
         let mut why = Vec::new();
         match o.code {
@@ -448,13 +685,23 @@ fn every_case_exits_with_its_code_and_message() {
         let stderr_ok = if case.stderr.is_empty() {
             o.stderr.is_empty()
         } else {
-            o.stderr.starts_with(case.stderr) && o.stderr.trim_end().lines().count() == 1
+            o.stderr.starts_with(case.stderr)
+                && o.stderr.trim_end().lines().count() == case.lines
+                && case.has.iter().all(|h| o.stderr.contains(h))
         };
         if !stderr_ok {
             why.push(format!(
-                "stderr {:?}, expected one line starting {:?}",
-                o.stderr, case.stderr
+                "stderr {:?}, expected {} line(s) starting {:?} with {:?}",
+                o.stderr, case.lines, case.stderr, case.has
             ));
+        }
+        for (f, before) in case.links.iter().zip(&links) {
+            let after = std::fs::read_link(dir.path().join(f)).ok();
+            if before.is_none() || after != *before {
+                why.push(format!(
+                    "{f} is no longer the same symbolic link ({after:?})"
+                ));
+            }
         }
         if case.out == Out::Captured && !o.stdout.contains(case.stdout) {
             why.push(format!("stdout lacks {:?}: {:?}", case.stdout, o.stdout));

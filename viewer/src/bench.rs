@@ -58,8 +58,17 @@ impl Default for BenchOptions {
 pub enum BenchError {
     #[error(transparent)]
     Volume(#[from] VolumeError),
-    #[error("--reference-step: expected a positive number, found {step}")]
-    ReferenceStep { step: f64 },
+    /// The reference step breaks the bounds every view's step has (the same rule as
+    /// `render --step`).
+    #[error("--reference-step: {0}")]
+    ReferenceStep(crate::view_state::InvalidViewState),
+    /// Some reference rays stopped before their end (a step too small for the length of
+    /// a ray's segments): every error measured against it would be wrong.
+    #[error(
+        "--reference-step {step}: the reference was cut short on {segments} ray segment(s) \
+         (too many samples per segment at this step); use a larger --reference-step"
+    )]
+    ReferenceTruncated { step: f64, segments: u64 },
     #[error("steps must be positive numbers")]
     Steps,
     #[error(transparent)]
@@ -168,11 +177,6 @@ pub(crate) fn reference(
     meshes: &Meshes,
     opts: &BenchOptions,
 ) -> Result<Reference, BenchError> {
-    if !(opts.reference_step > 0.0 && opts.reference_step.is_finite()) {
-        return Err(BenchError::ReferenceStep {
-            step: opts.reference_step,
-        });
-    }
     let mut st = state.clone();
     st.strategy = Strategy::Uniform;
     st.step = opts.reference_step;
@@ -180,7 +184,14 @@ pub(crate) fn reference(
     // depend on the method it judges.
     st.preintegrated = false;
     st.spp = opts.reference_spp.unwrap_or(state.spp).max(1);
+    st.validate().map_err(BenchError::ReferenceStep)?;
     let (frame, ms) = render_median(renderer, vol, &st, meshes, 1)?;
+    if frame.stats.truncated_segments > 0 {
+        return Err(BenchError::ReferenceTruncated {
+            step: opts.reference_step,
+            segments: frame.stats.truncated_segments,
+        });
+    }
     Ok(Reference {
         frame,
         ms,

@@ -32,7 +32,7 @@ pub fn check_frame_memory(
     let what = if frames == 1 {
         format!("a {width}x{height} image")
     } else {
-        format!("{frames} images of {width}x{height}")
+        format!("a {width}x{height} image ({frames} copies)")
     };
     files::limits::check_memory_capped(what, need, MAX_FRAME_BYTES, "8 GiB for images")
 }

@@ -17,24 +17,126 @@ pub struct Probe {
 pub fn probe(vol: &Volume, points: &[[f64; 3]], grad_field: usize) -> Vec<Probe> {
     points
         .iter()
-        .map(|&p| match vol.sample(p, grad_field) {
-            Some(s) => Probe {
-                p,
-                values: s.values.iter().map(|&v| v as f64).collect(),
-                gradient: s.gradient,
-                normal: vol
-                    .shading_gradient(vol.to_local(p), grad_field)
-                    .and_then(|g| glam::DVec3::from_array(g).try_normalize())
-                    .map_or([f64::NAN; 3], |n| n.to_array()),
-            },
-            None => Probe {
-                p,
-                values: vec![f64::NAN; vol.fields.len()],
-                gradient: [f64::NAN; 3],
-                normal: [f64::NAN; 3],
-            },
-        })
+        .map(|&p| probe_one(vol, p, grad_field))
         .collect()
+}
+
+fn probe_one(vol: &Volume, p: [f64; 3], grad_field: usize) -> Probe {
+    match vol.sample(p, grad_field) {
+        Some(s) => Probe {
+            p,
+            values: s.values.iter().map(|&v| v as f64).collect(),
+            gradient: s.gradient,
+            normal: vol
+                .shading_gradient(vol.to_local(p), grad_field)
+                .and_then(|g| glam::DVec3::from_array(g).try_normalize())
+                .map_or([f64::NAN; 3], |n| n.to_array()),
+        },
+        None => Probe {
+            p,
+            values: vec![f64::NAN; vol.fields.len()],
+            gradient: [f64::NAN; 3],
+            normal: [f64::NAN; 3],
+        },
+    }
+}
+
+/// Points probed and written at a time: the report streams, so its memory stays bounded
+/// (a few MiB) whatever the number of points; each chunk is probed on all cores.
+const CHUNK: usize = 1 << 14;
+
+/// How [`write_report`] prints.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ReportFormat {
+    /// A header line, then `x,y,z,<fields>,d<f>/dx,…,normal_x,…` per point (NaN outside).
+    Csv,
+    /// A JSON list of `{x, y, z, <field>…, gradient, normal}` (null outside: JSON has no
+    /// NaN).
+    Json,
+}
+
+/// Probes `points` and writes the report to `out` chunk by chunk (see [`CHUNK`]).
+pub fn write_report(
+    out: &mut impl std::io::Write,
+    vol: &Volume,
+    points: &[[f64; 3]],
+    grad_field: usize,
+    format: ReportFormat,
+) -> std::io::Result<()> {
+    use rayon::prelude::*;
+    if format == ReportFormat::Csv {
+        let names: Vec<&str> = vol.fields.iter().map(|f| f.name.as_str()).collect();
+        let g = vol.fields.get(grad_field).map_or("", |f| f.name.as_str());
+        writeln!(
+            out,
+            "x,y,z,{},d{g}/dx,d{g}/dy,d{g}/dz,normal_x,normal_y,normal_z",
+            names.join(",")
+        )?;
+    } else {
+        write!(out, "[")?;
+    }
+    for (c, chunk) in points.chunks(CHUNK).enumerate() {
+        let probed: Vec<Probe> = chunk
+            .par_iter()
+            .map(|&p| probe_one(vol, p, grad_field))
+            .collect();
+        for (i, r) in probed.iter().enumerate() {
+            match format {
+                ReportFormat::Csv => write_csv_row(out, r)?,
+                ReportFormat::Json => {
+                    if c + i > 0 {
+                        write!(out, ",")?;
+                    }
+                    serde_json::to_writer(&mut *out, &json_object(vol, r))?;
+                }
+            }
+        }
+    }
+    if format == ReportFormat::Json {
+        writeln!(out, "]")?;
+    }
+    Ok(())
+}
+
+fn write_csv_row(out: &mut impl std::io::Write, r: &Probe) -> std::io::Result<()> {
+    let vals: Vec<String> = r.values.iter().map(|v| v.to_string()).collect();
+    writeln!(
+        out,
+        "{},{},{},{},{},{},{},{},{},{}",
+        r.p[0],
+        r.p[1],
+        r.p[2],
+        vals.join(","),
+        r.gradient[0],
+        r.gradient[1],
+        r.gradient[2],
+        r.normal[0],
+        r.normal[1],
+        r.normal[2]
+    )
+}
+
+/// One point as a JSON object (keys sorted, as `serde_json` maps are).
+fn json_object(vol: &Volume, r: &Probe) -> serde_json::Value {
+    let num = |v: f64| {
+        serde_json::Number::from_f64(v).map_or(serde_json::Value::Null, serde_json::Value::Number)
+    };
+    let mut o = serde_json::Map::new();
+    o.insert("x".into(), num(r.p[0]));
+    o.insert("y".into(), num(r.p[1]));
+    o.insert("z".into(), num(r.p[2]));
+    for (f, v) in vol.fields.iter().zip(&r.values) {
+        o.insert(f.name.clone(), num(*v));
+    }
+    o.insert(
+        "gradient".into(),
+        serde_json::Value::Array(r.gradient.iter().map(|&g| num(g)).collect()),
+    );
+    o.insert(
+        "normal".into(),
+        serde_json::Value::Array(r.normal.iter().map(|&g| num(g)).collect()),
+    );
+    serde_json::Value::Object(o)
 }
 
 /// The field whose gradient is reported by default: `q` if present, else the first.
@@ -49,7 +151,15 @@ pub fn default_field(vol: &Volume) -> usize {
 /// data line (`0,0`, `nan,0,0`, `0;0;0`, `0x1,0,0`) is an error like any other line, so a
 /// typo cannot silently drop the only point, or every point after a mistaken header.
 pub fn parse_points_csv(text: &str) -> Result<Vec<[f64; 3]>, PointsCsvError> {
-    let mut out = Vec::new();
+    // Room for one point per line, reserved within the memory limit, so a huge list is
+    // refused up front (naming its size) instead of aborting while it grows.
+    let lines = text.bytes().filter(|&b| b == b'\n').count() + 1;
+    let mut out = files::limits::with_capacity(format!("{lines} points"), lines).map_err(|e| {
+        PointsCsvError {
+            line: 0,
+            error: PointError::TooMany(e),
+        }
+    })?;
     let mut first = true;
     for (i, line) in text.lines().enumerate() {
         let line = line.trim();
@@ -78,9 +188,10 @@ pub(crate) fn is_header(line: &str) -> bool {
         })
 }
 
-/// Why a line of a points CSV is refused: its 1-based number and the point's error.
+/// Why a line of a points CSV is refused: its 1-based number (0: the list as a whole) and
+/// the point's error.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("line {line}: {error}")]
+#[error("{}{error}", if *line == 0 { String::new() } else { format!("line {line}: ") })]
 pub struct PointsCsvError {
     pub line: usize,
     pub error: PointError,
@@ -95,6 +206,9 @@ pub enum PointError {
     NotNumber { number: String, text: String },
     #[error("expected a finite number, found `{number}`")]
     NotFinite { number: String },
+    /// The list as a whole does not fit in memory.
+    #[error("{0}")]
+    TooMany(files::limits::LimitError),
 }
 
 /// Parses `x,y,z`.

@@ -7,6 +7,11 @@
 //! They come from the manifest `qbricks-bake` writes next to the frames, which holds each
 //! field's range over every baked frame; without one, from the union of the rendered
 //! frames' own ranges.
+//!
+//! The manifest is also trusted on which files are frames of the bake ([`plan`]): a frame
+//! it lists as failed, or a file it does not list at all, is left over from an earlier bake
+//! (the new bake failed to replace it, or never made it) and is skipped with a warning
+//! rather than shown as if it belonged to the sequence.
 
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
@@ -17,8 +22,8 @@ use format::OpenOptions;
 use crate::view_state::ViewState;
 
 /// Most frames `--frames` may name (a typo like `1..1000000000` would otherwise report a
-/// billion missing files).
-pub(crate) const MAX_RANGE_FRAMES: u64 = 100_000;
+/// billion missing files): the shared frame bound.
+use files::limits::MAX_FRAMES as MAX_RANGE_FRAMES;
 
 /// `--frames`: `A..B` (both included), `A..`, `..B` or `A`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -86,6 +91,114 @@ pub enum SequenceError {
     },
     #[error("--frames {first}..{last}: expected at most {MAX_RANGE_FRAMES} frames")]
     TooMany { first: u64, last: u64 },
+    #[error("{0}")]
+    Manifest(#[from] ManifestError),
+    #[error(
+        "{pattern}: every frame that matches is skipped (the manifest {} lists them as failed \
+         or does not list them): {}",
+        manifest.display(),
+        skipped_list(skipped)
+    )]
+    AllSkipped {
+        pattern: String,
+        manifest: PathBuf,
+        skipped: Vec<Skipped>,
+    },
+}
+
+fn skipped_list(skipped: &[Skipped]) -> String {
+    let mut names: Vec<String> = skipped
+        .iter()
+        .take(10)
+        .map(|s| s.path.display().to_string())
+        .collect();
+    if skipped.len() > 10 {
+        names.push("…".to_string());
+    }
+    names.join(", ")
+}
+
+/// A file that matches the pattern but is not a frame of the bake the manifest describes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Skipped {
+    pub frame: u64,
+    pub path: PathBuf,
+    /// Why, in words: the bake's own error, or that the manifest does not list it.
+    pub why: String,
+}
+
+impl std::fmt::Display for Skipped {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}: skipped, {}", self.path.display(), self.why)
+    }
+}
+
+/// The frames of a sequence to show, what they share, and the files left out.
+#[derive(Debug, Clone)]
+pub struct SequencePlan {
+    pub frames: Vec<(u64, PathBuf)>,
+    pub skipped: Vec<Skipped>,
+    pub info: SequenceInfo,
+}
+
+/// Chooses the frames ([`select_frames`]), drops those the manifest says are not frames of
+/// its bake (see the module docs) and surveys the rest ([`survey`]).
+pub fn plan(
+    pattern: &FramePattern,
+    shown: &str,
+    range: Option<FrameRange>,
+) -> Result<SequencePlan, SequenceError> {
+    let chosen = select_frames(pattern, shown, range)?;
+    let manifest = Manifest::find(pattern)?;
+    let (frames, skipped) = match &manifest {
+        Some((_, m)) => trust(chosen, m),
+        None => (chosen, Vec::new()),
+    };
+    if frames.is_empty() {
+        return Err(SequenceError::AllSkipped {
+            pattern: shown.to_string(),
+            manifest: pattern.manifest_path(),
+            skipped,
+        });
+    }
+    let info = survey_with(&frames, manifest)?;
+    Ok(SequencePlan {
+        frames,
+        skipped,
+        info,
+    })
+}
+
+/// Splits `frames` into those the manifest lists as baked (or that do not exist: a frame
+/// asked for by `--frames` that is missing still fails as itself) and the rest.
+fn trust(frames: Vec<(u64, PathBuf)>, manifest: &Manifest) -> (Vec<(u64, PathBuf)>, Vec<Skipped>) {
+    let mut kept = Vec::new();
+    let mut skipped = Vec::new();
+    for (frame, path) in frames {
+        if let Some(f) = manifest.failed.iter().find(|f| f.frame == frame) {
+            if path.exists() {
+                skipped.push(Skipped {
+                    frame,
+                    why: format!(
+                        "its bake failed ({}), so this file is from an earlier bake",
+                        f.error
+                    ),
+                    path,
+                });
+                continue;
+            }
+        } else if !manifest.frames.iter().any(|f| f.frame == frame) && path.exists() {
+            skipped.push(Skipped {
+                frame,
+                why: "the manifest of the bake does not list it, so it is from an earlier bake"
+                    .to_string(),
+                path,
+            });
+            continue;
+        }
+        kept.push((frame, path));
+    }
+    (kept, skipped)
 }
 
 fn range_note(r: Option<FrameRange>) -> String {
@@ -186,6 +299,14 @@ pub fn survey(
     pattern: &FramePattern,
     frames: &[(u64, PathBuf)],
 ) -> Result<SequenceInfo, ManifestError> {
+    survey_with(frames, Manifest::find(pattern)?)
+}
+
+/// [`survey`] with the manifest already found.
+fn survey_with(
+    frames: &[(u64, PathBuf)],
+    manifest: Option<(PathBuf, Manifest)>,
+) -> Result<SequenceInfo, ManifestError> {
     let mut bounds: Option<([f64; 3], [f64; 3])> = None;
     let mut own: Vec<FieldRange> = Vec::new();
     let mut opened = 0;
@@ -221,7 +342,7 @@ pub fn survey(
             }
         }
     }
-    let (fields, source) = match Manifest::find(pattern)? {
+    let (fields, source) = match manifest {
         Some((path, manifest)) => {
             let mut fields = manifest.fields;
             for f in own {

@@ -5,7 +5,7 @@
 use std::path::Path;
 use std::process::{Command, Output};
 
-use format::sequence::{FieldRange, Manifest};
+use format::sequence::{FieldRange, Manifest, ManifestFrame};
 use qbricks_viewer::testvol::{self, GridSpec};
 
 fn qbricks_view(args: &[&str], dir: &Path) -> Output {
@@ -124,10 +124,18 @@ fn one_colour_map_for_the_whole_sequence() {
     assert_eq!(s2, a2);
 
     // With a manifest, its ranges win (here a speed range much wider than the frames').
+    // It lists both frames as baked: a file it does not list is not a frame of its bake.
+    let baked = |frame: u64| ManifestFrame {
+        frame,
+        input: format!("in_{frame:04}.vdb"),
+        output: format!("f_{frame:04}.qbk"),
+        leaf_cells: 0,
+        fields: vec![],
+    };
     let manifest = Manifest {
         input_pattern: "in_####.vdb".into(),
         output_pattern: "f_####.qbk".into(),
-        frames: vec![],
+        frames: vec![baked(1), baked(2)],
         failed: vec![],
         missing: vec![],
         fields: vec![FieldRange {

@@ -19,7 +19,6 @@ use crate::mesh::{MeshInstance, Meshes};
 use crate::progressive::{Job, Level, Progressive, ProgressiveOptions, Update};
 use crate::ray::RayCaster;
 use crate::render::Scene;
-use crate::sequence::{select_frames, survey};
 use crate::shading::{default_lights, Light};
 use crate::view_state::{ViewState, MAX_IMAGE_SIDE};
 use format::sequence::FramePattern;
@@ -143,6 +142,10 @@ pub struct ViewerApp {
     /// is on screen (`None`: not submitted yet).
     frame_job: Option<u64>,
     outcome: Arc<Mutex<Option<anyhow::Result<Option<OrbitReport>>>>>,
+    /// The view state file loaded last (an input: saves must not overwrite it).
+    state_file: Option<PathBuf>,
+    /// The error of opening the file or the state the window was started with.
+    startup_error: Option<String>,
     last_ui: Option<Instant>,
 }
 
@@ -203,6 +206,8 @@ impl ViewerApp {
             sequence: None,
             frame_job: None,
             outcome,
+            state_file: None,
+            startup_error: None,
             last_ui: None,
         };
         let file = options
@@ -213,6 +218,7 @@ impl ViewerApp {
         if let Some(s) = &options.state {
             app.load_state(s);
         }
+        app.startup_error = app.error.clone();
         Ok(app)
     }
 
@@ -276,19 +282,14 @@ impl ViewerApp {
     /// does, so frames can be compared by colour; then the first frame.
     fn open_sequence(&mut self, path: &Path, pattern: &FramePattern) {
         let shown = path.display().to_string();
-        let info = select_frames(pattern, &shown, None)
-            .map_err(|e| e.to_string())
-            .and_then(|frames| {
-                let info = survey(pattern, &frames).map_err(|e| e.to_string())?;
-                Ok((frames, info))
-            });
-        let (frames, info) = match info {
-            Ok(v) => v,
-            Err(m) => {
-                self.error = Some(m);
+        let plan = match crate::sequence::plan(pattern, &shown, None) {
+            Ok(p) => p,
+            Err(e) => {
+                self.error = Some(e.to_string());
                 return;
             }
         };
+        let (frames, info) = (plan.frames, plan.info);
         let mut state = info.default_state();
         state.spp = WINDOW_SPP;
         state.width = self.state.width;
@@ -361,23 +362,52 @@ impl ViewerApp {
                 // The loaded lights are the user's: keep them where they are.
                 self.lights_follow = false;
                 self.state = s;
+                self.state_file = Some(path.to_path_buf());
                 self.error = None;
             }
             Err(m) => self.error = Some(m),
         }
     }
 
+    /// Refuses to save over a file the window reads: the open file (every frame of an open
+    /// sequence), the view state it loaded, the meshes (shown or hidden). The same guard
+    /// every command's outputs go through.
+    fn check_output(&self, role: &str, path: &Path) -> Result<(), String> {
+        let mut guard = files::guard::Guard::new();
+        if let Some(doc) = &self.doc {
+            guard.input("open file", &doc.path);
+        }
+        if let Some(p) = &self.sequence {
+            for (f, path) in &p.frames {
+                guard.input(format!("frame {f}"), path);
+            }
+        }
+        if let Some(s) = &self.state_file {
+            guard.input("view state", s);
+        }
+        for m in self.state.meshes.iter().chain(&self.hidden_meshes) {
+            guard.input("mesh", &m.path);
+        }
+        guard.output(role, path);
+        guard.check().map_err(|e| e.to_string())
+    }
+
     /// Writes the view state (the same JSON `render --state` reads).
     pub fn save_state(&mut self, path: &Path) {
-        if let Err(e) = self.state.save(path) {
-            self.error = Some(e.to_string());
+        let result = self
+            .check_output("Save view", path)
+            .and_then(|()| self.state.save(path).map_err(|e| e.to_string()));
+        if let Err(m) = result {
+            self.error = Some(m);
         }
     }
 
     /// Writes the finished full-resolution image as a PNG.
     pub fn save_png(&mut self, path: &Path) {
         let result = match &self.finished {
-            Some(u) => film::save_png(path, u.width, u.height, &u.rgb).map_err(|e| e.to_string()),
+            Some(u) => self.check_output("Save image", path).and_then(|()| {
+                film::save_png(path, u.width, u.height, &u.rgb).map_err(|e| e.to_string())
+            }),
             None => Err(format!(
                 "{}: the image is still rendering; save it once it is finished",
                 path.display()
@@ -748,6 +778,16 @@ impl ViewerApp {
         let frame_interval = self.last_ui.map(|t| now.duration_since(t));
         self.last_ui = Some(now);
 
+        // A scripted run (`--screenshot`, `--orbit-frames`) whose file or state failed to
+        // open has nothing to show: it fails with that error and writes nothing, as
+        // `render` would.
+        if let (Some(_), Some(e)) = (&self.script, &self.startup_error) {
+            if let Ok(mut g) = self.outcome.lock() {
+                *g = Some(Err(anyhow::anyhow!("{e}")));
+            }
+            ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+            return;
+        }
         if let Some(script) = &mut self.script {
             if let ScriptStep::Orbit(yaw) = script.before_frame(frame_interval) {
                 navigation::orbit(&mut self.state.camera, self.pivot, yaw, 0.0);

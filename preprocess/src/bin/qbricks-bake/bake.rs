@@ -9,7 +9,6 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use clap::ValueEnum;
 use files::output::QuietStdout;
-use format::writer::{write_with, WriteOptions};
 use indicatif::{ProgressBar, ProgressStyle};
 use qbricks_preprocess::bake::{bake_with_progress, BakeOptions, BakeSummary, DEFAULT_MAX_BRICK};
 use qbricks_preprocess::sequence::FramePattern;
@@ -141,6 +140,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
 
+    let mut guard = files::guard::Guard::new();
+    guard.input("input file", &args.input).output(
+        if args.output.is_some() {
+            "-o"
+        } else {
+            "the default output (the input with .qbk)"
+        },
+        &output,
+    );
+    guard.check()?;
+
     // Progress: on a terminal a spinner naming the stage, shown once the bake has taken a
     // second (short bakes stay silent); with --progress elsewhere, plain stage lines.
     let show = !args.quiet && (args.progress || std::io::stderr().is_terminal());
@@ -223,7 +233,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 }
 
 /// Reads the grids of `input` that `read` selects, bakes them with `opts` (source and
-/// staggered grids filled in per file) and writes `output` atomically (never over `input`).
+/// staggered grids filled in per file) and writes `output` atomically. The caller has
+/// checked that `output` is not an input of the run (`files::guard`).
 pub fn bake_file(
     input: &Path,
     output: &Path,
@@ -256,12 +267,6 @@ pub fn bake_file(
     let (brick_file, summary) =
         bake_with_progress(grids, &opts, stage).with_context(|| input_name.clone())?;
     stage("writing");
-    write_with(
-        output,
-        &brick_file,
-        &WriteOptions {
-            forbid_overwrite_of: Some(input.to_path_buf()),
-        },
-    )?;
+    format::writer::write(output, &brick_file)?;
     Ok(summary)
 }

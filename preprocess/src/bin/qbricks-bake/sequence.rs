@@ -25,14 +25,6 @@ const BYTES_PER_INPUT_BYTE: u64 = 12;
 /// Fixed overhead per frame in the same estimate.
 const BYTES_PER_FRAME: u64 = 64 << 20;
 
-/// `MemAvailable` from `/proc/meminfo`, when the system says.
-fn available_memory() -> Option<u64> {
-    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
-    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb.saturating_mul(1024))
-}
-
 /// Frames baked at once: `--jobs`, else the thread count, lowered so that the estimated
 /// peak of that many frames fits in 80 % of the available memory (at least one).
 fn concurrency(jobs: Option<usize>, frames: &[(u64, std::path::PathBuf)]) -> usize {
@@ -49,7 +41,7 @@ fn concurrency(jobs: Option<usize>, frames: &[(u64, std::path::PathBuf)]) -> usi
     let per_frame = largest
         .saturating_mul(BYTES_PER_INPUT_BYTE)
         .saturating_add(BYTES_PER_FRAME);
-    let by_memory = available_memory().map_or(usize::MAX, |m| {
+    let by_memory = files::limits::available_memory().map_or(usize::MAX, |m| {
         usize::try_from(m / 10 * 8 / per_frame).unwrap_or(usize::MAX)
     });
     threads.min(by_memory).clamp(1, n)
@@ -85,6 +77,18 @@ pub fn run(
     if frames.is_empty() {
         anyhow::bail!("{in_pattern}: no file matches the frame pattern");
     }
+    files::limits::count("frames", frames.len() as u64, 1, files::limits::MAX_FRAMES)?;
+    // Every output against every input frame before any frame is baked: `-o 'f_1###.vdb'`
+    // names input frame 1001 as the output of frame 1.
+    let mut guard = files::guard::Guard::new();
+    for (frame, path) in &frames {
+        guard.input(format!("frame {frame}"), path);
+    }
+    for (frame, _) in &frames {
+        guard.output(format!("-o (frame {frame})"), &output.path(*frame));
+    }
+    guard.output("the manifest", &output.manifest_path());
+    guard.check()?;
     if !output.dir().as_os_str().is_empty() {
         std::fs::create_dir_all(output.dir())
             .with_context(|| format!("{}: cannot create the directory", output.dir().display()))?;
@@ -177,6 +181,13 @@ pub fn run(
                             format!("{name}: {msg}")
                         };
                         say(format!("qbricks-bake: {line}"));
+                        if !args.quiet && out.exists() {
+                            say(format!(
+                                "qbricks-bake: warning: {} is left from an earlier bake; the \
+                                 manifest lists frame {frame} as failed, so qbricks-view skips it",
+                                out.display()
+                            ));
+                        }
                         Err(ManifestFailure {
                             frame: *frame,
                             input: name.clone(),

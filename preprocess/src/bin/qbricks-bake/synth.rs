@@ -55,10 +55,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let pattern = FramePattern::parse(&args.output)?;
     let outputs: Vec<(u64, PathBuf)> = match (args.frames, &pattern) {
         (None, None) => vec![(1, args.output.clone())],
-        (Some(n), Some(p)) if (1..=100_000).contains(&n) => {
+        (Some(n), Some(p)) => {
+            files::limits::count("--frames", n, 1, files::limits::MAX_FRAMES)?;
             (1..=n).map(|f| (f, p.path(f))).collect()
         }
-        (Some(n), Some(_)) => anyhow::bail!("--frames must be in 1..=100000, found {n}"),
         (Some(_), None) => anyhow::bail!(
             "{}: --frames needs an output with a frame-number placeholder (e.g. out_####.vdb)",
             args.output.display()

@@ -3,9 +3,11 @@
 use std::io::Write;
 use std::path::PathBuf;
 
-use anyhow::{bail, Context};
+use anyhow::Context;
+use files::guard::Guard;
 use files::output::QuietStdout;
 use qbricks_viewer::bench::{self, BenchOptions, Run};
+use qbricks_viewer::film;
 use qbricks_viewer::mesh::Meshes;
 use qbricks_viewer::render::Renderer;
 use qbricks_viewer::view_state::ViewState;
@@ -48,41 +50,23 @@ pub struct Args {
     pub threads: Option<usize>,
 }
 
-fn parse_size(s: &str) -> anyhow::Result<(u32, u32)> {
-    let bad = || anyhow::anyhow!("--size: expected WxH with sides 1..=16384, found `{s}`");
-    let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
-    let w: u32 = w.trim().parse().map_err(|_| bad())?;
-    let h: u32 = h.trim().parse().map_err(|_| bad())?;
-    let max = qbricks_viewer::view_state::MAX_IMAGE_SIDE;
-    if w == 0 || h == 0 || w > max || h > max {
-        return Err(bad());
-    }
-    Ok((w, h))
-}
-
 pub fn run(args: Args) -> anyhow::Result<()> {
     let path = resolve_file(args.file.clone())?;
-    if args.repeat == 0 {
-        bail!("--repeat: expected at least 1, found 0");
-    }
-    if args.threads == Some(0) {
-        bail!("--threads: expected at least 1, found 0");
-    }
-    if !(args.reference_step > 0.0 && args.reference_step.is_finite()) {
-        bail!(
-            "--reference-step: expected a positive number, found {}",
-            args.reference_step
-        );
-    }
+    files::limits::repeat(args.repeat)?;
+    files::limits::threads(args.threads)?;
     if let Some(spp) = args.reference_spp {
-        if spp == 0 || spp > qbricks_viewer::view_state::MAX_SPP {
-            bail!(
-                "--reference-spp: expected 1..={}, found {spp}",
-                qbricks_viewer::view_state::MAX_SPP
-            );
-        }
+        files::limits::count(
+            "--reference-spp",
+            spp,
+            1,
+            qbricks_viewer::view_state::MAX_SPP,
+        )?;
     }
-    let size = args.size.as_deref().map(parse_size).transpose()?;
+    let size = args
+        .size
+        .as_deref()
+        .map(|s| qbricks_viewer::view_state::parse_size("--size", s, 1))
+        .transpose()?;
     let view = open_volume(&path, true)?;
     let vol = Volume::new(&view).with_context(|| format!("{}", path.display()))?;
     let mut state = match &args.state {
@@ -96,6 +80,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     state
         .validate()
         .map_err(|m| anyhow::anyhow!("view state: {m}"))?;
+    let mut guard = Guard::new();
+    guard.input("brick file", &path);
+    if let Some(s) = &args.state {
+        guard.input("--state file", s);
+    }
+    for m in &state.meshes {
+        guard.input("mesh", &m.path);
+    }
+    if let Some(p) = &args.plot {
+        guard.output("--plot", p);
+    }
+    guard.check()?;
+    // The reference and the run being measured are held at once.
+    film::check_frame_memory(state.width, state.height, 2)?;
     let meshes = if state.meshes.is_empty() {
         Meshes::empty()
     } else {

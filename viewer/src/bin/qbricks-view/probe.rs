@@ -53,63 +53,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .with_context(|| format!("{}", args.file.display()))?,
         None => probe::default_field(&vol),
     };
-    let res = probe::probe(&vol, &points, gf);
     let mut out = std::io::BufWriter::new(QuietStdout::new());
-    if args.json {
-        // JSON has no NaN: points outside the data get null values.
-        let num = |v: f64| {
-            serde_json::Number::from_f64(v)
-                .map_or(serde_json::Value::Null, serde_json::Value::Number)
-        };
-        let list: Vec<serde_json::Value> = res
-            .iter()
-            .map(|r| {
-                let mut o = serde_json::Map::new();
-                o.insert("x".into(), num(r.p[0]));
-                o.insert("y".into(), num(r.p[1]));
-                o.insert("z".into(), num(r.p[2]));
-                for (f, v) in vol.fields.iter().zip(&r.values) {
-                    o.insert(f.name.clone(), num(*v));
-                }
-                o.insert(
-                    "gradient".into(),
-                    serde_json::Value::Array(r.gradient.iter().map(|&g| num(g)).collect()),
-                );
-                o.insert(
-                    "normal".into(),
-                    serde_json::Value::Array(r.normal.iter().map(|&g| num(g)).collect()),
-                );
-                serde_json::Value::Object(o)
-            })
-            .collect();
-        serde_json::to_writer(&mut out, &list)?;
-        writeln!(out)?;
+    let format = if args.json {
+        probe::ReportFormat::Json
     } else {
-        let names: Vec<&str> = vol.fields.iter().map(|f| f.name.as_str()).collect();
-        let g = &vol.fields[gf].name;
-        writeln!(
-            out,
-            "x,y,z,{},d{g}/dx,d{g}/dy,d{g}/dz,normal_x,normal_y,normal_z",
-            names.join(",")
-        )?;
-        for r in &res {
-            let vals: Vec<String> = r.values.iter().map(|v| v.to_string()).collect();
-            writeln!(
-                out,
-                "{},{},{},{},{},{},{},{},{},{}",
-                r.p[0],
-                r.p[1],
-                r.p[2],
-                vals.join(","),
-                r.gradient[0],
-                r.gradient[1],
-                r.gradient[2],
-                r.normal[0],
-                r.normal[1],
-                r.normal[2]
-            )?;
-        }
-    }
+        probe::ReportFormat::Csv
+    };
+    probe::write_report(&mut out, &vol, &points, gf, format)?;
     out.flush()?;
     Ok(())
 }

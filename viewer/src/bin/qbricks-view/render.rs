@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{bail, Context};
-use files::output::same_file;
+use files::guard::Guard;
 use files::output::QuietStdout;
 use format::sequence::FramePattern;
 use qbricks_viewer::film;
@@ -127,7 +127,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     state
         .validate()
         .map_err(|m| anyhow::anyhow!("view state: {m}"))?;
-    check_files(&path, args.output.as_deref(), &args, &state)?;
+    check_files(
+        &args,
+        &state,
+        [("brick file".to_string(), path.as_path())],
+        args.output.iter().map(|o| ("-o".to_string(), o.as_path())),
+    )?;
     check_frame_memory(state.width, state.height)?;
     for n in notes {
         eprintln!("qbricks-view: note: {n}");
@@ -189,51 +194,32 @@ pub fn render_frame(renderer: &Renderer, scene: &Scene, args: &Args) -> (Frame, 
     }
 }
 
-/// Refuses outputs (`output`, `--save-state`) that are the same file as an input (the
-/// brick file, the state file, a mesh) or as each other: by path, through symlinks and
-/// `..`, or hard links. Runs before anything is rendered or written, so nothing is lost.
-pub fn check_files(
-    file: &Path,
-    output: Option<&Path>,
-    args: &Args,
-    state: &ViewState,
-) -> anyhow::Result<()> {
-    let mut inputs: Vec<(&str, &Path)> = vec![("brick file", file)];
+/// Refuses a render whose outputs (the images, `--save-state`) would overwrite one of its
+/// inputs (the brick files, the `--state` file, the meshes) or each other, before anything
+/// is rendered or written (see `files::guard`).
+pub fn check_files<'a>(
+    args: &'a Args,
+    state: &'a ViewState,
+    bricks: impl IntoIterator<Item = (String, &'a Path)>,
+    images: impl IntoIterator<Item = (String, &'a Path)>,
+) -> Result<(), files::guard::Clash> {
+    let mut guard = Guard::new();
+    for (role, path) in bricks {
+        guard.input(role, path);
+    }
     if let Some(s) = &args.state {
-        inputs.push(("--state file", s));
+        guard.input("--state file", s);
     }
     for m in &state.meshes {
-        inputs.push(("mesh", &m.path));
+        guard.input("mesh", &m.path);
     }
-    let mut outputs: Vec<(&str, &Path)> = Vec::new();
-    if let Some(o) = output {
-        outputs.push(("-o", o));
+    for (role, path) in images {
+        guard.output(role, path);
     }
     if let Some(s) = &args.save_state {
-        outputs.push(("--save-state", s));
+        guard.output("--save-state", s);
     }
-    for (i, (flag, out)) in outputs.iter().enumerate() {
-        for (what, input) in &inputs {
-            if same_file(out, input) {
-                bail!(
-                    "{}: {flag} would overwrite the {what} {}, an input of this render",
-                    out.display(),
-                    input.display()
-                );
-            }
-        }
-        for (other_flag, other) in &outputs[..i] {
-            // Two outputs into one device (`/dev/null`) lose nothing.
-            let device = std::fs::metadata(out).is_ok_and(|m| !m.is_file() && !m.is_dir());
-            if same_file(out, other) && !device {
-                bail!(
-                    "{}: {flag} and {other_flag} name the same file",
-                    out.display()
-                );
-            }
-        }
-    }
-    Ok(())
+    guard.check()
 }
 
 /// Refuses an image too large for the machine (see [`film::check_frame_memory`]).

@@ -3,7 +3,7 @@
 //! frame that fails is named and the others go on.
 
 use std::io::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
 use files::output::QuietStdout;
@@ -12,7 +12,7 @@ use qbricks_viewer::dataset::Dataset;
 use qbricks_viewer::film;
 use qbricks_viewer::mesh::Meshes;
 use qbricks_viewer::render::{FrameReport, Renderer, Scene};
-use qbricks_viewer::sequence::{output_pattern, select_frames, survey, RangeSource};
+use qbricks_viewer::sequence::{self, output_pattern, RangeSource};
 use qbricks_viewer::view_state::ViewState;
 use serde::Serialize;
 
@@ -39,33 +39,8 @@ pub fn run(args: &Args, path: &Path, pattern: FramePattern) -> anyhow::Result<()
         bail!("{shown}: expected -o with a frame pattern for the images (e.g. -o 'png/frame_####.png')");
     };
     let out_pattern = output_pattern(output).map_err(anyhow::Error::msg)?;
-    let frames = select_frames(&pattern, &shown, args.frames)?;
-    let info = survey(&pattern, &frames)?;
-    match &info.source {
-        RangeSource::Manifest(m) => eprintln!(
-            "qbricks-view: {shown}: field ranges of the whole sequence from {}",
-            m.display()
-        ),
-        RangeSource::Frames(n) => eprintln!(
-            "qbricks-view: {shown}: no manifest ({}), field ranges are the union of the {n} \
-             frame(s)' own ranges",
-            pattern.manifest_path().display()
-        ),
-    }
-    if args.frames.is_none() {
-        let numbers: Vec<u64> = frames.iter().map(|f| f.0).collect();
-        let missing = gaps(&numbers);
-        if !missing.is_empty() {
-            let list: Vec<String> = missing.iter().take(20).map(u64::to_string).collect();
-            eprintln!(
-                "qbricks-view: warning: {shown}: {} frame(s) missing: {}{}",
-                missing.len(),
-                list.join(", "),
-                if missing.len() > 20 { ", …" } else { "" }
-            );
-        }
-    }
-
+    let plan = sequence::plan(&pattern, &shown, args.frames)?;
+    let (frames, info) = (plan.frames, plan.info);
     // One view state for every frame: from --state, or from what the frames share (the
     // camera frames the union of their boxes, since the flow moves), then the flags.
     let from_file = args.state.is_some();
@@ -83,6 +58,65 @@ pub fn run(args: &Args, path: &Path, pattern: FramePattern) -> anyhow::Result<()
     state
         .validate()
         .map_err(|m| anyhow::anyhow!("view state: {m}"))?;
+    // Every output against every input before any frame is rendered: the frames that
+    // exist (not only those rendered: `-o 'f_1###.qbk'` names frame 1001 for frame 1), the
+    // manifest, the state, the meshes.
+    let existing = pattern.scan().unwrap_or_default();
+    let manifest = pattern.manifest_path();
+    let bricks = existing
+        .iter()
+        .chain(frames.iter())
+        .map(|(f, p)| (format!("frame {f}"), p.as_path()))
+        .chain(
+            manifest
+                .exists()
+                .then(|| ("manifest".to_string(), manifest.as_path())),
+        );
+    let outputs: Vec<(u64, PathBuf)> = frames
+        .iter()
+        .map(|(f, _)| (*f, out_pattern.path(*f)))
+        .collect();
+    check_files(
+        args,
+        &state,
+        bricks,
+        outputs
+            .iter()
+            .map(|(f, p)| (format!("-o (frame {f})"), p.as_path())),
+    )?;
+    match &info.source {
+        RangeSource::Manifest(m) => eprintln!(
+            "qbricks-view: {shown}: field ranges of the whole sequence from {}",
+            m.display()
+        ),
+        RangeSource::Frames(n) => eprintln!(
+            "qbricks-view: {shown}: no manifest ({}), field ranges are the union of the {n} \
+             frame(s)' own ranges",
+            pattern.manifest_path().display()
+        ),
+    }
+    for s in &plan.skipped {
+        eprintln!("qbricks-view: warning: {s}");
+    }
+    if args.frames.is_none() {
+        // Skipped frames were named above: not missing as well.
+        let mut numbers: Vec<u64> = frames
+            .iter()
+            .map(|f| f.0)
+            .chain(plan.skipped.iter().map(|s| s.frame))
+            .collect();
+        numbers.sort_unstable();
+        let missing = gaps(&numbers);
+        if !missing.is_empty() {
+            let list: Vec<String> = missing.iter().take(20).map(u64::to_string).collect();
+            eprintln!(
+                "qbricks-view: warning: {shown}: {} frame(s) missing: {}{}",
+                missing.len(),
+                list.join(", "),
+                if missing.len() > 20 { ", …" } else { "" }
+            );
+        }
+    }
     check_frame_memory(state.width, state.height)?;
     for n in notes {
         eprintln!("qbricks-view: note: {n}");
@@ -141,7 +175,8 @@ pub fn run(args: &Args, path: &Path, pattern: FramePattern) -> anyhow::Result<()
         bar.inc(1);
     }
     bar.finish_and_clear();
-    if let Some(p) = &args.save_state {
+    // The state only for a run that succeeded: nothing is written when a run fails.
+    if let (Some(p), true) = (&args.save_state, failed.is_empty()) {
         state.save(p).with_context(|| "--save-state".to_string())?;
     }
     if !failed.is_empty() {
@@ -167,7 +202,6 @@ fn render_one(
     if !input.exists() {
         bail!("{}: no such file", input.display());
     }
-    check_files(input, Some(out), args, state)?;
     let options = format::OpenOptions {
         verify_checksum: !args.no_checksum,
     };

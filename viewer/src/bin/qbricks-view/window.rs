@@ -31,27 +31,65 @@ pub struct Args {
     pub json: bool,
 }
 
+/// The window's size in points, `WxH`, each side at least 64 (room for the panel).
 fn parse_size(s: &str) -> anyhow::Result<[f32; 2]> {
-    let bad = || anyhow::anyhow!("--size: expected WxH (e.g. 1280x800), found `{s}`");
-    let (w, h) = s.split_once('x').ok_or_else(bad)?;
-    let w: u32 = w.trim().parse().map_err(|_| bad())?;
-    let h: u32 = h.trim().parse().map_err(|_| bad())?;
-    if !(64..=16384).contains(&w) || !(64..=16384).contains(&h) {
-        return Err(bad());
-    }
+    let (w, h) = qbricks_viewer::view_state::parse_size("--size", s, 64)?;
     Ok([w as f32, h as f32])
+}
+
+/// Checks every count and size argument against the shared bounds, and the screenshot
+/// against the files the window reads, before the window opens.
+fn check(args: &Args) -> anyhow::Result<[f32; 2]> {
+    use files::limits;
+    let size = parse_size(&args.size)?;
+    limits::threads(args.threads)?;
+    if let Some(n) = args.orbit_frames {
+        limits::count("--orbit-frames", n, 1, limits::MAX_ORBIT_FRAMES)?;
+    }
+    if let Some(n) = args.frames {
+        limits::count("--frames", n, 1, limits::MAX_ORBIT_FRAMES)?;
+    }
+    // The progressive renderer keeps the image being refined, the one on screen and the
+    // texture: three frames at the window's size (at one pixel per point; the panel
+    // takes part of it).
+    qbricks_viewer::film::check_frame_memory(size[0] as u32, size[1] as u32, 3)?;
+    if let Some(shot) = &args.screenshot {
+        let mut guard = files::guard::Guard::new();
+        let file = args
+            .file
+            .clone()
+            .unwrap_or_else(|| PathBuf::from(crate::render::DEFAULT_FILE));
+        guard.input("brick file", &file);
+        if let Ok(Some(pattern)) = format::sequence::FramePattern::parse(&file) {
+            for (f, p) in pattern.scan().unwrap_or_default() {
+                guard.input(format!("frame {f}"), &p);
+            }
+            let manifest = pattern.manifest_path();
+            if manifest.exists() {
+                guard.input("manifest", &manifest);
+            }
+        }
+        if let Some(s) = &args.state {
+            guard.input("--state file", s);
+            // Its meshes, when it reads; a state that does not is reported by the window.
+            if let Ok(state) = qbricks_viewer::view_state::ViewState::load(s) {
+                for m in &state.meshes {
+                    guard.input("mesh", &m.path);
+                }
+            }
+        }
+        guard.output("--screenshot", shot);
+        guard.check()?;
+    }
+    Ok(size)
 }
 
 #[cfg(feature = "gui")]
 pub fn run(args: Args) -> anyhow::Result<()> {
     use qbricks_viewer::app::{self, Script, WindowOptions};
 
-    let size = parse_size(&args.size)?;
-    if args.threads == Some(0) {
-        anyhow::bail!("--threads: expected at least 1, found 0");
-    }
+    let size = check(&args)?;
     let script = match (args.orbit_frames, &args.screenshot) {
-        (Some(0), _) => anyhow::bail!("--orbit-frames: expected at least 1, found 0"),
         (Some(frames), shot) => Some(Script::Orbit {
             frames,
             screenshot: shot.clone(),
@@ -82,7 +120,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
 #[cfg(not(feature = "gui"))]
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let _ = parse_size(&args.size)?;
+    check(&args)?;
     anyhow::bail!(
         "this qbricks-view was built without the window (cargo feature `gui`); \
          use `qbricks-view render`, `probe` or `info`, or rebuild with default features"
