@@ -148,7 +148,8 @@ fn exercise(view: &BrickFileView) {
             if preintegrated {
                 params.preintegrated = PreIntegrated::new(&params.tf, params.delta0);
             }
-            let mut tr = Tracer::new(&vol, params);
+            let accel = viewer::accel::Accel::new(&vol, params.accel_key());
+            let mut tr = Tracer::new(&vol, &accel, params);
             for (o, e) in origins.iter().zip(ends.iter()) {
                 let d: [f64; 3] = std::array::from_fn(|a| e[a] - o[a]);
                 let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();

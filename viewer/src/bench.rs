@@ -58,6 +58,8 @@ impl Default for BenchOptions {
 pub enum BenchError {
     #[error(transparent)]
     Volume(#[from] VolumeError),
+    #[error(transparent)]
+    Field(#[from] crate::fields::UnknownField),
     /// The reference step breaks the bounds every view's step has (the same rule as
     /// `render --step`).
     #[error("--reference-step: {0}")]

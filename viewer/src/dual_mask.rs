@@ -15,8 +15,8 @@
 //! its corners as before, so the skipped intervals are exactly those the corner test would
 //! have rejected, and the roots are bit-identical.
 
+use crate::lattice::Lattice;
 use crate::reconstruct::{floor_i64, DualBrick};
-use crate::sampling::Lattice;
 use crate::volume::Volume;
 
 /// Most dual cells a region's mask covers (beyond that the region reads its corners).
@@ -240,7 +240,7 @@ impl DualMask {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sampling::Lattices;
+    use crate::lattice::Lattices;
 
     /// The mask built brick by brick is, bit for bit, the corner test of
     /// `Volume::dual_cell_sides` at every dual cell's centre: on per-cell noise (bricks of
@@ -249,7 +249,7 @@ mod tests {
     /// and a NaN one.
     #[test]
     fn masks_are_the_corner_test_at_every_dual_cell() {
-        use crate::sampling::Lattices;
+        use crate::lattice::Lattices;
         let noise = |p: [f64; 3]| {
             let k = p.map(|x| (2.0 * x).floor() as i64);
             let h = ((k[0] * 73_856_093) ^ (k[1] * 19_349_663) ^ (k[2] * 83_492_791))

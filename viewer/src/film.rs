@@ -8,7 +8,7 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use crate::render::{Tile, TileResult};
+use crate::tiles::{Tile, TileResult};
 
 /// Bytes a headless frame holds per pixel: the film's f64 sums and sample counts (28), the
 /// resolved f32 image (12), the 8-bit copy and the PNG encoder's buffer (≈ 6), rounded up.

@@ -5,6 +5,7 @@
 // Numeric kernels index several per-axis arrays in lockstep; iterators would obscure them.
 #![allow(clippy::needless_range_loop)]
 
+pub mod accel;
 mod active;
 #[cfg(feature = "gui")]
 pub mod app;
@@ -15,20 +16,25 @@ pub mod chart;
 pub mod colormap;
 pub mod dataset;
 mod dual_mask;
+pub mod fields;
 pub mod film;
 pub mod info;
 pub mod integrate;
+mod lattice;
 pub mod mesh;
+mod packed;
 pub mod probe;
 pub mod progressive;
 pub mod ray;
 pub mod reconstruct;
 pub mod render;
 pub mod sampling;
+pub mod scene;
 pub mod sequence;
 pub mod shading;
 #[cfg(any(test, feature = "testkit"))]
 pub mod testvol;
+mod tiles;
 pub mod transfer;
 pub mod traverse;
 pub mod view_state;

@@ -13,6 +13,11 @@
 //! pixel for pixel, as the headless [`crate::render::render`] of the same view state,
 //! because both sum the same samples in the same order into a [`Film`].
 //!
+//! The render thread keeps the accelerations of the last few views of the open file
+//! ([`AccelCache`]), so that a view that only moves the camera (every frame of an orbit),
+//! its preview and its full-resolution frame build no tree; the cache is the thread's own
+//! and starts over when a job brings another file.
+//!
 //! Nothing here knows about egui: the window polls [`Progressive::latest`] and gets
 //! woken through the `notify` callback.
 
@@ -20,12 +25,15 @@ use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
+use crate::accel::AccelCache;
 use crate::dataset::Dataset;
+use crate::fields::UnknownField;
 use crate::film::Film;
 use crate::mesh::Meshes;
-use crate::render::{tiles, CancelToken, Counts, Renderer, Scene, TileResult};
+use crate::render::{CancelToken, Counts, Renderer};
+use crate::scene::Scene;
+use crate::tiles::{tiles, TileResult};
 use crate::view_state::ViewState;
-use crate::volume::VolumeError;
 
 /// One view to render.
 #[derive(Clone)]
@@ -298,7 +306,31 @@ impl Drop for Progressive {
     }
 }
 
+/// The accelerations the render thread keeps, and the file they belong to.
+#[derive(Default)]
+struct Accels {
+    dataset: Option<Arc<Dataset>>,
+    cache: AccelCache,
+}
+
+impl Accels {
+    /// The cache for `dataset`'s volume: the kept one if it is the same file, else a
+    /// new one.
+    fn of(&mut self, dataset: &Arc<Dataset>) -> &mut AccelCache {
+        if !self
+            .dataset
+            .as_ref()
+            .is_some_and(|d| Arc::ptr_eq(d, dataset))
+        {
+            self.cache.clear();
+            self.dataset = Some(Arc::clone(dataset));
+        }
+        &mut self.cache
+    }
+}
+
 fn worker_loop(shared: &Shared, renderer: &Renderer) {
+    let mut accels = Accels::default();
     loop {
         let pending = {
             let mut g = shared.lock();
@@ -314,7 +346,7 @@ fn worker_loop(shared: &Shared, renderer: &Renderer) {
             }
         };
         let generation = pending.generation;
-        if let Err(e) = run_job(shared, renderer, pending) {
+        if let Err(e) = run_job(shared, renderer, &mut accels, pending) {
             shared.lock().error = Some((generation, e.to_string()));
             shared.changed.notify_all();
             (shared.notify)();
@@ -337,12 +369,18 @@ fn upscale(src: &[[f32; 3]], pw: u32, ph: u32, w: u32, h: u32) -> Vec<[f32; 3]> 
     out
 }
 
-fn run_job(shared: &Shared, renderer: &Renderer, p: Pending) -> Result<(), VolumeError> {
+fn run_job(
+    shared: &Shared,
+    renderer: &Renderer,
+    accels: &mut Accels,
+    p: Pending,
+) -> Result<(), UnknownField> {
     let Pending {
         generation,
         job,
         cancel,
     } = p;
+    let cache = accels.of(&job.dataset);
     let opts = &shared.options;
     let state = &job.state;
     let vol = job.dataset.volume();
@@ -361,7 +399,7 @@ fn run_job(shared: &Shared, renderer: &Renderer, p: Pending) -> Result<(), Volum
         ps.width = w.div_ceil(scale).max(1);
         ps.height = h.div_ceil(scale).max(1);
         ps.spp = 1;
-        let scene = Scene::new(vol, &ps, &job.meshes)?;
+        let scene = Scene::cached(vol, &ps, &job.meshes, cache)?;
         let t = Instant::now();
         let acc = Mutex::new((Film::new(ps.width, ps.height), Counts::default()));
         let sink = |r: TileResult| {
@@ -410,7 +448,7 @@ fn run_job(shared: &Shared, renderer: &Renderer, p: Pending) -> Result<(), Volum
     }
 
     // Full resolution, one sample wave after another.
-    let scene = Scene::new(vol, state, &job.meshes)?;
+    let scene = Scene::cached(vol, state, &job.meshes, cache)?;
     let spp = state.spp.max(1);
     let all = tiles(w, h);
     let t = Instant::now();

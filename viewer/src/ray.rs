@@ -12,10 +12,12 @@ use glam::{DVec3, Vec3};
 use crate::camera::Ray;
 use crate::mesh::MeshHit;
 use crate::reconstruct::Eval;
-use crate::render::Scene;
 use crate::sampling::{Event, Stats, Strategy, Tracer};
+use crate::scene::Scene;
 use crate::shading::{phong, Light};
 use crate::transfer::Mode;
+
+pub use crate::shading::Shading;
 
 /// splitmix64 finaliser.
 #[inline]
@@ -31,17 +33,6 @@ fn mix(mut z: u64) -> u64 {
 pub fn jitter(x: u32, y: u32, sample: u32, seed: u64, purpose: u64) -> f64 {
     let h = mix(seed ^ mix(((x as u64) << 32 | y as u64) ^ mix((sample as u64) << 8 | purpose)));
     (h >> 11) as f64 / (1u64 << 53) as f64
-}
-
-/// Which gradient gives the shading normal.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum Shading {
-    /// Central differences of the reconstruction over one local cell width: continuous
-    /// across cell faces and level boundaries ([`crate::volume::Volume::shading_gradient`]).
-    #[default]
-    Smooth,
-    /// The analytic gradient of the reconstruction (piecewise, facets at cell faces).
-    Analytic,
 }
 
 /// An iso-surface point as seen by a camera ray.
@@ -74,8 +65,8 @@ impl<'s> RayCaster<'s> {
         }
         RayCaster {
             scene,
-            main: Tracer::new(scene.vol, scene.params),
-            shadow: Tracer::new(scene.vol, shadow_params),
+            main: Tracer::new(scene.vol, &scene.accel, scene.params),
+            shadow: Tracer::new(scene.vol, &scene.accel, shadow_params),
             hits: 0,
             rays: 0,
         }
@@ -195,7 +186,7 @@ impl<'s> RayCaster<'s> {
         let mut params = scene.params;
         params.strategy = Strategy::Exact;
         params.tf.mode = Mode::Iso;
-        let mut tracer = Tracer::new(scene.vol, params);
+        let mut tracer = Tracer::new(scene.vol, &scene.accel, params);
         let o = scene.vol.to_local(ray.origin.to_array());
         let t_max = mesh_t.unwrap_or(f64::INFINITY);
         let iso_t = tracer

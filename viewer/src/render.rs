@@ -16,105 +16,20 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::active::Start;
-use crate::camera::RayGen;
 use crate::film::Film;
-use crate::mesh::Meshes;
-use crate::ray::{RayCaster, Shading};
-use crate::sampling::{Event, Params, Stats, Strategy};
-use crate::transfer::{Mode, PreIntegrated, Transfer};
+use crate::ray::RayCaster;
+use crate::sampling::{Event, Stats, Strategy};
+use crate::transfer::Mode;
 use crate::view_state::ViewState;
-use crate::volume::{Volume, VolumeError};
 
 pub use crate::ray::jitter;
-
-/// Tile edge in pixels.
-pub(crate) const TILE: u32 = 16;
+pub use crate::scene::Scene;
+pub use crate::tiles::{tiles, Tile, TileResult};
 
 /// Edge in pixels of the groups whose rays share one start in the active tree
 /// ([`crate::sampling::Tracer::start_group`]): small enough that most groups beside a
 /// thin surface see none of it, large enough that finding the start costs little per ray.
 const GROUP: u32 = 4;
-
-/// Everything a ray needs, resolved once per frame.
-pub struct Scene<'a> {
-    pub vol: &'a Volume<'a>,
-    pub state: &'a ViewState,
-    pub meshes: &'a Meshes,
-    pub params: Params,
-    /// Camera rays with the camera basis computed once per frame.
-    pub rays: RayGen,
-    /// Where shading normals come from.
-    pub shading: Shading,
-}
-
-impl<'a> Scene<'a> {
-    /// Resolves field names and the transfer function of `state` against `vol`.
-    /// `exact` is an iso-surface strategy; in dvr mode it samples as
-    /// [`effective_strategy`] says.
-    pub fn new(
-        vol: &'a Volume<'a>,
-        state: &'a ViewState,
-        meshes: &'a Meshes,
-    ) -> Result<Self, VolumeError> {
-        let setting = |setting| {
-            move |e| VolumeError::Setting {
-                setting,
-                source: Box::new(e),
-            }
-        };
-        let field = vol
-            .field_index(&state.iso_field)
-            .map_err(setting("iso_field"))?;
-        // A colour field the file does not have is an error like a missing iso field (it
-        // used to fall back silently to a constant colour).
-        let colour_field = Some(
-            vol.field_index(&state.colormap.field)
-                .map_err(setting("colormap.field"))?,
-        );
-        let params = Params {
-            strategy: state.effective_strategy(),
-            step: state.step,
-            tf: Transfer {
-                mode: state.mode,
-                iso: state.iso,
-                band: state.transfer,
-            },
-            field,
-            colour_field,
-            // The seed report's opacities are per sample at step 0.5·dx of the finest grid.
-            delta0: 0.5 * vol.finest_w,
-            clip: None,
-            preintegrated: None,
-        };
-        let mut params = params;
-        if state.preintegrated {
-            params.preintegrated = PreIntegrated::new(&params.tf, params.delta0);
-        }
-        params.clip_to_active(vol);
-        Ok(Scene {
-            vol,
-            state,
-            meshes,
-            params,
-            rays: state.camera.ray_generator(state.width, state.height),
-            shading: Shading::default(),
-        })
-    }
-}
-
-/// The strategy actually used (see [`ViewState::effective_strategy`]): `exact` in dvr
-/// mode samples as `uniform` when the opacity is pre-integrated and as `bisect` when it is
-/// point-sampled. Point samples catch a band thinner than the step only by chance, which
-/// `bisect`'s search between samples repairs; pre-integration already counts the band
-/// between two samples, so plain `uniform` steps reach a lower error with fewer samples
-/// than either `bisect` variant (BENCHMARKS.md, "Direct volume rendering").
-pub(crate) fn effective_strategy(mode: Mode, strategy: Strategy, preintegrated: bool) -> Strategy {
-    match (mode, strategy) {
-        (Mode::Dvr, Strategy::Exact) if preintegrated => Strategy::Uniform,
-        (Mode::Dvr, Strategy::Exact) => Strategy::Bisect,
-        _ => strategy,
-    }
-}
 
 /// A rendered image (linear RGB in 0..=1 per pixel, row-major from the top-left).
 #[derive(Debug, Clone, PartialEq)]
@@ -130,44 +45,6 @@ pub struct Frame {
     /// a reference to count missed and false surfaces, which the colours alone cannot tell
     /// (a surface may be shaded like the background).
     pub(crate) pixel_hits: Vec<u32>,
-}
-
-/// A rectangle of pixels `[x0, x1) × [y0, y1)`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Tile {
-    pub x0: u32,
-    pub y0: u32,
-    pub x1: u32,
-    pub y1: u32,
-}
-
-/// The [`TILE`]-sized tiles of a `width`×`height` image, row by row from the top left.
-pub fn tiles(width: u32, height: u32) -> Vec<Tile> {
-    let (tx, ty) = (width.div_ceil(TILE), height.div_ceil(TILE));
-    (0..ty)
-        .flat_map(|j| {
-            (0..tx).map(move |i| Tile {
-                x0: i * TILE,
-                y0: j * TILE,
-                x1: ((i + 1) * TILE).min(width),
-                y1: ((j + 1) * TILE).min(height),
-            })
-        })
-        .collect()
-}
-
-/// One rendered tile: per pixel (row-major inside the tile) the sum of the colours of
-/// samples `samples`, plus the work it took.
-#[derive(Debug, Clone)]
-pub struct TileResult {
-    pub tile: Tile,
-    pub samples: Range<u32>,
-    pub sum: Vec<[f64; 3]>,
-    /// Per pixel (row-major inside the tile), how many of `samples` hit.
-    pub(crate) hit_samples: Vec<u32>,
-    pub stats: Stats,
-    pub rays: u64,
-    pub hits: u64,
 }
 
 /// Tells a frame in flight to stop. Clones share the flag. It also counts the pixel rows
@@ -210,12 +87,9 @@ pub(crate) fn render_tiles(
     cancel: &CancelToken,
     sink: &(dyn Fn(TileResult) + Sync),
 ) -> bool {
-    // An iso-surface builds the tree of the regions it searches once per iso value: here,
-    // on all the pool's threads, before the tiles' rays ask for it.
-    let params = &scene.params;
-    if params.tf.mode == Mode::Iso {
-        scene.vol.prepare_active_tree(params.field, params.tf.iso);
-    }
+    // The view's trees are built here, the active tree's masks on all the pool's
+    // threads, before the tiles' rays walk them (a no-op once a frame of the view has).
+    scene.accel.prepare(scene.vol, scene.params.tf.mode);
     tiles.par_iter().all(|&tile| {
         if cancel.is_cancelled() {
             return false;
@@ -459,6 +333,7 @@ pub fn render_aov(scene: &Scene, aov: Aov) -> Frame {
         params: scene.params,
         rays: scene.rays,
         shading: scene.shading,
+        accel: Arc::clone(&scene.accel),
     };
     if iso_scene.params.tf.mode == Mode::Dvr {
         iso_scene.params.tf.mode = Mode::Iso;
@@ -594,7 +469,9 @@ pub fn render_with_threads(
 mod tests {
     use super::*;
     use crate::camera::{Camera, Projection};
+    use crate::mesh::Meshes;
     use crate::testvol;
+    use crate::volume::Volume;
 
     /// A frame whose pixel groups start their walks below the root (or skip them) has
     /// the colours and the work counters of the same pixels traced one by one from the
@@ -643,7 +520,7 @@ mod tests {
             assert_eq!(frame.stats, caster.stats(), "eye {eye:?}");
             assert_eq!((frame.rays, frame.hits), (caster.rays, caster.hits));
             // The groups did start below the root somewhere.
-            let tree = vol.active_tree(scene.params.field, st.iso).expect("tree");
+            let tree = scene.accel.active_tree(&vol).expect("tree");
             let f = glam::DVec3::from_array(vol.frame);
             for gy in (0..st.height).step_by(GROUP as usize) {
                 for gx in (0..st.width).step_by(GROUP as usize) {

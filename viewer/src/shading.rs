@@ -1,4 +1,4 @@
-//! Lights and Phong shading.
+//! Lights, Phong shading, and where shading normals come from.
 //!
 //! Energy: with `ambient + diffuse + specular ≤ 1`, base colours and light colours in
 //! 0..=1 and light intensities summing to at most 1, [`phong`] stays in 0..=1 per channel
@@ -8,6 +8,17 @@ use glam::{DVec3, Vec3};
 use serde::{Deserialize, Serialize};
 
 use crate::camera::Camera;
+
+/// Which gradient gives the shading normal.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Shading {
+    /// Central differences of the reconstruction over one local cell width: continuous
+    /// across cell faces and level boundaries ([`crate::volume::Volume::shading_gradient`]).
+    #[default]
+    Smooth,
+    /// The analytic gradient of the reconstruction (piecewise, facets at cell faces).
+    Analytic,
+}
 
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]

@@ -1,33 +1,38 @@
-//! Read access to an opened `.qbk` file, laid out for the ray caster.
+//! Read access to an opened `.qbk` file, laid out for the ray caster: the file, and
+//! nothing that depends on how it is viewed.
 //!
-//! Zero-copy: bricks, regions, brick lists, the KD-tree with its per-node value ranges and
-//! the field values are all read from the archive as stored (the page cache, or the memory
-//! map, is the only copy), so opening costs nothing proportional to the file beyond the
-//! checks [`format::BrickFileView`] runs once. The only conversion is to a local frame
-//! centred on the data, applied as each number is read (`local = stored − frame`), so
-//! that data placed at 1e6 keeps sub-cell precision; the traversal and point location
-//! use the same subtraction ([`format::kd`]), so their edge rules agree.
+//! Zero-copy: bricks, regions, brick lists, the KD-tree and the field values are all read
+//! from the archive as stored (the page cache, or the memory map, is the only copy), so
+//! opening costs nothing proportional to the file beyond the checks
+//! [`format::BrickFileView`] runs once. The only conversion is to a local frame centred
+//! on the data, applied as each number is read (`local = stored − frame`), so that data
+//! placed at 1e6 keeps sub-cell precision; the traversal and point location use the same
+//! subtraction ([`format::kd`]), so their edge rules agree.
+//!
+//! A [`Volume`] is immutable once built and shared by every view of the file. What a view
+//! adds (the tree packed with its iso field's ranges, the regions that can hold its iso
+//! value, the box of the regions that can contribute to its band) belongs to that view,
+//! in its [`crate::accel::Accel`]. The volume only derives, on first use, two tables that
+//! depend on the file alone (see [`Volume::region`] and [`Volume::region_at`]).
+
+use std::sync::{Arc, OnceLock};
 
 use format::kd::Descent;
 use format::sequence::FieldRange;
 use format::{ArchivedBrickFile, BrickFileView};
 use rkyv::Archived;
 
+use crate::fields::UnknownField;
+use crate::packed::Packed;
+
 /// Archived `f32` as stored in the file.
 pub(crate) type StoredF32 = rkyv::Archived<f32>;
 
+/// Why a volume could not be built: never, once [`BrickFileView`] has validated the file
+/// (every index the volume reads was checked there). The `Result` of [`Volume::new`] keeps
+/// a place for a check a future format may need.
 #[derive(Debug, thiserror::Error)]
-pub enum VolumeError {
-    /// `available` lists the file's fields, comma-separated.
-    #[error("field {name:?} is not in the file (fields: {available})")]
-    NoSuchField { name: String, available: String },
-    /// A view setting names a field the file does not have.
-    #[error("{setting}: {source}")]
-    Setting {
-        setting: &'static str,
-        source: Box<VolumeError>,
-    },
-}
+pub enum VolumeError {}
 
 /// A brick in the local frame, as the reconstruction reads it.
 #[derive(Debug, Clone, Copy)]
@@ -50,15 +55,6 @@ pub struct RegionN {
     pub finest_w: f64,
 }
 
-/// Field and band (as bits) of an [`ActiveBox`].
-type ActiveBoxKey = (usize, u64, u64);
-/// A local box, `min > max` when empty.
-type ActiveBox = ([f64; 3], [f64; 3]);
-
-/// How many bands' boxes a volume keeps (a view, its shadow rays, a window flipping
-/// between a few values).
-const KEEP_BOXES: usize = 4;
-
 /// The volume as the ray caster sees it.
 pub struct Volume<'a> {
     /// World position of the local frame's origin (`world = local + frame`).
@@ -72,17 +68,16 @@ pub struct Volume<'a> {
     pub(crate) file: &'a ArchivedBrickFile,
     /// Cell width per level.
     level_w: Vec<f64>,
-    /// Per field, the KD-tree packed for the ray walk on first use (see
-    /// [`crate::traverse`]).
-    packed: Vec<std::sync::OnceLock<crate::traverse::Packed>>,
-    /// The last few trees of regions that one iso value can touch (see [`crate::active`]).
-    active: crate::active::ActiveCache,
-    /// The last few boxes of the regions that can contribute to a band (see
-    /// [`Volume::active_box`]), newest last.
-    active_boxes: std::sync::Mutex<Vec<(ActiveBoxKey, ActiveBox)>>,
     /// Every region's box (its KD leaf's cell) and step width, derived on first use: the
-    /// file stores neither (format 3).
-    region_table: std::sync::OnceLock<Vec<RegionN>>,
+    /// file stores neither (format 3). It depends on the file alone, so every view shares
+    /// it; a view that never asks for a region never pays for it.
+    region_table: OnceLock<Vec<RegionN>>,
+    /// The KD-tree packed with field 0's ranges, for point location ([`Volume::region_at`]),
+    /// derived on first use: a denser read than the archived tree, which shading normals
+    /// and refinement probes descend for every hit. Point location reads no ranges, so
+    /// which field is packed does not matter; it depends on the file alone. `None` for a
+    /// file without fields (point location then reads the archived tree).
+    locate: OnceLock<Option<Arc<Packed>>>,
     /// Finest cell width in the file (reference length for opacity).
     pub finest_w: f64,
 }
@@ -131,28 +126,15 @@ impl<'a> Volume<'a> {
             values,
             file,
             level_w,
-            packed: (0..file.fields.len())
-                .map(|_| std::sync::OnceLock::new())
-                .collect(),
-            active: Default::default(),
-            region_table: std::sync::OnceLock::new(),
-            active_boxes: Default::default(),
+            region_table: OnceLock::new(),
+            locate: OnceLock::new(),
             finest_w: if finest_w.is_finite() { finest_w } else { 1.0 },
         })
     }
 
-    /// Index of the field called `name`.
-    pub fn field_index(&self, name: &str) -> Result<usize, VolumeError> {
-        self.fields
-            .iter()
-            .position(|f| f.name == name)
-            .ok_or_else(|| {
-                let names: Vec<&str> = self.fields.iter().map(|f| f.name.as_str()).collect();
-                VolumeError::NoSuchField {
-                    name: name.to_string(),
-                    available: names.join(", "),
-                }
-            })
+    /// Index of the field called `name` (see [`crate::fields`]).
+    pub fn field_index(&self, name: &str) -> Result<usize, UnknownField> {
+        crate::fields::find(&self.fields, name).map(|(i, _)| i)
     }
 
     /// World → local frame.
@@ -165,27 +147,23 @@ impl<'a> Volume<'a> {
         std::array::from_fn(|a| p[a] + self.frame[a])
     }
 
-    /// The KD-tree packed with field `f`'s ranges (built on first use); `None` for a
-    /// field the file does not have.
-    pub(crate) fn packed(&self, f: usize) -> Option<&crate::traverse::Packed> {
-        let cell = self.packed.get(f)?;
-        Some(cell.get_or_init(|| crate::traverse::Packed::build(self.file, f)))
+    /// The KD-tree packed with field `f`'s ranges, for a view's acceleration; `None` for
+    /// a field the file does not have. Field 0's is the point-location tree, shared.
+    pub(crate) fn packed(&self, f: usize) -> Option<Arc<Packed>> {
+        match f {
+            0 => self.locate.get_or_init(|| self.pack_locate()).clone(),
+            f if f < self.fields.len() => Some(Arc::new(Packed::build(self.file, f))),
+            _ => None,
+        }
     }
 
-    /// The regions whose range of field `f` holds `value`, as a tree (built on first
-    /// use, kept for the next frames); `None` for a field the file does not have.
-    pub(crate) fn active_tree(
-        &self,
-        f: usize,
-        value: f64,
-    ) -> Option<std::sync::Arc<crate::active::ActiveTree>> {
-        self.active.get(self, f, value, false)
+    /// The point-location tree (field 0's packed tree), packed on first use.
+    pub(crate) fn locate_tree(&self) -> Option<&Packed> {
+        self.locate.get_or_init(|| self.pack_locate()).as_deref()
     }
 
-    /// [`Volume::active_tree`], built on the current rayon pool when it is not kept yet:
-    /// for a frame's set-up, before its rays ask for it one by one.
-    pub(crate) fn prepare_active_tree(&self, f: usize, value: f64) {
-        self.active.get(self, f, value, true);
+    fn pack_locate(&self) -> Option<Arc<Packed>> {
+        (!self.fields.is_empty()).then(|| Arc::new(Packed::build(self.file, 0)))
     }
 
     /// Number of bricks.
@@ -215,7 +193,7 @@ impl<'a> Volume<'a> {
 
     /// Every region in the local frame, by index (derived on first use, one walk over
     /// the tree: a region's box is its leaf's cell, its step width its finest brick's
-    /// level's).
+    /// level's; see `region_table`).
     fn region_table(&self) -> &[RegionN] {
         self.region_table.get_or_init(|| {
             let file = self.file;
@@ -265,19 +243,9 @@ impl<'a> Volume<'a> {
     }
 
     /// The box (local frame) of every region whose range of field `f` meets `[lo, hi]`;
-    /// empty (`min > max`) when none does. One pass over the regions the first time a
-    /// (field, band) is asked for; a frame asks once, and the volume keeps the last few
-    /// answers, so frames of an unchanged view cost nothing here.
+    /// empty (`min > max`) when none does. One pass over the regions: a view computes it
+    /// once, for its band ([`crate::accel::Accel`]).
     pub fn active_box(&self, f: usize, lo: f64, hi: f64) -> ([f64; 3], [f64; 3]) {
-        let key = (f, lo.to_bits(), hi.to_bits());
-        // A poisoned lock only means another thread panicked while holding it; the list
-        // itself is always whole.
-        let mut boxes = self.active_boxes.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(i) = boxes.iter().position(|(k, _)| *k == key) {
-            let entry = boxes.remove(i);
-            boxes.push(entry);
-            return entry.1;
-        }
         let mut min = [f64::INFINITY; 3];
         let mut max = [f64::NEG_INFINITY; 3];
         if f < self.fields.len() {
@@ -291,10 +259,6 @@ impl<'a> Volume<'a> {
                 }
             }
         }
-        if boxes.len() == KEEP_BOXES {
-            boxes.remove(0);
-        }
-        boxes.push((key, (min, max)));
         (min, max)
     }
 
@@ -321,14 +285,15 @@ impl<'a> Volume<'a> {
         [v.min.to_native(), v.max.to_native()]
     }
 
-    /// Region containing the local point `p` (half-open boxes), by KD descent.
+    /// Region containing the local point `p` (half-open boxes), by KD descent (of the
+    /// point-location tree, see `locate`).
     pub fn region_at(&self, p: [f64; 3]) -> Option<u32> {
         // The packed copy of field 0's tree (when there is one) is the denser read.
         // Inside the bounds a leaf's cell is its region's box.
         if !self.inside(&p) {
             return None;
         }
-        match self.packed(0) {
+        match self.locate_tree() {
             Some(packed) => format::kd::locate(packed, p, self.frame),
             None => format::kd::locate(&format::kd::file_tree(self.file), p, self.frame),
         }
@@ -341,7 +306,7 @@ impl<'a> Volume<'a> {
 
     /// The KD descent of the local point `p`, for [`Volume::region_near`].
     pub(crate) fn descent(&self, p: [f64; 3]) -> Descent {
-        match self.packed(0) {
+        match self.locate_tree() {
             Some(packed) => Descent::of(packed, p, self.frame),
             None => Descent::of(&format::kd::file_tree(self.file), p, self.frame),
         }
@@ -353,7 +318,7 @@ impl<'a> Volume<'a> {
         if !self.inside(&q) {
             return None;
         }
-        match self.packed(0) {
+        match self.locate_tree() {
             Some(packed) => near.locate(packed, q, self.frame),
             None => near.locate(&format::kd::file_tree(self.file), q, self.frame),
         }
@@ -373,7 +338,7 @@ mod tests {
 
     /// The box of the regions that can contribute is the union over exactly those regions
     /// (checked by brute force over every region), for bands that meet some, all or none;
-    /// asking again gives the kept answer, and other bands and fields get their own.
+    /// asking again gives the same answer, and other bands and fields get their own.
     #[test]
     fn active_box_is_the_union_of_the_regions_meeting_the_band() {
         let f = |p: [f64; 3]| p[0] + 0.25 * p[1] - 0.5 * p[2];

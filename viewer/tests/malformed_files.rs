@@ -52,7 +52,8 @@ fn walk(view: &BrickFileView) {
     ] {
         let mut params = testvol::params(&vol, strategy, 0.5, mode, 4.0);
         params.tf.band.sigma = 0.5;
-        let mut tr = Tracer::new(&vol, params);
+        let accel = qbricks_viewer::accel::Accel::new(&vol, params.accel_key());
+        let mut tr = Tracer::new(&vol, &accel, params);
         match mode {
             Mode::Iso => {
                 let _ = tr.iso(o, d, 0.0, f64::INFINITY, 0.37);

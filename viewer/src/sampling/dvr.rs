@@ -7,7 +7,7 @@ use super::{at, bisect_depth, Event, Strategy, Tracer};
 use crate::integrate::{correct_opacity, Accum};
 use crate::reconstruct::Eval;
 use crate::transfer::Class;
-use crate::traverse::{Skip, SKIPPED};
+use crate::traverse::{segments_skipping, Skip, SKIPPED};
 
 impl Tracer<'_> {
     /// Direct volume rendering of `o + t d`, `t ∈ [t0, t1]`; `shade` gives the colour of a
@@ -41,7 +41,8 @@ impl Tracer<'_> {
             // Only `bisect` needs to know about gaps (band crossings next to skipped space).
             across_gaps: params.strategy != Strategy::Bisect,
         };
-        vol.segments_skipping(o, d, t0, t1, &mut stack, &skip, |seg| {
+        let packed = self.packed();
+        segments_skipping(vol, packed, o, d, t0, t1, &mut stack, &skip, |seg| {
             let r = seg.region as usize;
             let w = vol.step_width(seg.region);
             if seg.t0 > last_t1 + 1e-9 * w {

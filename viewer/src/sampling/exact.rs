@@ -2,16 +2,16 @@
 //! cell lattice present in the region) `Σ H (v − iso)` along the ray is a cubic, so each
 //! such interval whose cells straddle the iso value is solved for its first root.
 
+use super::roots::first_root;
 use super::Gaps;
-use super::{Event, Tracer, MAX_LATTICES};
+use super::{Event, Tracer};
 use crate::active::range_holds;
 use crate::dual_mask::DualMask;
-use crate::reconstruct::Cubic;
-use crate::traverse::{Segment, Skip, SKIPPED};
-use crate::volume::Volume;
+use crate::lattice::{Lattice, Lattices, MAX_LATTICES};
+use crate::traverse::{segments_skipping, Segment, Skip, SKIPPED};
 
 impl Tracer<'_> {
-    /// Exact iso search: per region whose range holds the iso value (the volume's
+    /// Exact iso search: per region whose range holds the iso value (the view's
     /// [`ActiveTree`](crate::active) for it; everything else is stepped over), per
     /// interval between lattice planes of every level present (inside which
     /// `Σ H (v − iso)` is a cubic), skip when all contributing cells lie on one side, else
@@ -25,10 +25,10 @@ impl Tracer<'_> {
     ) -> Option<(f64, Option<u32>)> {
         let vol = self.vol;
         let (field, iso) = (self.params.field, self.params.tf.iso);
-        let (tree, start) = self.take_active();
+        let (tree, start) = self.active_walk();
         let mut found = None;
         let mut stack = std::mem::take(&mut self.stack);
-        match &tree {
+        match tree {
             Some(tree) => {
                 let mut gaps = Gaps::new(vol, &o, &d, t0, t1);
                 tree.segments(
@@ -56,7 +56,8 @@ impl Tracer<'_> {
                     keep: |a: f32, b: f32| range_holds(a, b, iso),
                     across_gaps: true,
                 };
-                vol.segments_skipping(o, d, t0, t1, &mut stack, &skip, |seg| {
+                let packed = self.packed();
+                segments_skipping(vol, packed, o, d, t0, t1, &mut stack, &skip, |seg| {
                     let skipped = seg.region == SKIPPED || !range_holds(seg.min, seg.max, iso);
                     self.enter_segment(&seg, skipped);
                     if skipped {
@@ -69,7 +70,6 @@ impl Tracer<'_> {
             }
         }
         self.stack = stack;
-        self.active = tree;
         found
     }
 
@@ -154,62 +154,6 @@ struct Planes {
     n: usize,
 }
 
-/// One cell lattice of a region: cell width, its inverse and one cell centre (local).
-pub(crate) type Lattice = (f64, f64, [f64; 3]);
-
-/// The distinct cell lattices of a region's bricks (at most [`MAX_LATTICES`]).
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct Lattices {
-    list: [Lattice; MAX_LATTICES],
-    n: usize,
-    /// The region has more lattices than are listed (see
-    /// [`Stats::inexact_segments`](super::Stats::inexact_segments)).
-    pub(crate) inexact: bool,
-}
-
-impl Lattices {
-    /// The lattices of region `r`: bricks whose cells are whole cells apart share one.
-    pub(crate) fn of(vol: &Volume, r: usize) -> Lattices {
-        let mut l = Lattices {
-            list: [(0.0, 0.0, [0.0; 3]); MAX_LATTICES],
-            n: 0,
-            inexact: false,
-        };
-        for b in vol.region_brick_ids(r) {
-            let br = vol.brick(b.to_native());
-            let same = |&(w, _, origin): &Lattice| {
-                w == br.w
-                    && (origin == br.origin
-                        || (0..3).all(|a| {
-                            // Whole cells apart (a cast truncates in one instruction;
-                            // `round` is a library call on the baseline target).
-                            let q = (origin[a] - br.origin[a]) * br.inv_w;
-                            let frac = (q - q as i64 as f64).abs();
-                            !(1e-9..=1.0 - 1e-9).contains(&frac)
-                        }))
-            };
-            if l.list[..l.n].iter().any(same) {
-                continue;
-            }
-            if l.n == MAX_LATTICES {
-                // More distinct lattices in one region than are cut (never produced by
-                // nested grids of one refinement ratio): the remaining lattices' planes are
-                // not cut, so intervals there are only approximately cubic. Counted in
-                // `Stats::inexact_segments` and reported by `render --json`.
-                l.inexact = true;
-                break;
-            }
-            l.list[l.n] = (br.w, br.inv_w, br.origin);
-            l.n += 1;
-        }
-        l
-    }
-
-    pub(crate) fn as_slice(&self) -> &[Lattice] {
-        &self.list[..self.n]
-    }
-}
-
 impl Planes {
     fn new(lattices: &[Lattice], o: &[f64; 3], d: &[f64; 3], t: f64) -> Planes {
         let mut pl = Planes {
@@ -258,140 +202,12 @@ impl Planes {
     }
 }
 
-/// First root of the cubic on `[0, 1]` (a sign change or an exact zero), refined by
-/// bisection to round-off.
-pub(crate) fn first_root(c: &Cubic) -> Option<f64> {
-    // Bernstein coefficients on [0, 1]: g lies in their convex hull, so when all of them
-    // are clearly of one sign g has no zero there (most intervals whose cells straddle
-    // the iso value), without the critical points and evaluations below.
-    let b = [
-        c.c[0],
-        c.c[0] + c.c[1] / 3.0,
-        c.c[0] + (2.0 * c.c[1] + c.c[2]) / 3.0,
-        c.c[0] + c.c[1] + c.c[2] + c.c[3],
-    ];
-    let margin = 1e-9 * (c.c[0].abs() + c.c[1].abs() + c.c[2].abs() + c.c[3].abs());
-    if b.iter().all(|&x| x > margin) || b.iter().all(|&x| x < -margin) {
-        return None;
-    }
-    // Where the weights vanish (outer support boundary) g is zero without a surface.
-    let wscale = c.weight.iter().map(|x| x.abs()).sum::<f64>();
-    let real_zero = |x: f64| c.weight_at(x) > 1e-7 * wscale;
-    let mut g0 = c.eval(0.0);
-    if g0 == 0.0 {
-        if real_zero(0.0) {
-            return Some(0.0);
-        }
-        g0 = c.eval(1e-9);
-        if g0 == 0.0 {
-            return None;
-        }
-    }
-    // Monotone pieces between the critical points.
-    let mut cuts = [0.0, 1.0, 1.0, 1.0];
-    let mut n = 1;
-    let (qa, qb, qc) = (3.0 * c.c[3], 2.0 * c.c[2], c.c[1]);
-    let scale = qa.abs() + qb.abs() + qc.abs();
-    let mut roots = [f64::NAN; 2];
-    if qa.abs() <= 1e-14 * scale {
-        if qb != 0.0 {
-            roots[0] = -qc / qb;
-        }
-    } else {
-        let disc = qb * qb - 4.0 * qa * qc;
-        if disc >= 0.0 {
-            let q = -0.5 * (qb + qb.signum() * disc.sqrt());
-            roots[0] = q / qa;
-            if q != 0.0 {
-                roots[1] = qc / q;
-            }
-        }
-    }
-    if roots[0] > roots[1] {
-        roots.swap(0, 1);
-    }
-    for x in roots {
-        if x > 0.0 && x < 1.0 {
-            cuts[n] = x;
-            n += 1;
-        }
-    }
-    cuts[n] = 1.0;
-    let mut xa = 0.0;
-    let mut ga = g0;
-    for &xb in &cuts[1..=n] {
-        if xb <= xa {
-            continue;
-        }
-        let gb = c.eval(xb);
-        if gb == 0.0 {
-            if real_zero(xb) {
-                return Some(xb);
-            }
-            xa = xb;
-            continue;
-        }
-        if (ga < 0.0) != (gb < 0.0) {
-            // g is monotone on [xa, xb]: Newton steps kept inside the shrinking bracket
-            // (bisection where a step would leave it), to round-off.
-            let (mut lo, mut hi) = (xa, xb);
-            let mut x = 0.5 * (lo + hi);
-            for _ in 0..100 {
-                let gm = c.eval(x);
-                if gm == 0.0 {
-                    if real_zero(x) {
-                        return Some(x);
-                    }
-                    break;
-                }
-                if (gm < 0.0) == (ga < 0.0) {
-                    lo = x;
-                } else {
-                    hi = x;
-                }
-                let dg = c.slope(x);
-                let newton = x - gm / dg;
-                let next = if newton > lo && newton < hi {
-                    newton
-                } else {
-                    0.5 * (lo + hi)
-                };
-                if next <= lo || next >= hi || (next - x).abs() <= 4.0 * f64::EPSILON {
-                    x = next.clamp(lo, hi);
-                    break;
-                }
-                x = next;
-            }
-            if real_zero(x) {
-                return Some(x);
-            }
-        }
-        xa = xb;
-        ga = gb;
-    }
-    None
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::reconstruct::Cubic;
     use crate::traverse::{inverse, ray_box};
-
-    fn cubic_from_roots(r: [f64; 3], scale: f64) -> Cubic {
-        // scale·(x − r0)(x − r1)(x − r2), weights constant 1.
-        let [a, b, c] = r;
-        Cubic {
-            c: [
-                -scale * a * b * c,
-                scale * (a * b + a * c + b * c),
-                -scale * (a + b + c),
-                scale,
-            ],
-            weight: [1.0, 0.0, 0.0, 0.0],
-            any_above: true,
-            any_below: true,
-        }
-    }
+    use crate::volume::Volume;
 
     /// Deterministic numbers in `[0, 1)`.
     fn lcg(state: &mut u64) -> f64 {
@@ -601,8 +417,8 @@ mod tests {
             crate::transfer::Mode::Iso,
             iso,
         );
-        let mut tracer = Tracer::new(vol, params);
-        tracer.active = Some(tree.clone());
+        let accel = crate::accel::Accel::with_active(vol, params.accel_key(), tree.clone());
+        let mut tracer = Tracer::new(vol, &accel, params);
         tracer.iso_exact(o, d, -1e3, 1e3)
     }
 
@@ -640,7 +456,9 @@ mod tests {
                 rays.push((o, d));
             }
             for iso in isos {
-                let cut = vol.active_tree(0, iso).expect("a tree");
+                let cut = std::sync::Arc::new(
+                    crate::active::ActiveTree::of(&vol, 0, iso).expect("a tree"),
+                );
                 let whole = std::sync::Arc::new(
                     crate::active::ActiveTree::uncut(&vol, 0, iso).expect("a tree"),
                 );
@@ -715,13 +533,11 @@ mod tests {
             let mut seed = 9;
             let c = vol.to_local([12.0; 3]);
             for iso in isos {
-                let mut exact = Tracer::new(
-                    &vol,
-                    crate::testvol::params(&vol, Strategy::Exact, step, Mode::Iso, iso),
-                );
-                let mut tracers = [Strategy::Uniform, Strategy::Paper, Strategy::Bisect].map(|s| {
-                    Tracer::new(&vol, crate::testvol::params(&vol, s, step, Mode::Iso, iso))
-                });
+                let params = |s| crate::testvol::params(&vol, s, step, Mode::Iso, iso);
+                let accel = crate::accel::Accel::new(&vol, params(Strategy::Exact).accel_key());
+                let mut exact = Tracer::new(&vol, &accel, params(Strategy::Exact));
+                let mut tracers = [Strategy::Uniform, Strategy::Paper, Strategy::Bisect]
+                    .map(|s| Tracer::new(&vol, &accel, params(s)));
                 for _ in 0..600 {
                     let o: [f64; 3] = std::array::from_fn(|a| c[a] + 40.0 * (lcg(&mut seed) - 0.5));
                     let d: [f64; 3] = std::array::from_fn(|_| lcg(&mut seed) - 0.5);
@@ -746,28 +562,5 @@ mod tests {
             differ * 200 <= rays,
             "{differ} of {rays} rays differ from exact"
         );
-    }
-
-    #[test]
-    fn first_root_of_cubics() {
-        for (roots, want) in [
-            ([0.3, 0.5, 0.9], Some(0.3)),
-            ([-1.0, 0.7, 2.0], Some(0.7)),
-            ([-1.0, 1.5, 2.0], None),
-            ([0.25, 0.2500001, 3.0], Some(0.25)), // two close roots: the first
-        ] {
-            for scale in [1.0, -3.0, 1e-6] {
-                let got = first_root(&cubic_from_roots(roots, scale));
-                match (got, want) {
-                    (Some(g), Some(w)) => assert!((g - w).abs() < 1e-9, "{roots:?}: {g} vs {w}"),
-                    (None, None) => {}
-                    _ => panic!("{roots:?} scale {scale}: got {got:?}, want {want:?}"),
-                }
-            }
-        }
-        // A zero where the weights vanish (outer support boundary) is not a surface.
-        let mut c = cubic_from_roots([0.0, 5.0, 6.0], 1.0);
-        c.weight = [0.0, 1.0, 0.0, 0.0];
-        assert_eq!(first_root(&c), None);
     }
 }

@@ -6,7 +6,7 @@
 
 use super::positions::Positions;
 use super::{at, bisect_depth, Event, Gaps, IsoHit, Strategy, Tracer};
-use crate::traverse::{Segment, Skip, SKIPPED};
+use crate::traverse::{segments_skipping, Segment, Skip, SKIPPED};
 
 #[derive(Debug, Clone, Copy)]
 struct Prev {
@@ -101,8 +101,9 @@ impl Tracer<'_> {
         // the field lies on one side of the value, so no crossing is lost by treating the
         // stretches between parts as gaps in the data (an exit sample before each, an
         // entry sample after). Without a tree, the file's walk with skipped subtrees.
-        let (tree, start) = self.take_active();
-        let mut gaps = tree.as_ref().map(|_| Gaps::new(vol, &o, &d, t0, t1));
+        let (tree, start) = self.active_walk();
+        let packed = self.packed();
+        let mut gaps = tree.map(|_| Gaps::new(vol, &o, &d, t0, t1));
         let mut visit = |seg: Segment| {
             if let Some(g) = gaps.as_mut() {
                 g.before(self, &seg);
@@ -195,14 +196,13 @@ impl Tracer<'_> {
             }
             true
         };
-        match &tree {
+        match tree {
             Some(tree) => tree.segments(vol, start, o, d, t0, t1, &mut stack, |seg, _, _, _| {
                 visit(seg)
             }),
-            None => vol.segments_skipping(o, d, t0, t1, &mut stack, &skip, visit),
+            None => segments_skipping(vol, packed, o, d, t0, t1, &mut stack, &skip, visit),
         }
         self.stack = stack;
-        self.active = tree;
         if bracket.is_none() {
             if let Some(g) = &gaps {
                 g.finish(self);

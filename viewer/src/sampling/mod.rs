@@ -13,27 +13,35 @@
 //!
 //! - here: the public types ([`Strategy`], [`Params`], [`Stats`], [`Event`], [`IsoHit`]),
 //!   the limits, and [`Tracer`] with the per-segment bookkeeping every walk uses (clipping
-//!   to the active box, fetching the active tree, counting and logging a segment and the
-//!   gaps between the tree's leaves, probing a point during refinement)
-//!   and the bisection depth that `iso` and `dvr` both refine to under `bisect`;
+//!   to the active box, the trees of the view's acceleration, counting and logging a
+//!   segment and the gaps between the active tree's leaves, probing a point during
+//!   refinement) and the bisection depth that `iso` and `dvr` both refine to under
+//!   `bisect`;
 //! - `positions`: where the samples of one region segment go (`uniform`'s fixed step carried
 //!   from region to region, `paper`/`bisect` interval midpoints);
 //! - `iso`: iso mode ([`Tracer::iso`], [`Tracer::iso_occluded`]) and its sample-based
 //!   search for `uniform`, `paper` and `bisect`: bracket a crossing, then narrow it;
-//! - `exact`: the `exact` iso search, a cubic per interval between lattice planes and its
-//!   first root ([`exact::first_root`]);
+//! - `exact`: the `exact` iso search, a cubic per interval between lattice planes; `roots`:
+//!   the cubic's first root;
 //! - `dvr`: direct volume rendering ([`Tracer::dvr`], [`Tracer::transmittance`]) and
 //!   `bisect`'s search for the band between two samples.
 //!
 //! Every strategy is a method of the one [`Tracer`] (the files add `impl Tracer` blocks), so
 //! the scratch stack, counters and log have a single owner and the skip bookkeeping a single
 //! copy; the strategy is picked by matching on [`Strategy`], not through a trait per strategy.
+//!
+//! A tracer reads the volume (the file) and the view's acceleration ([`Accel`]: the packed
+//! tree of its iso field, the active tree of its iso value), which its caller built for the
+//! same field and iso value as its [`Params`] ([`Params::accel_key`]); it never looks a
+//! tree up.
 
 use std::fmt;
 use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
+use crate::accel::{Accel, AccelKey};
+use crate::active::{ActiveTree, Start};
 use crate::reconstruct::Eval;
 use crate::transfer::PreIntegrated;
 use crate::transfer::{Mode, Transfer};
@@ -41,9 +49,9 @@ use crate::volume::Volume;
 
 mod dvr;
 mod exact;
-pub(crate) use exact::{Lattice, Lattices};
 mod iso;
 mod positions;
+mod roots;
 
 /// Smallest bisection interval of `bisect`, in cell widths.
 pub(crate) const BISECT_RESOLUTION: f64 = 0.005;
@@ -69,6 +77,21 @@ impl Strategy {
         Strategy::Bisect,
         Strategy::Exact,
     ];
+    /// The strategy rays use for this one in `mode`: `exact` finds iso-surface roots; a
+    /// dvr band has no single root, so in dvr mode `exact` samples as `uniform` when the
+    /// opacity is pre-integrated and as `bisect` when it is point-sampled. Point samples
+    /// catch a band thinner than the step only by chance, which `bisect`'s search between
+    /// samples repairs; pre-integration already counts the band between two samples, so
+    /// plain `uniform` steps reach a lower error with fewer samples than either `bisect`
+    /// variant (BENCHMARKS.md, "Direct volume rendering").
+    pub(crate) fn in_mode(self, mode: Mode, preintegrated: bool) -> Strategy {
+        match (mode, self) {
+            (Mode::Dvr, Strategy::Exact) if preintegrated => Strategy::Uniform,
+            (Mode::Dvr, Strategy::Exact) => Strategy::Bisect,
+            _ => self,
+        }
+    }
+
     pub(crate) fn as_str(self) -> &'static str {
         match self {
             Strategy::Uniform => "uniform",
@@ -127,6 +150,16 @@ impl Params {
         // Nothing can contribute: an empty box (min > max) that no ray enters.
         self.clip = Some(vol.active_box(self.field, lo, hi));
     }
+
+    /// The settings of these parameters that decide the acceleration their rays need:
+    /// field, iso value and band.
+    pub fn accel_key(&self) -> AccelKey {
+        AccelKey {
+            field: self.field,
+            iso: self.tf.iso,
+            band: self.tf.band(),
+        }
+    }
 }
 
 /// Work counters of one or more rays (summed in integers: deterministic).
@@ -136,7 +169,8 @@ pub struct Stats {
     pub samples: u64,
     pub segments: u64,
     pub skipped: u64,
-    /// `exact` segments through a region with more than [`MAX_LATTICES`] distinct cell
+    /// `exact` segments through a region with more than
+    /// [`MAX_LATTICES`](crate::lattice::MAX_LATTICES) distinct cell
     /// lattices: the extra lattices' planes are not cut there, so the search is only
     /// approximately exact (reported, never silent; nested grids of one refinement ratio
     /// never produce such a region).
@@ -155,9 +189,6 @@ impl std::ops::AddAssign for Stats {
         self.truncated_segments += o.truncated_segments;
     }
 }
-
-/// Most distinct cell lattices `exact` cuts planes for in one region.
-pub(crate) const MAX_LATTICES: usize = 8;
 
 /// Most sample positions in one region segment. With the smallest step
 /// (`view_state::MIN_STEP`, a thousand per cell width) that is a thousand cells along one
@@ -215,6 +246,8 @@ fn at(o: &[f64; 3], d: &[f64; 3], t: f64) -> [f64; 3] {
 /// Casts rays through one volume with one set of parameters; keeps its scratch space.
 pub struct Tracer<'v> {
     pub vol: &'v Volume<'v>,
+    /// The trees the rays walk, built for the field and iso value of `params`.
+    accel: &'v Accel,
     pub params: Params,
     pub stats: Stats,
     /// Set to `Some` to record what the next rays do (`--pixel`).
@@ -222,12 +255,10 @@ pub struct Tracer<'v> {
     stack: Vec<(u32, f64, f64)>,
     /// Region of the last refinement probe.
     probe_hint: Option<u32>,
-    /// The regions an iso-surface search walks for the current iso value (built before a
-    /// frame's tiles, or fetched on the first ray).
-    active: Option<std::sync::Arc<crate::active::ActiveTree>>,
-    /// Where an iso-surface search starts walking `active` for the next rays: set by the frame loop for
-    /// each group of pixels (see [`Tracer::group_start`]), the root otherwise.
-    start: crate::active::Start,
+    /// Where an iso-surface search starts walking the active tree for the next rays: set
+    /// by the frame loop for each group of pixels (see [`Tracer::group_start`]), the root
+    /// otherwise.
+    start: Start,
     /// The bricks of the region `exact` is searching (scratch, refilled per region), and
     /// that region.
     bricks: Vec<crate::reconstruct::DualBrick>,
@@ -235,41 +266,46 @@ pub struct Tracer<'v> {
 }
 
 impl<'v> Tracer<'v> {
-    pub fn new(vol: &'v Volume<'v>, params: Params) -> Self {
+    /// A tracer of rays with `params` through `vol`, walking the trees of `accel`, which
+    /// must be an acceleration of `vol` for the field and iso value of `params` (the key
+    /// [`Params::accel_key`] gives; the clip box is `params.clip`'s business).
+    pub fn new(vol: &'v Volume<'v>, accel: &'v Accel, params: Params) -> Self {
+        debug_assert!(
+            accel.key().field == params.field && accel.key().iso == params.tf.iso,
+            "an acceleration for {:?} traced with field {} at iso {}",
+            accel.key(),
+            params.field,
+            params.tf.iso
+        );
         Tracer {
             vol,
+            accel,
             params,
             stats: Stats::default(),
             log: None,
             stack: Vec::with_capacity(64),
             probe_hint: None,
-            active: None,
-            start: crate::active::Start::Root,
+            start: Start::Root,
             bricks: Vec::new(),
             bricks_of: None,
         }
     }
 
     /// Where iso-surface walks can start for rays inside `frustum` (the pixels of one
-    /// group, see [`crate::active::ActiveTree::start_in`]); fetches the active tree for
-    /// them. dvr walks the file's tree: for it, the root.
-    pub(crate) fn group_start(&mut self, frustum: &crate::camera::Frustum) -> crate::active::Start {
+    /// group, see [`ActiveTree::start_in`]). dvr walks the file's tree: for it, the root.
+    pub(crate) fn group_start(&mut self, frustum: &crate::camera::Frustum) -> Start {
         if self.params.tf.mode != Mode::Iso {
-            return crate::active::Start::Root;
+            return Start::Root;
         }
-        let (field, iso) = (self.params.field, self.params.tf.iso);
-        if !self.active.as_ref().is_some_and(|t| t.is_for(field, iso)) {
-            self.active = self.vol.active_tree(field, iso);
-        }
-        match &self.active {
+        match self.accel.active_tree(self.vol) {
             Some(tree) => tree.start_in(frustum),
-            None => crate::active::Start::Root,
+            None => Start::Root,
         }
     }
 
     /// Where the next rays' walks start: a [`Tracer::group_start`] of this tracer for a
     /// frustum that holds them, or the root.
-    pub(crate) fn set_start(&mut self, start: crate::active::Start) {
+    pub(crate) fn set_start(&mut self, start: Start) {
         self.start = start;
     }
 
@@ -309,20 +345,15 @@ impl<'v> Tracer<'v> {
         });
     }
 
-    /// The active tree for this tracer's field and iso value, and where the next ray's walk
-    /// starts in it (the group start the caller set belongs to the tree it put in
-    /// `self.active`); the caller puts the tree back.
-    fn take_active(
-        &mut self,
-    ) -> (
-        Option<std::sync::Arc<crate::active::ActiveTree>>,
-        crate::active::Start,
-    ) {
-        let (field, iso) = (self.params.field, self.params.tf.iso);
-        match self.active.take() {
-            Some(t) if t.is_for(field, iso) => (Some(t), self.start),
-            _ => (self.vol.active_tree(field, iso), crate::active::Start::Root),
-        }
+    /// The active tree of the view's iso value, and where the next ray's walk starts in it
+    /// (the group start the frame loop set, found in the same tree).
+    fn active_walk(&self) -> (Option<&'v ActiveTree>, Start) {
+        (self.accel.active_tree(self.vol), self.start)
+    }
+
+    /// The file's tree packed with the iso field's ranges, for walks that skip by them.
+    fn packed(&self) -> Option<&'v crate::packed::Packed> {
+        self.accel.packed(self.vol)
     }
 
     /// Counts (and logs) the stretch `[t0, t1]` of the data that a walk of the active tree

@@ -19,7 +19,8 @@ use crate::shading::{default_lights, Light, Material, ShadingError};
 pub use crate::transfer::{Band, Mode};
 
 mod overrides;
-pub use overrides::{OverrideError, Overrides, UnknownField};
+pub use crate::fields::UnknownField;
+pub use overrides::{OverrideError, Overrides};
 
 /// Range of one field: of a file (from its field table), or of a whole sequence (from its
 /// manifest), which is the same record.
@@ -312,10 +313,10 @@ impl ViewState {
     }
 
     /// The strategy the rays use: `exact` finds iso-surface roots; a dvr band has no
-    /// single root, so in dvr mode it samples as [`crate::render::effective_strategy`]
-    /// says: `uniform` with pre-integration, `bisect` without.
+    /// single root, so in dvr mode it samples as [`Strategy::in_mode`] says: `uniform`
+    /// with pre-integration, `bisect` without.
     pub(crate) fn effective_strategy(&self) -> Strategy {
-        crate::render::effective_strategy(self.mode, self.strategy, self.preintegrated)
+        self.strategy.in_mode(self.mode, self.preintegrated)
     }
 
     /// Puts the default lights back over the viewer's shoulder for the current camera

@@ -4,6 +4,7 @@
 use super::{default_iso, FieldRange, Mode, Strategy, ViewState};
 use crate::camera::Projection;
 use crate::colormap::ColorMap;
+use crate::fields::UnknownField;
 use crate::mesh::{MeshInstance, MeshSpecError};
 
 /// Command-line changes to a view state (`qbricks-view render` flags). They live here,
@@ -82,15 +83,6 @@ pub enum OverrideError {
         flag: &'static str,
         error: crate::probe::PointError,
     },
-}
-
-/// A field override that names no field of the data.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{flag}: no field named {name:?} (fields: {})", known.join(", "))]
-pub struct UnknownField {
-    pub flag: &'static str,
-    pub name: String,
-    pub known: Vec<String>,
 }
 
 impl Overrides {
@@ -204,14 +196,9 @@ impl Overrides {
         fields: &[FieldRange],
     ) -> Result<(), UnknownField> {
         let find = |flag: &'static str, name: &str| {
-            fields
-                .iter()
-                .find(|f| f.name == name)
-                .ok_or_else(|| UnknownField {
-                    flag,
-                    name: name.to_string(),
-                    known: fields.iter().map(|f| f.name.clone()).collect(),
-                })
+            crate::fields::find(fields, name)
+                .map(|(_, f)| f)
+                .map_err(|e| e.named_by(flag))
         };
         if let Some(name) = &self.iso_field {
             let f = find("--iso-field", name)?;

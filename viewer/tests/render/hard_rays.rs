@@ -7,6 +7,7 @@
 //! field exactly (linear fields inside one grid), and otherwise against the reference
 //! strategy (`uniform` at step 0.01 cell).
 
+use qbricks_viewer::accel::Accel;
 use qbricks_viewer::sampling::{Params, Strategy, Tracer};
 use qbricks_viewer::testvol::{self, FieldFn, GridSpec};
 use qbricks_viewer::transfer::Mode;
@@ -48,11 +49,17 @@ fn iso_hit(
     let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
     let d = d.map(|x| x / n);
     // Without and with clipping to the active box: both must give the same hit.
-    let mut tr = Tracer::new(vol, params(vol, strategy, step, Mode::Iso, iso));
+    let p = params(vol, strategy, step, Mode::Iso, iso);
+    let accel = Accel::new(vol, p.accel_key());
+    let mut tr = Tracer::new(vol, &accel, p);
     let plain = tr
         .iso(vol.to_local(o), d, 0.0, f64::INFINITY, jitter)
         .map(|h| h.t);
-    let mut tr = Tracer::new(vol, params_clipped(vol, strategy, step, Mode::Iso, iso));
+    let mut tr = Tracer::new(
+        vol,
+        &accel,
+        params_clipped(vol, strategy, step, Mode::Iso, iso),
+    );
     let clipped = tr
         .iso(vol.to_local(o), d, 0.0, f64::INFINITY, jitter)
         .map(|h| h.t);
@@ -380,7 +387,9 @@ fn zero_gradient_at_the_hit() {
             }
             // The gradient there is zero from the right: the hit's reconstruction must
             // still be finite.
-            let mut tr = Tracer::new(vol, params(vol, Strategy::Exact, STEP, Mode::Iso, 0.0));
+            let p = params(vol, Strategy::Exact, STEP, Mode::Iso, 0.0);
+            let accel = Accel::new(vol, p.accel_key());
+            let mut tr = Tracer::new(vol, &accel, p);
             let h = tr
                 .iso(vol.to_local(o), [1.0, 0.0, 0.0], 0.0, f64::INFINITY, 0.0)
                 .expect("hit");
@@ -413,7 +422,9 @@ fn iso_outside_the_data_range_hits_nothing_and_samples_nothing() {
     with_volume(&[grid16()], &[("f", &f)], 4, |vol| {
         for iso in [-5.0, 40.0, 1e30, -1e30] {
             for s in STRATEGIES {
-                let mut tr = Tracer::new(vol, params(vol, s, STEP, Mode::Iso, iso));
+                let p = params(vol, s, STEP, Mode::Iso, iso);
+                let accel = Accel::new(vol, p.accel_key());
+                let mut tr = Tracer::new(vol, &accel, p);
                 let d = unit([1.0, 0.8, 0.3]);
                 let hit = tr.iso(vol.to_local([-1.0, -1.0, 2.0]), d, 0.0, f64::INFINITY, 0.37);
                 assert!(hit.is_none(), "{s}: hit at iso {iso}");
@@ -423,7 +434,7 @@ fn iso_outside_the_data_range_hits_nothing_and_samples_nothing() {
                 );
                 assert!(tr.stats.skipped > 0, "{s}: the ray crossed no region");
                 // Clipped to the (empty) active box: nothing at all.
-                let mut tr = Tracer::new(vol, params_clipped(vol, s, STEP, Mode::Iso, iso));
+                let mut tr = Tracer::new(vol, &accel, params_clipped(vol, s, STEP, Mode::Iso, iso));
                 let hit = tr.iso(vol.to_local([-1.0, -1.0, 2.0]), d, 0.0, f64::INFINITY, 0.37);
                 assert!(hit.is_none(), "{s}: hit at iso {iso} (clipped)");
                 assert_eq!(tr.stats.samples, 0, "{s}: samples at iso {iso} (clipped)");
@@ -432,7 +443,8 @@ fn iso_outside_the_data_range_hits_nothing_and_samples_nothing() {
                     params(vol, s, STEP, Mode::Dvr, iso),
                     params_clipped(vol, s, STEP, Mode::Dvr, iso),
                 ] {
-                    let mut tr = Tracer::new(vol, p);
+                    let accel = Accel::new(vol, p.accel_key());
+                    let mut tr = Tracer::new(vol, &accel, p);
                     let acc = tr.dvr(
                         vol.to_local([-1.0, -1.0, 2.0]),
                         d,
@@ -488,7 +500,9 @@ fn empty_space_between_data() {
             );
         }
         // A ray entirely in the gap meets no data: nothing is sampled.
-        let mut tr = Tracer::new(vol, params(vol, Strategy::Exact, STEP, Mode::Iso, 6.0));
+        let p = params(vol, Strategy::Exact, STEP, Mode::Iso, 6.0);
+        let accel = Accel::new(vol, p.accel_key());
+        let mut tr = Tracer::new(vol, &accel, p);
         assert!(tr
             .iso(
                 vol.to_local([6.0, -1.0, 2.0]),

@@ -1,0 +1,48 @@
+//! Tiles: the unit of work of a frame and what one rendered tile hands back, shared by
+//! the frame loop ([`crate::render`]) that renders them and the film
+//! ([`crate::film`]) that sums them.
+
+use std::ops::Range;
+
+use crate::sampling::Stats;
+
+/// Tile edge in pixels.
+pub(crate) const TILE: u32 = 16;
+
+/// A rectangle of pixels `[x0, x1) × [y0, y1)`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Tile {
+    pub x0: u32,
+    pub y0: u32,
+    pub x1: u32,
+    pub y1: u32,
+}
+
+/// The [`TILE`]-sized tiles of a `width`×`height` image, row by row from the top left.
+pub fn tiles(width: u32, height: u32) -> Vec<Tile> {
+    let (tx, ty) = (width.div_ceil(TILE), height.div_ceil(TILE));
+    (0..ty)
+        .flat_map(|j| {
+            (0..tx).map(move |i| Tile {
+                x0: i * TILE,
+                y0: j * TILE,
+                x1: ((i + 1) * TILE).min(width),
+                y1: ((j + 1) * TILE).min(height),
+            })
+        })
+        .collect()
+}
+
+/// One rendered tile: per pixel (row-major inside the tile) the sum of the colours of
+/// samples `samples`, plus the work it took.
+#[derive(Debug, Clone)]
+pub struct TileResult {
+    pub tile: Tile,
+    pub samples: Range<u32>,
+    pub sum: Vec<[f64; 3]>,
+    /// Per pixel (row-major inside the tile), how many of `samples` hit.
+    pub(crate) hit_samples: Vec<u32>,
+    pub stats: Stats,
+    pub rays: u64,
+    pub hits: u64,
+}
