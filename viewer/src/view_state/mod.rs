@@ -5,22 +5,26 @@
 //! pixel. Unknown fields are rejected (a typo must not silently fall back to a default);
 //! values serde cannot check are checked by [`ViewState::validate`], which `load` calls.
 
-use std::io::Write;
-use std::path::{Path, PathBuf};
-
-use files::input::{read_whole, InputErrorKind, Limits};
 use serde::{Deserialize, Serialize};
 
-use crate::camera::{Camera, Projection};
-use crate::colormap::{ColorMap, ColorMapError};
-use crate::mesh::{MeshError, MeshInstance};
+use crate::camera::Camera;
+use crate::colormap::ColorMap;
+use crate::mesh::MeshInstance;
 pub use crate::sampling::Strategy;
-use crate::shading::{default_lights, Light, Material, ShadingError};
+use crate::shading::{default_lights, Light, Material};
 pub use crate::transfer::{Band, Mode};
 
+mod command;
+mod file;
 mod overrides;
+mod size;
+mod validate;
 pub use crate::fields::UnknownField;
+pub use command::ViewCommand;
+pub use file::ViewStateError;
 pub use overrides::{OverrideError, Overrides};
+pub use size::{parse_size, SizeError};
+pub use validate::InvalidViewState;
 
 /// Range of one field: of a file (from its field table), or of a whole sequence (from its
 /// manifest), which is the same record.
@@ -35,32 +39,6 @@ pub const MAX_SPP: u32 = 4096;
 /// `1e-30` made every ray march for ever (`t + dt == t`).
 pub(crate) const MIN_STEP: f64 = 1e-3;
 
-/// Why a `WxH` size argument is refused.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("{flag}: expected WxH with sides {min}..={MAX_IMAGE_SIDE}, found `{text}`")]
-pub struct SizeError {
-    pub flag: String,
-    pub min: u32,
-    pub text: String,
-}
-
-/// `WxH` (or `WXH`) with both sides in `min..=`[`MAX_IMAGE_SIDE`]: the one reading of an
-/// image or window size every command uses.
-pub fn parse_size(flag: &str, text: &str, min: u32) -> Result<(u32, u32), SizeError> {
-    let bad = || SizeError {
-        flag: flag.to_string(),
-        min,
-        text: text.to_string(),
-    };
-    let (w, h) = text.split_once(['x', 'X']).ok_or_else(bad)?;
-    let w: u32 = w.trim().parse().map_err(|_| bad())?;
-    let h: u32 = h.trim().parse().map_err(|_| bad())?;
-    let side = min..=MAX_IMAGE_SIDE;
-    if !side.contains(&w) || !side.contains(&h) {
-        return Err(bad());
-    }
-    Ok((w, h))
-}
 /// Most `meshes` entries: each is loaded and placed separately (2,000 took 15 s and 3.3 GB).
 pub(crate) const MAX_MESHES: usize = 64;
 
@@ -115,100 +93,6 @@ pub(crate) const DEFAULT_BACKGROUND: [f32; 3] = [0.08, 0.09, 0.11];
 
 fn default_background() -> [f32; 3] {
     DEFAULT_BACKGROUND
-}
-
-/// Why a view state could not be loaded or saved.
-#[derive(Debug, thiserror::Error)]
-pub enum ViewStateError {
-    // The cause is part of the one-line message, not a `source` (which would print it
-    // twice in an anyhow chain).
-    #[error("{}: {error}", path.display())]
-    Io {
-        path: PathBuf,
-        error: std::io::Error,
-    },
-    #[error("{}: not a valid view state: {error}", path.display())]
-    Parse {
-        path: PathBuf,
-        error: serde_json::Error,
-    },
-    #[error("{}: {error}", path.display())]
-    Invalid {
-        path: PathBuf,
-        error: InvalidViewState,
-    },
-    /// Larger than a view state may be; `size` is `None` for a stream that went on past
-    /// the limit.
-    #[error(
-        "{}: expected a JSON view state of at most {limit} bytes, found {}",
-        path.display(),
-        found_bytes(*size)
-    )]
-    TooLarge {
-        path: PathBuf,
-        limit: u64,
-        size: Option<u64>,
-    },
-    /// Not a file that can be read whole (a directory, …).
-    #[error("{}: {kind}", path.display())]
-    Input { path: PathBuf, kind: InputErrorKind },
-    #[error("{}: not UTF-8 text: {error}", path.display())]
-    NotUtf8 {
-        path: PathBuf,
-        error: std::str::Utf8Error,
-    },
-}
-
-/// `N bytes`, or `more` for a stream read no further than the limit.
-fn found_bytes(size: Option<u64>) -> String {
-    match size {
-        Some(n) => format!("{n} bytes"),
-        None => "more".to_string(),
-    }
-}
-
-/// What [`ViewState::validate`] refuses: a value the JSON types allow but the renderer
-/// cannot use. The message names the field by its JSON path.
-#[derive(Debug, thiserror::Error)]
-pub enum InvalidViewState {
-    /// `eye`, `look_at` or `up` of the camera.
-    #[error("camera.{name}: not finite ({value:?})")]
-    CameraNotFinite { name: &'static str, value: [f64; 3] },
-    #[error("camera: eye and look_at are the same point")]
-    EyeAtLookAt,
-    #[error(
-        "camera.up: {up:?} is zero or parallel to the view direction (eye → look_at), \
-         which leaves the image's roll undefined"
-    )]
-    UpAlongView { up: [f64; 3] },
-    #[error("camera.projection.fov_deg: expected 0 < fov < 179, found {fov_deg}")]
-    FieldOfView { fov_deg: f64 },
-    #[error("camera.projection.width: expected a finite number > 0, found {width}")]
-    OrthographicWidth { width: f64 },
-    #[error("iso: not finite ({iso})")]
-    Iso { iso: f64 },
-    #[error("step: expected a finite number ≥ {MIN_STEP} (cell widths), found {step:?}")]
-    Step { step: f64 },
-    #[error("spp: expected 1..={MAX_SPP}, found {spp}")]
-    Spp { spp: u32 },
-    /// `transfer.sigma`, `transfer.peak` or `transfer.k`.
-    #[error("{name}: expected a finite number > 0, found {value}")]
-    Transfer { name: &'static str, value: f64 },
-    #[error("colormap.{0}")]
-    ColorMap(ColorMapError),
-    #[error("lights[{index}].{error}")]
-    Light { index: usize, error: ShadingError },
-    #[error("material.{0}")]
-    Material(ShadingError),
-    #[error("meshes: expected at most {MAX_MESHES} entries, found {count}")]
-    TooManyMeshes { count: usize },
-    #[error("meshes[{index}]: {error}")]
-    Mesh { index: usize, error: MeshError },
-    #[error("background: expected components in 0..=1, found {background:?}")]
-    Background { background: [f32; 3] },
-    /// `width` or `height`.
-    #[error("{name}: expected 1..={MAX_IMAGE_SIDE}, found {value}")]
-    ImageSide { name: &'static str, value: u32 },
 }
 
 /// The iso value and dvr band width a field starts with: 10 % of its positive maximum
@@ -333,158 +217,13 @@ impl ViewState {
             self.transfer.sigma = 0.08 * iso.abs();
         }
     }
-
-    /// Checks what the JSON types cannot.
-    pub fn validate(&self) -> Result<(), InvalidViewState> {
-        let c = &self.camera;
-        for (name, value) in [("eye", c.eye), ("look_at", c.look_at), ("up", c.up)] {
-            if value.iter().any(|x| !x.is_finite()) {
-                return Err(InvalidViewState::CameraNotFinite { name, value });
-            }
-        }
-        if c.eye == c.look_at {
-            return Err(InvalidViewState::EyeAtLookAt);
-        }
-        // An up vector along the view direction leaves the image's roll undefined; the
-        // camera would silently pick a world axis instead.
-        let forward = std::array::from_fn::<f64, 3, _>(|a| c.look_at[a] - c.eye[a]);
-        let cross = [
-            forward[1] * c.up[2] - forward[2] * c.up[1],
-            forward[2] * c.up[0] - forward[0] * c.up[2],
-            forward[0] * c.up[1] - forward[1] * c.up[0],
-        ];
-        let norm = |v: [f64; 3]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
-        let sine_ok = norm(cross) > 1e-9 * norm(forward) * norm(c.up);
-        if !sine_ok {
-            return Err(InvalidViewState::UpAlongView { up: c.up });
-        }
-        match c.projection {
-            Projection::Perspective { fov_deg } if !(fov_deg > 0.0 && fov_deg < 179.0) => {
-                return Err(InvalidViewState::FieldOfView { fov_deg })
-            }
-            Projection::Orthographic { width } if !(width > 0.0 && width.is_finite()) => {
-                return Err(InvalidViewState::OrthographicWidth { width })
-            }
-            _ => {}
-        }
-        if !self.iso.is_finite() {
-            return Err(InvalidViewState::Iso { iso: self.iso });
-        }
-        if !(self.step.is_finite() && self.step >= MIN_STEP) {
-            return Err(InvalidViewState::Step { step: self.step });
-        }
-        if !(1..=MAX_SPP).contains(&self.spp) {
-            return Err(InvalidViewState::Spp { spp: self.spp });
-        }
-        for (name, value) in [
-            ("transfer.sigma", self.transfer.sigma),
-            ("transfer.peak", self.transfer.peak),
-            ("transfer.k", self.transfer.k),
-        ] {
-            if !(value.is_finite() && value > 0.0) {
-                return Err(InvalidViewState::Transfer { name, value });
-            }
-        }
-        self.colormap
-            .validate()
-            .map_err(InvalidViewState::ColorMap)?;
-        for (index, l) in self.lights.iter().enumerate() {
-            l.validate()
-                .map_err(|error| InvalidViewState::Light { index, error })?;
-        }
-        self.material
-            .validate()
-            .map_err(InvalidViewState::Material)?;
-        if self.meshes.len() > MAX_MESHES {
-            return Err(InvalidViewState::TooManyMeshes {
-                count: self.meshes.len(),
-            });
-        }
-        for (index, m) in self.meshes.iter().enumerate() {
-            m.validate()
-                .map_err(|error| InvalidViewState::Mesh { index, error })?;
-        }
-        if self.background.iter().any(|c| !(0.0..=1.0).contains(c)) {
-            return Err(InvalidViewState::Background {
-                background: self.background,
-            });
-        }
-        for (name, value) in [("width", self.width), ("height", self.height)] {
-            if !(1..=MAX_IMAGE_SIDE).contains(&value) {
-                return Err(InvalidViewState::ImageSide { name, value });
-            }
-        }
-        Ok(())
-    }
-
-    /// Parses and validates JSON text; `path` only names the source in errors.
-    pub(crate) fn from_json(path: &Path, text: &str) -> Result<ViewState, ViewStateError> {
-        let state: ViewState =
-            serde_json::from_str(text).map_err(|error| ViewStateError::Parse {
-                path: path.to_path_buf(),
-                error,
-            })?;
-        state.validate().map_err(|error| ViewStateError::Invalid {
-            path: path.to_path_buf(),
-            error,
-        })?;
-        Ok(state)
-    }
-
-    /// Reads a state file (at most 16 MiB, a regular file checked by its size before
-    /// reading, a device or pipe read no further than that).
-    pub fn load(path: &Path) -> Result<ViewState, ViewStateError> {
-        const MAX_BYTES: u64 = 16 << 20;
-        let path_buf = || path.to_path_buf();
-        let too_large = |size| ViewStateError::TooLarge {
-            path: path_buf(),
-            limit: MAX_BYTES,
-            size,
-        };
-        let bytes = read_whole(path, Limits::both(MAX_BYTES)).map_err(|e| match e.kind {
-            InputErrorKind::Io(error) => ViewStateError::Io {
-                path: path_buf(),
-                error,
-            },
-            InputErrorKind::TooLarge { size, .. } => too_large(Some(size)),
-            InputErrorKind::StreamTooLarge { .. } => too_large(None),
-            kind => ViewStateError::Input {
-                path: path_buf(),
-                kind,
-            },
-        })?;
-        let text = String::from_utf8(bytes).map_err(|e| ViewStateError::NotUtf8 {
-            path: path_buf(),
-            error: e.utf8_error(),
-        })?;
-        ViewState::from_json(path, &text)
-    }
-
-    /// Pretty JSON text.
-    pub fn to_json(&self) -> String {
-        // Serialising plain data with string keys cannot fail.
-        serde_json::to_string_pretty(self).unwrap_or_default()
-    }
-
-    /// Writes the state with [`files::output::write_atomic`] (temporary file next to
-    /// `path`, renamed over it; a device or FIFO is written into).
-    pub fn save(&self, path: &Path) -> Result<(), ViewStateError> {
-        files::output::write_atomic(path, |f| {
-            f.write_all(self.to_json().as_bytes())?;
-            f.write_all(b"\n")
-        })
-        .map_err(|error| ViewStateError::Io {
-            path: path.to_path_buf(),
-            error,
-        })
-    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    fn fields() -> Vec<FieldRange> {
+    pub(super) fn fields() -> Vec<FieldRange> {
         vec![
             FieldRange {
                 name: "q".into(),
@@ -529,260 +268,6 @@ mod tests {
         ViewState::default_for([0.0; 3], [1.0; 3], &nan)
             .validate()
             .expect("nan range");
-    }
-
-    #[test]
-    fn field_overrides_start_the_new_field_from_its_range() {
-        let mut fields = fields();
-        fields.push(FieldRange {
-            name: "density".into(),
-            min: 0.0,
-            max: 2.0,
-        });
-        let base = ViewState::default_for([0.0; 3], [1.0; 3], &fields);
-        let over = |colour: Option<&str>, iso_field: Option<&str>, iso: Option<f64>| Overrides {
-            colour_field: colour.map(str::to_string),
-            iso_field: iso_field.map(str::to_string),
-            iso,
-            ..Overrides::default()
-        };
-
-        let mut s = base.clone();
-        over(Some("density"), None, None)
-            .apply_fields(&mut s, &fields)
-            .expect("known");
-        assert_eq!(s.colormap, ColorMap::default_for_range("density", 0.0, 2.0));
-        assert_eq!((s.iso_field.as_str(), s.iso), ("q", base.iso));
-
-        let mut s = base.clone();
-        over(None, Some("density"), None)
-            .apply_fields(&mut s, &fields)
-            .expect("known");
-        assert_eq!((s.iso_field.as_str(), s.iso), ("density", 0.2));
-        assert!((s.transfer.sigma - 0.016).abs() < 1e-12);
-        assert_eq!(s.colormap, base.colormap);
-
-        // An explicit --iso is kept (apply sets it first).
-        let mut s = base.clone();
-        let o = over(None, Some("density"), Some(1.5));
-        o.apply(&mut s, false).expect("apply");
-        o.apply_fields(&mut s, &fields).expect("known");
-        assert_eq!((s.iso_field.as_str(), s.iso), ("density", 1.5));
-
-        // Naming the current fields changes nothing, even a hand-made colour map.
-        let mut s = base.clone();
-        s.colormap = ColorMap::seed_report();
-        let kept = s.clone();
-        over(Some("speed"), Some("q"), None)
-            .apply_fields(&mut s, &fields)
-            .expect("known");
-        assert_eq!(s, kept);
-
-        let e = over(Some("vorticity"), None, None)
-            .apply_fields(&mut base.clone(), &fields)
-            .expect_err("unknown");
-        assert_eq!(e.flag, "--colour-field");
-        assert_eq!(e.known, ["q", "speed", "density"]);
-        assert_eq!(
-            e.to_string(),
-            "--colour-field: no field named \"vorticity\" (fields: q, speed, density)"
-        );
-        let e = over(None, Some("w"), None)
-            .apply_fields(&mut base.clone(), &fields)
-            .expect_err("unknown");
-        assert_eq!(e.flag, "--iso-field");
-    }
-
-    #[test]
-    fn json_round_trip_through_a_file() {
-        let dir = tempfile::tempdir().expect("tempdir");
-        let path = dir.path().join("view.json");
-        let mut s = ViewState::default_for([0.0; 3], [1.0; 3], &fields());
-        s.mode = Mode::Dvr;
-        s.strategy = Strategy::Bisect;
-        s.meshes.push(MeshInstance::at_origin("data/sphere.obj"));
-        s.shadows = true;
-        s.seed = 42;
-        s.camera.projection = Projection::Orthographic { width: 2.5 };
-        s.colormap = ColorMap::seed_report();
-        s.save(&path).expect("save");
-        let back = ViewState::load(&path).expect("load");
-        assert_eq!(s, back);
-        // Only the final file is left behind.
-        let names: Vec<_> = std::fs::read_dir(dir.path())
-            .expect("read_dir")
-            .map(|e| e.expect("entry").file_name())
-            .collect();
-        assert_eq!(names, vec![std::ffi::OsString::from("view.json")]);
-        let text = std::fs::read_to_string(&path).expect("read");
-        assert!(text.contains("\"mode\": \"dvr\""), "{text}");
-        assert!(text.contains("\"strategy\": \"bisect\""), "{text}");
-    }
-
-    #[test]
-    fn unknown_fields_are_rejected_with_their_name() {
-        let s = ViewState::default_for([0.0; 3], [1.0; 3], &fields());
-        let mut v: serde_json::Value = serde_json::from_str(&s.to_json()).expect("json");
-        v["isovalue"] = serde_json::json!(0.1);
-        let e = ViewState::from_json(Path::new("v.json"), &v.to_string()).expect_err("unknown");
-        let msg = e.to_string();
-        assert!(
-            msg.starts_with("v.json: ") && msg.contains("isovalue"),
-            "{msg}"
-        );
-        // The cause is in the message only once (an anyhow chain would repeat a source).
-        assert!(std::error::Error::source(&e).is_none());
-        // Nested: inside the camera and inside a light.
-        let mut v: serde_json::Value = serde_json::from_str(&s.to_json()).expect("json");
-        v["camera"]["fov"] = serde_json::json!(30);
-        let e = ViewState::from_json(Path::new("v.json"), &v.to_string()).expect_err("nested");
-        assert!(e.to_string().contains("fov"), "{e}");
-        let mut v: serde_json::Value = serde_json::from_str(&s.to_json()).expect("json");
-        v["lights"][0]["power"] = serde_json::json!(3);
-        let e = ViewState::from_json(Path::new("v.json"), &v.to_string()).expect_err("light");
-        assert!(e.to_string().contains("power"), "{e}");
-        // Bad enum strings.
-        let mut v: serde_json::Value = serde_json::from_str(&s.to_json()).expect("json");
-        v["strategy"] = serde_json::json!("fast");
-        let e = ViewState::from_json(Path::new("v.json"), &v.to_string()).expect_err("enum");
-        assert!(e.to_string().contains("fast"), "{e}");
-    }
-
-    #[test]
-    fn invalid_values_are_rejected_with_their_name() {
-        use InvalidViewState as I;
-        let s = ViewState::default_for([0.0; 3], [1.0; 3], &fields());
-        type Change = Box<dyn Fn(&mut ViewState)>;
-        type Check = fn(&InvalidViewState) -> bool;
-        let cases: Vec<(&str, Change, Check)> = vec![
-            ("width", Box::new(|s| s.width = 0), |e| {
-                matches!(
-                    e,
-                    I::ImageSide {
-                        name: "width",
-                        value: 0
-                    }
-                )
-            }),
-            ("height", Box::new(|s| s.height = 100_000), |e| {
-                matches!(e, I::ImageSide { name: "height", .. })
-            }),
-            ("step", Box::new(|s| s.step = -1.0), |e| {
-                matches!(e, I::Step { .. })
-            }),
-            ("step", Box::new(|s| s.step = 1e-30), |e| {
-                matches!(e, I::Step { .. })
-            }),
-            (
-                "camera.up",
-                Box::new(|s| {
-                    s.camera.up = std::array::from_fn(|a| s.camera.look_at[a] - s.camera.eye[a])
-                }),
-                |e| matches!(e, I::UpAlongView { .. }),
-            ),
-            ("camera.up", Box::new(|s| s.camera.up = [0.0; 3]), |e| {
-                matches!(
-                    e,
-                    I::UpAlongView {
-                        up: [0.0, 0.0, 0.0]
-                    }
-                )
-            }),
-            (
-                "colormap.points",
-                Box::new(|s| s.colormap.points.clear()),
-                |e| matches!(e, I::ColorMap(ColorMapError::NoPoints)),
-            ),
-            (
-                "meshes: expected at most 64",
-                Box::new(|s| s.meshes = vec![MeshInstance::at_origin("a.obj"); MAX_MESHES + 1]),
-                |e| matches!(e, I::TooManyMeshes { count } if *count == MAX_MESHES + 1),
-            ),
-            ("spp", Box::new(|s| s.spp = 0), |e| {
-                matches!(e, I::Spp { spp: 0 })
-            }),
-            (
-                "transfer.sigma",
-                Box::new(|s| s.transfer.sigma = 0.0),
-                |e| {
-                    matches!(
-                        e,
-                        I::Transfer {
-                            name: "transfer.sigma",
-                            ..
-                        }
-                    )
-                },
-            ),
-            ("colormap.band", Box::new(|s| s.colormap.band = -1.0), |e| {
-                matches!(e, I::ColorMap(ColorMapError::Band { .. }))
-            }),
-            (
-                "camera.projection.fov_deg",
-                Box::new(|s| s.camera.projection = Projection::Perspective { fov_deg: 200.0 }),
-                |e| matches!(e, I::FieldOfView { .. }),
-            ),
-            (
-                "meshes[0]",
-                Box::new(|s| {
-                    let mut m = MeshInstance::at_origin("a.obj");
-                    m.scale = -1.0;
-                    s.meshes.push(m);
-                }),
-                |e| matches!(e, I::Mesh { index: 0, .. }),
-            ),
-            (
-                "lights[0].intensity",
-                Box::new(|s| {
-                    if let Some(Light::Directional { intensity, .. }) = s.lights.first_mut() {
-                        *intensity = -1.0;
-                    }
-                }),
-                |e| {
-                    matches!(
-                        e,
-                        I::Light {
-                            index: 0,
-                            error: ShadingError::Intensity { .. }
-                        }
-                    )
-                },
-            ),
-        ];
-        for (name, change, check) in cases {
-            let mut bad = s.clone();
-            change(&mut bad);
-            let e = ViewState::from_json(Path::new("v.json"), &bad.to_json()).expect_err(name);
-            let ViewStateError::Invalid { error, .. } = &e else {
-                panic!("{name}: not an invalid value: {e}");
-            };
-            assert!(check(error), "{name}: {error:?}");
-            // The message names the field by its JSON path.
-            assert!(e.to_string().contains(name), "{name}: {e}");
-        }
-        assert_eq!(
-            I::ColorMap(ColorMapError::Unsorted {
-                index: 2,
-                value: 0.5,
-                previous: 1.0
-            })
-            .to_string(),
-            "colormap.points[2].value 0.5 is below points[1].value 1: points must be sorted"
-        );
-        let e = ViewState::load(Path::new("/nonexistent/v.json")).expect_err("missing");
-        assert!(e.to_string().contains("/nonexistent/v.json"), "{e}");
-    }
-
-    #[test]
-    fn defaulted_fields_may_be_omitted() {
-        let s = ViewState::default_for([0.0; 3], [1.0; 3], &fields());
-        let mut v: serde_json::Value = serde_json::from_str(&s.to_json()).expect("json");
-        let obj = v.as_object_mut().expect("object");
-        for k in ["spp", "seed", "material", "meshes", "shadows", "background"] {
-            obj.remove(k);
-        }
-        let back = ViewState::from_json(Path::new("v.json"), &v.to_string()).expect("parse");
-        assert_eq!(back, s);
     }
 
     #[test]

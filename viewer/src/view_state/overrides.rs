@@ -1,9 +1,10 @@
 //! Command-line flags that change a view state (`qbricks-view render` and the window),
-//! and how they are applied.
+//! and how they are applied: plain settings are set, and the changes that follow a rule
+//! (the iso value, the iso and colour fields) go through [`ViewState::apply`], as the
+//! window's panel does.
 
-use super::{default_iso, FieldRange, Mode, Strategy, ViewState};
+use super::{FieldRange, Mode, Strategy, ViewCommand, ViewState};
 use crate::camera::Projection;
-use crate::colormap::ColorMap;
 use crate::fields::UnknownField;
 use crate::mesh::{MeshInstance, MeshSpecError};
 
@@ -105,12 +106,14 @@ impl Overrides {
         if let Some(v) = self.mode {
             state.mode = v;
         }
-        if let Some(v) = self.iso {
-            if from_file {
-                state.iso = v;
-            } else {
-                state.set_iso(v);
-            }
+        if let Some(value) = self.iso {
+            // A state file's band is the user's; a new view's follows the iso value.
+            let iso = ViewCommand::Iso {
+                value,
+                band_follows: !from_file,
+            };
+            // Setting the iso value names no field: it cannot fail.
+            let _ = state.apply(&iso, &[]);
         }
         if let Some(v) = self.strategy {
             state.strategy = v;
@@ -186,37 +189,99 @@ impl Overrides {
 impl Overrides {
     /// Applies `--iso-field` and `--colour-field` against the fields the data has
     /// (`fields`: their ranges, a sequence's ranges for a sequence), after
-    /// [`Overrides::apply`]. A field that changes gets a fresh start from its range: the
-    /// iso value (unless `--iso` was given) and band as [`default_iso`], the colour map's
-    /// points as [`ColorMap::default_for_range`], since values meant for another field
-    /// would show nothing useful. An unknown name is an error listing the fields.
+    /// [`Overrides::apply`], as [`ViewCommand::IsoField`] and [`ViewCommand::ColourField`]:
+    /// a field that changes gets a fresh start from its range (the iso value unless
+    /// `--iso` was given). An unknown name is an error naming the flag and listing the
+    /// fields.
     pub fn apply_fields(
         &self,
         state: &mut ViewState,
         fields: &[FieldRange],
     ) -> Result<(), UnknownField> {
-        let find = |flag: &'static str, name: &str| {
-            crate::fields::find(fields, name)
-                .map(|(_, f)| f)
-                .map_err(|e| e.named_by(flag))
-        };
         if let Some(name) = &self.iso_field {
-            let f = find("--iso-field", name)?;
-            if *name != state.iso_field {
-                state.iso_field = name.clone();
-                let (iso, sigma) = default_iso(f);
-                if self.iso.is_none() {
-                    state.iso = iso;
-                    state.transfer.sigma = sigma;
-                }
-            }
+            let command = ViewCommand::IsoField {
+                name: name.clone(),
+                keep_iso: self.iso.is_some(),
+            };
+            state
+                .apply(&command, fields)
+                .map_err(|e| e.named_by("--iso-field"))?;
         }
         if let Some(name) = &self.colour_field {
-            let f = find("--colour-field", name)?;
-            if *name != state.colormap.field {
-                state.colormap = ColorMap::default_for_range(name, f.min, f.max);
-            }
+            let command = ViewCommand::ColourField { name: name.clone() };
+            state
+                .apply(&command, fields)
+                .map_err(|e| e.named_by("--colour-field"))?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::colormap::ColorMap;
+    use crate::view_state::tests::fields;
+
+    #[test]
+    fn field_overrides_start_the_new_field_from_its_range() {
+        let mut fields = fields();
+        fields.push(FieldRange {
+            name: "density".into(),
+            min: 0.0,
+            max: 2.0,
+        });
+        let base = ViewState::default_for([0.0; 3], [1.0; 3], &fields);
+        let over = |colour: Option<&str>, iso_field: Option<&str>, iso: Option<f64>| Overrides {
+            colour_field: colour.map(str::to_string),
+            iso_field: iso_field.map(str::to_string),
+            iso,
+            ..Overrides::default()
+        };
+
+        let mut s = base.clone();
+        over(Some("density"), None, None)
+            .apply_fields(&mut s, &fields)
+            .expect("known");
+        assert_eq!(s.colormap, ColorMap::default_for_range("density", 0.0, 2.0));
+        assert_eq!((s.iso_field.as_str(), s.iso), ("q", base.iso));
+
+        let mut s = base.clone();
+        over(None, Some("density"), None)
+            .apply_fields(&mut s, &fields)
+            .expect("known");
+        assert_eq!((s.iso_field.as_str(), s.iso), ("density", 0.2));
+        assert!((s.transfer.sigma - 0.016).abs() < 1e-12);
+        assert_eq!(s.colormap, base.colormap);
+
+        // An explicit --iso is kept (apply sets it first).
+        let mut s = base.clone();
+        let o = over(None, Some("density"), Some(1.5));
+        o.apply(&mut s, false).expect("apply");
+        o.apply_fields(&mut s, &fields).expect("known");
+        assert_eq!((s.iso_field.as_str(), s.iso), ("density", 1.5));
+
+        // Naming the current fields changes nothing, even a hand-made colour map.
+        let mut s = base.clone();
+        s.colormap = ColorMap::seed_report();
+        let kept = s.clone();
+        over(Some("speed"), Some("q"), None)
+            .apply_fields(&mut s, &fields)
+            .expect("known");
+        assert_eq!(s, kept);
+
+        let e = over(Some("vorticity"), None, None)
+            .apply_fields(&mut base.clone(), &fields)
+            .expect_err("unknown");
+        assert_eq!(e.flag, "--colour-field");
+        assert_eq!(e.known, ["q", "speed", "density"]);
+        assert_eq!(
+            e.to_string(),
+            "--colour-field: no field named \"vorticity\" (fields: q, speed, density)"
+        );
+        let e = over(None, Some("w"), None)
+            .apply_fields(&mut base.clone(), &fields)
+            .expect_err("unknown");
+        assert_eq!(e.flag, "--iso-field");
     }
 }

@@ -1,0 +1,272 @@
+//! What a view state may hold beyond what its JSON types allow, checked once
+//! ([`ViewState::validate`]) wherever a state comes in: a file, the window, the flags.
+
+use super::{ViewState, MAX_IMAGE_SIDE, MAX_MESHES, MAX_SPP, MIN_STEP};
+use crate::camera::Projection;
+use crate::colormap::ColorMapError;
+use crate::mesh::MeshError;
+use crate::shading::ShadingError;
+
+/// What [`ViewState::validate`] refuses: a value the JSON types allow but the renderer
+/// cannot use. The message names the field by its JSON path.
+#[derive(Debug, thiserror::Error)]
+pub enum InvalidViewState {
+    /// `eye`, `look_at` or `up` of the camera.
+    #[error("camera.{name}: not finite ({value:?})")]
+    CameraNotFinite { name: &'static str, value: [f64; 3] },
+    #[error("camera: eye and look_at are the same point")]
+    EyeAtLookAt,
+    #[error(
+        "camera.up: {up:?} is zero or parallel to the view direction (eye → look_at), \
+         which leaves the image's roll undefined"
+    )]
+    UpAlongView { up: [f64; 3] },
+    #[error("camera.projection.fov_deg: expected 0 < fov < 179, found {fov_deg}")]
+    FieldOfView { fov_deg: f64 },
+    #[error("camera.projection.width: expected a finite number > 0, found {width}")]
+    OrthographicWidth { width: f64 },
+    #[error("iso: not finite ({iso})")]
+    Iso { iso: f64 },
+    #[error("step: expected a finite number ≥ {MIN_STEP} (cell widths), found {step:?}")]
+    Step { step: f64 },
+    #[error("spp: expected 1..={MAX_SPP}, found {spp}")]
+    Spp { spp: u32 },
+    /// `transfer.sigma`, `transfer.peak` or `transfer.k`.
+    #[error("{name}: expected a finite number > 0, found {value}")]
+    Transfer { name: &'static str, value: f64 },
+    #[error("colormap.{0}")]
+    ColorMap(ColorMapError),
+    #[error("lights[{index}].{error}")]
+    Light { index: usize, error: ShadingError },
+    #[error("material.{0}")]
+    Material(ShadingError),
+    #[error("meshes: expected at most {MAX_MESHES} entries, found {count}")]
+    TooManyMeshes { count: usize },
+    #[error("meshes[{index}]: {error}")]
+    Mesh { index: usize, error: MeshError },
+    #[error("background: expected components in 0..=1, found {background:?}")]
+    Background { background: [f32; 3] },
+    /// `width` or `height`.
+    #[error("{name}: expected 1..={MAX_IMAGE_SIDE}, found {value}")]
+    ImageSide { name: &'static str, value: u32 },
+}
+
+impl ViewState {
+    /// Checks what the JSON types cannot.
+    pub fn validate(&self) -> Result<(), InvalidViewState> {
+        let c = &self.camera;
+        for (name, value) in [("eye", c.eye), ("look_at", c.look_at), ("up", c.up)] {
+            if value.iter().any(|x| !x.is_finite()) {
+                return Err(InvalidViewState::CameraNotFinite { name, value });
+            }
+        }
+        if c.eye == c.look_at {
+            return Err(InvalidViewState::EyeAtLookAt);
+        }
+        // An up vector along the view direction leaves the image's roll undefined; the
+        // camera would silently pick a world axis instead.
+        let forward = std::array::from_fn::<f64, 3, _>(|a| c.look_at[a] - c.eye[a]);
+        let cross = [
+            forward[1] * c.up[2] - forward[2] * c.up[1],
+            forward[2] * c.up[0] - forward[0] * c.up[2],
+            forward[0] * c.up[1] - forward[1] * c.up[0],
+        ];
+        let norm = |v: [f64; 3]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let sine_ok = norm(cross) > 1e-9 * norm(forward) * norm(c.up);
+        if !sine_ok {
+            return Err(InvalidViewState::UpAlongView { up: c.up });
+        }
+        match c.projection {
+            Projection::Perspective { fov_deg } if !(fov_deg > 0.0 && fov_deg < 179.0) => {
+                return Err(InvalidViewState::FieldOfView { fov_deg })
+            }
+            Projection::Orthographic { width } if !(width > 0.0 && width.is_finite()) => {
+                return Err(InvalidViewState::OrthographicWidth { width })
+            }
+            _ => {}
+        }
+        if !self.iso.is_finite() {
+            return Err(InvalidViewState::Iso { iso: self.iso });
+        }
+        if !(self.step.is_finite() && self.step >= MIN_STEP) {
+            return Err(InvalidViewState::Step { step: self.step });
+        }
+        if !(1..=MAX_SPP).contains(&self.spp) {
+            return Err(InvalidViewState::Spp { spp: self.spp });
+        }
+        for (name, value) in [
+            ("transfer.sigma", self.transfer.sigma),
+            ("transfer.peak", self.transfer.peak),
+            ("transfer.k", self.transfer.k),
+        ] {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(InvalidViewState::Transfer { name, value });
+            }
+        }
+        self.colormap
+            .validate()
+            .map_err(InvalidViewState::ColorMap)?;
+        for (index, l) in self.lights.iter().enumerate() {
+            l.validate()
+                .map_err(|error| InvalidViewState::Light { index, error })?;
+        }
+        self.material
+            .validate()
+            .map_err(InvalidViewState::Material)?;
+        if self.meshes.len() > MAX_MESHES {
+            return Err(InvalidViewState::TooManyMeshes {
+                count: self.meshes.len(),
+            });
+        }
+        for (index, m) in self.meshes.iter().enumerate() {
+            m.validate()
+                .map_err(|error| InvalidViewState::Mesh { index, error })?;
+        }
+        if self.background.iter().any(|c| !(0.0..=1.0).contains(c)) {
+            return Err(InvalidViewState::Background {
+                background: self.background,
+            });
+        }
+        for (name, value) in [("width", self.width), ("height", self.height)] {
+            if !(1..=MAX_IMAGE_SIDE).contains(&value) {
+                return Err(InvalidViewState::ImageSide { name, value });
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::MeshInstance;
+    use crate::shading::Light;
+    use crate::view_state::tests::fields;
+    use crate::view_state::ViewStateError;
+    use std::path::Path;
+
+    #[test]
+    fn invalid_values_are_rejected_with_their_name() {
+        use InvalidViewState as I;
+        let s = ViewState::default_for([0.0; 3], [1.0; 3], &fields());
+        type Change = Box<dyn Fn(&mut ViewState)>;
+        type Check = fn(&InvalidViewState) -> bool;
+        let cases: Vec<(&str, Change, Check)> = vec![
+            ("width", Box::new(|s| s.width = 0), |e| {
+                matches!(
+                    e,
+                    I::ImageSide {
+                        name: "width",
+                        value: 0
+                    }
+                )
+            }),
+            ("height", Box::new(|s| s.height = 100_000), |e| {
+                matches!(e, I::ImageSide { name: "height", .. })
+            }),
+            ("step", Box::new(|s| s.step = -1.0), |e| {
+                matches!(e, I::Step { .. })
+            }),
+            ("step", Box::new(|s| s.step = 1e-30), |e| {
+                matches!(e, I::Step { .. })
+            }),
+            (
+                "camera.up",
+                Box::new(|s| {
+                    s.camera.up = std::array::from_fn(|a| s.camera.look_at[a] - s.camera.eye[a])
+                }),
+                |e| matches!(e, I::UpAlongView { .. }),
+            ),
+            ("camera.up", Box::new(|s| s.camera.up = [0.0; 3]), |e| {
+                matches!(
+                    e,
+                    I::UpAlongView {
+                        up: [0.0, 0.0, 0.0]
+                    }
+                )
+            }),
+            (
+                "colormap.points",
+                Box::new(|s| s.colormap.points.clear()),
+                |e| matches!(e, I::ColorMap(ColorMapError::NoPoints)),
+            ),
+            (
+                "meshes: expected at most 64",
+                Box::new(|s| s.meshes = vec![MeshInstance::at_origin("a.obj"); MAX_MESHES + 1]),
+                |e| matches!(e, I::TooManyMeshes { count } if *count == MAX_MESHES + 1),
+            ),
+            ("spp", Box::new(|s| s.spp = 0), |e| {
+                matches!(e, I::Spp { spp: 0 })
+            }),
+            (
+                "transfer.sigma",
+                Box::new(|s| s.transfer.sigma = 0.0),
+                |e| {
+                    matches!(
+                        e,
+                        I::Transfer {
+                            name: "transfer.sigma",
+                            ..
+                        }
+                    )
+                },
+            ),
+            ("colormap.band", Box::new(|s| s.colormap.band = -1.0), |e| {
+                matches!(e, I::ColorMap(ColorMapError::Band { .. }))
+            }),
+            (
+                "camera.projection.fov_deg",
+                Box::new(|s| s.camera.projection = Projection::Perspective { fov_deg: 200.0 }),
+                |e| matches!(e, I::FieldOfView { .. }),
+            ),
+            (
+                "meshes[0]",
+                Box::new(|s| {
+                    let mut m = MeshInstance::at_origin("a.obj");
+                    m.scale = -1.0;
+                    s.meshes.push(m);
+                }),
+                |e| matches!(e, I::Mesh { index: 0, .. }),
+            ),
+            (
+                "lights[0].intensity",
+                Box::new(|s| {
+                    if let Some(Light::Directional { intensity, .. }) = s.lights.first_mut() {
+                        *intensity = -1.0;
+                    }
+                }),
+                |e| {
+                    matches!(
+                        e,
+                        I::Light {
+                            index: 0,
+                            error: ShadingError::Intensity { .. }
+                        }
+                    )
+                },
+            ),
+        ];
+        for (name, change, check) in cases {
+            let mut bad = s.clone();
+            change(&mut bad);
+            let e = ViewState::from_json(Path::new("v.json"), &bad.to_json()).expect_err(name);
+            let ViewStateError::Invalid { error, .. } = &e else {
+                panic!("{name}: not an invalid value: {e}");
+            };
+            assert!(check(error), "{name}: {error:?}");
+            // The message names the field by its JSON path.
+            assert!(e.to_string().contains(name), "{name}: {e}");
+        }
+        assert_eq!(
+            I::ColorMap(ColorMapError::Unsorted {
+                index: 2,
+                value: 0.5,
+                previous: 1.0
+            })
+            .to_string(),
+            "colormap.points[2].value 0.5 is below points[1].value 1: points must be sorted"
+        );
+        let e = ViewState::load(Path::new("/nonexistent/v.json")).expect_err("missing");
+        assert!(e.to_string().contains("/nonexistent/v.json"), "{e}");
+    }
+}
