@@ -6,10 +6,12 @@
 //! borrowing volume next to the view it borrows from.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::Instant;
 
 use format::{BrickFileView, FormatError, OpenOptions};
 
+use crate::accel::AccelCache;
 use crate::volume::{Volume, VolumeError};
 
 self_cell::self_cell!(
@@ -71,5 +73,31 @@ impl Dataset {
 
     pub fn view(&self) -> &BrickFileView {
         self.cell.borrow_owner()
+    }
+}
+
+/// The accelerations of the recent views of one dataset ([`AccelCache`]), for a thread
+/// that is handed views of whatever dataset is open (the window's render thread, its
+/// picks): a view of another dataset starts the cache over. Holding the dataset keeps
+/// the identity check sound (a dropped dataset's address could be reused).
+#[derive(Default)]
+pub(crate) struct DatasetAccels {
+    dataset: Option<Arc<Dataset>>,
+    cache: AccelCache,
+}
+
+impl DatasetAccels {
+    /// The cache of `dataset`'s volume: the kept one if it is the same dataset, else a
+    /// new one.
+    pub(crate) fn of(&mut self, dataset: &Arc<Dataset>) -> &mut AccelCache {
+        if !self
+            .dataset
+            .as_ref()
+            .is_some_and(|d| Arc::ptr_eq(d, dataset))
+        {
+            self.cache.clear();
+            self.dataset = Some(Arc::clone(dataset));
+        }
+        &mut self.cache
     }
 }

@@ -14,7 +14,7 @@
 //! because both sum the same samples in the same order into a [`Film`].
 //!
 //! The render thread keeps the accelerations of the last few views of the open file
-//! ([`AccelCache`]), so that a view that only moves the camera (every frame of an orbit),
+//! ([`crate::accel::AccelCache`]), so that a view that only moves the camera (every frame of an orbit),
 //! its preview and its full-resolution frame build no tree; the cache is the thread's own
 //! and starts over when a job brings another file.
 //!
@@ -25,8 +25,7 @@ use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use crate::accel::AccelCache;
-use crate::dataset::Dataset;
+use crate::dataset::{Dataset, DatasetAccels};
 use crate::fields::UnknownField;
 use crate::film::Film;
 use crate::mesh::Meshes;
@@ -306,31 +305,8 @@ impl Drop for Progressive {
     }
 }
 
-/// The accelerations the render thread keeps, and the file they belong to.
-#[derive(Default)]
-struct Accels {
-    dataset: Option<Arc<Dataset>>,
-    cache: AccelCache,
-}
-
-impl Accels {
-    /// The cache for `dataset`'s volume: the kept one if it is the same file, else a
-    /// new one.
-    fn of(&mut self, dataset: &Arc<Dataset>) -> &mut AccelCache {
-        if !self
-            .dataset
-            .as_ref()
-            .is_some_and(|d| Arc::ptr_eq(d, dataset))
-        {
-            self.cache.clear();
-            self.dataset = Some(Arc::clone(dataset));
-        }
-        &mut self.cache
-    }
-}
-
 fn worker_loop(shared: &Shared, renderer: &Renderer) {
-    let mut accels = Accels::default();
+    let mut accels = DatasetAccels::default();
     loop {
         let pending = {
             let mut g = shared.lock();
@@ -372,7 +348,7 @@ fn upscale(src: &[[f32; 3]], pw: u32, ph: u32, w: u32, h: u32) -> Vec<[f32; 3]> 
 fn run_job(
     shared: &Shared,
     renderer: &Renderer,
-    accels: &mut Accels,
+    accels: &mut DatasetAccels,
     p: Pending,
 ) -> Result<(), UnknownField> {
     let Pending {

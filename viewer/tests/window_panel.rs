@@ -218,3 +218,69 @@ fn a_view_saved_in_the_window_renders_headless_to_the_same_pixels() {
     let distinct: std::collections::HashSet<_> = a.pixels().map(|p| p.0).collect();
     assert!(distinct.len() > 20, "{} colours", distinct.len());
 }
+
+/// Choosing another iso field in the window starts it where `render --iso-field` starts
+/// it, whatever iso value the view held (the window used to keep Q's value, and speed at
+/// Q's 0.25 showed nothing): the same iso value and band width. Choosing a colour field
+/// gives the map `--colour-field` gives.
+#[test]
+fn choosing_fields_in_the_window_gives_the_state_the_command_line_gives() {
+    use eframe::egui::accesskit::Role;
+    let dir = tempfile::tempdir().expect("tempdir");
+    let saved = dir.path().join("cli.json");
+    let out = Command::new(env!("CARGO_BIN_EXE_qbricks-view"))
+        .arg("render")
+        .arg(sample())
+        .args(["--iso-field", "speed", "--colour-field", "q"])
+        .args(["--width", "8", "--height", "6", "-o"])
+        .arg(dir.path().join("cli.png"))
+        .arg("--save-state")
+        .arg(&saved)
+        .output()
+        .expect("run qbricks-view");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let cli = ViewState::load(&saved).expect("the saved state");
+
+    let app = ViewerApp::for_tests(&sample(), Some(1)).expect("app");
+    let mut h = harness(app);
+    h.state_mut().state.set_iso(0.25);
+    h.run_steps(1);
+    h.get_by_role_and_label(Role::ComboBox, "iso field").click();
+    h.run_steps(2);
+    h.get_by_role_and_label(Role::Button, "speed").click();
+    h.run_steps(2);
+    let st = &h.state().state;
+    assert_eq!(st.iso_field, "speed");
+    assert_eq!(
+        (st.iso, st.transfer.sigma),
+        (cli.iso, cli.transfer.sigma),
+        "the window's iso value and band for speed, then the command line's"
+    );
+    h.get_by_role_and_label(Role::ComboBox, "colour field")
+        .click();
+    h.run_steps(2);
+    h.get_by_role_and_label(Role::Button, "q").click();
+    h.run_steps(2);
+    let (map, want) = (&h.state().state.colormap, &cli.colormap);
+    assert_eq!(
+        (map.field.as_str(), map.band),
+        (want.field.as_str(), want.band)
+    );
+    assert_eq!(map.points.len(), want.points.len());
+    for (p, q) in map.points.iter().zip(&want.points) {
+        assert_eq!(p.value, q.value);
+        // Drawing the panel's colour buttons rounds the colours through egui's colour
+        // type (by a few 1e-8); the map is otherwise the command line's.
+        let close = p
+            .colour
+            .iter()
+            .zip(q.colour)
+            .all(|(a, b)| (a - b).abs() < 1e-6);
+        assert!(close, "{:?} vs {:?}", p.colour, q.colour);
+    }
+    assert!(h.state().error.is_none(), "{:?}", h.state().error);
+}

@@ -7,35 +7,36 @@
 //! rendering it with `qbricks-view render --state` gives the same pixels.
 //!
 //! Only this folder knows about egui; the render core does not.
+//!
+//! One file per concern: `viewer` is the window and the one place that handles what the
+//! panel asks for (`command`); `document` the open data, `view` the window's own view
+//! settings, `frames` the renderer and its images, `dialogs` the file dialog, `picking`
+//! the values under the cursor; `panel`, `canvas`, `status` and `widgets` draw; the rest
+//! (`navigation`, `player`, `script`, `options`) is state and rules without egui where it
+//! can be.
 
+mod canvas;
+mod command;
+mod dialogs;
+mod document;
+mod frames;
 mod navigation;
+mod options;
 mod panel;
+mod picking;
 mod player;
 mod script;
+mod status;
+mod view;
 mod viewer;
 mod widgets;
 
-use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 
 pub use navigation::{orbit, pan};
+pub use options::WindowOptions;
 pub use script::{OrbitReport, Script};
 pub use viewer::ViewerApp;
-
-/// How the window starts.
-#[derive(Debug, Clone, Default)]
-pub struct WindowOptions {
-    /// `.qbk` file to open.
-    pub file: Option<PathBuf>,
-    /// View state to start from.
-    pub state: Option<PathBuf>,
-    /// Render threads (`None`: one per core).
-    pub threads: Option<usize>,
-    /// Inner window size in points.
-    pub size: [f32; 2],
-    /// What to do without a user, then exit.
-    pub script: Option<Script>,
-}
 
 /// Opens the window and runs until it is closed (or the script is done). Returns the
 /// script's report, if one ran.

@@ -1,66 +1,82 @@
-//! The side panel. Every control edits a field of the window's `ViewState` (or, for
-//! the few window-only settings, a field of the app), so what the panel shows is what
-//! `render --state` renders.
+//! The side panel. Every control edits the window's `ViewState`, so what the panel shows
+//! is what `render --state` renders: plain settings in place, and the changes that follow
+//! a rule (a new iso or colour field, an iso value, framing the data, the lights, files
+//! and meshes) as [`AppCommand`]s, which the window handles in one place, with the rules
+//! the command line uses.
 
 use eframe::egui::{self, Color32, RichText};
 
+use super::command::AppCommand;
+use super::dialogs::DialogPurpose;
+use super::document::Doc;
 use super::navigation;
-use super::viewer::{DialogPurpose, ViewerApp};
+use super::player::Player;
+use super::view::ViewControls;
 use super::widgets;
 use crate::camera::Projection;
-use crate::colormap::ColorMap;
 use crate::sampling::Strategy;
 use crate::transfer::Mode;
-use crate::view_state::MAX_SPP;
+use crate::view_state::{ViewCommand, ViewState, MAX_SPP};
 
-pub(crate) fn show(app: &mut ViewerApp, ui: &mut egui::Ui) {
-    ui.add_space(4.0);
-    files(app, ui);
-    if let Some(msg) = &app.error {
-        ui.label(RichText::new(msg).color(Color32::from_rgb(255, 110, 100)));
-    }
-    if app.sequence.is_some() {
-        ui.separator();
-        sequence(app, ui);
-    }
-    if app.doc.is_none() {
-        return;
-    }
-    ui.separator();
-    summary(app, ui);
-    ui.separator();
-    volume(app, ui);
-    ui.separator();
-    colours(app, ui);
-    ui.separator();
-    scene(app, ui);
-    ui.separator();
-    camera(app, ui);
-    ui.add_space(8.0);
+/// What the panel shows and edits: the view state and the window's own settings.
+pub(crate) struct Panel<'a> {
+    /// The message at the top (bad file, failed save, …).
+    pub error: Option<&'a str>,
+    pub doc: Option<&'a Doc>,
+    pub player: Option<&'a mut Player>,
+    pub state: &'a mut ViewState,
+    pub controls: &'a mut ViewControls,
+    /// Pick values under the cursor.
+    pub picking: &'a mut bool,
+    pub resolution_scale: &'a mut f32,
 }
 
-fn files(app: &mut ViewerApp, ui: &mut egui::Ui) {
+/// Draws the panel; what it asks the window to do, in order.
+pub(crate) fn show(p: Panel<'_>, ui: &mut egui::Ui) -> Vec<AppCommand> {
+    let mut out = Vec::new();
+    ui.add_space(4.0);
+    files(&mut out, ui);
+    if let Some(msg) = p.error {
+        ui.label(RichText::new(msg).color(Color32::from_rgb(255, 110, 100)));
+    }
+    if let Some(player) = p.player {
+        ui.separator();
+        sequence(player, &mut out, ui);
+    }
+    let Some(doc) = p.doc else {
+        return out;
+    };
+    ui.separator();
+    summary(doc, ui);
+    ui.separator();
+    volume(doc, p.state, &mut out, ui);
+    ui.separator();
+    colours(doc, p.state, &mut out, ui);
+    ui.separator();
+    scene(p.state, p.controls, &mut out, ui);
+    ui.separator();
+    camera(p.state, p.picking, p.resolution_scale, &mut out, ui);
+    ui.add_space(8.0);
+    out
+}
+
+fn files(out: &mut Vec<AppCommand>, ui: &mut egui::Ui) {
     ui.horizontal_wrapped(|ui| {
-        if ui.button("Open…").clicked() {
-            app.open_dialog(DialogPurpose::OpenFile);
-        }
-        if ui.button("Save image…").clicked() {
-            app.open_dialog(DialogPurpose::SavePng);
-        }
-        if ui.button("Save view…").clicked() {
-            app.open_dialog(DialogPurpose::SaveState);
-        }
-        if ui.button("Load view…").clicked() {
-            app.open_dialog(DialogPurpose::LoadState);
+        for (label, purpose) in [
+            ("Open…", DialogPurpose::OpenFile),
+            ("Save image…", DialogPurpose::SavePng),
+            ("Save view…", DialogPurpose::SaveState),
+            ("Load view…", DialogPurpose::LoadState),
+        ] {
+            if ui.button(label).clicked() {
+                out.push(AppCommand::Dialog(purpose));
+            }
         }
     });
 }
 
 /// The frame slider and play/pause of a sequence.
-fn sequence(app: &mut ViewerApp, ui: &mut egui::Ui) {
-    let Some(player) = &mut app.sequence else {
-        return;
-    };
+fn sequence(player: &mut Player, out: &mut Vec<AppCommand>, ui: &mut egui::Ui) {
     let n = player.frames.len();
     ui.label(RichText::new(&player.pattern).strong());
     let numbers: Vec<u64> = player.frames.iter().map(|f| f.0).collect();
@@ -101,14 +117,11 @@ fn sequence(app: &mut ViewerApp, ui: &mut egui::Ui) {
     });
     ui.label(format!("{} of {n} frames", player.index + 1));
     if changed {
-        app.show_frame();
+        out.push(AppCommand::ShowFrame);
     }
 }
 
-fn summary(app: &ViewerApp, ui: &mut egui::Ui) {
-    let Some(doc) = &app.doc else {
-        return;
-    };
+fn summary(doc: &Doc, ui: &mut egui::Ui) {
     let name = doc
         .path
         .file_name()
@@ -129,24 +142,19 @@ fn summary(app: &ViewerApp, ui: &mut egui::Ui) {
     }
 }
 
-fn volume(app: &mut ViewerApp, ui: &mut egui::Ui) {
-    let Some(doc) = &app.doc else {
-        return;
-    };
-    let names: Vec<String> = doc.fields.iter().map(|f| f.name.clone()).collect();
-    let st = &mut app.state;
+fn volume(doc: &Doc, st: &mut ViewState, out: &mut Vec<AppCommand>, ui: &mut egui::Ui) {
     ui.horizontal(|ui| {
         ui.label("Mode");
         ui.radio_value(&mut st.mode, Mode::Iso, "iso-surface");
         ui.radio_value(&mut st.mode, Mode::Dvr, "shell (dvr)");
     });
-    egui::ComboBox::from_label("iso field")
-        .selected_text(st.iso_field.clone())
-        .show_ui(ui, |ui| {
-            for n in &names {
-                ui.selectable_value(&mut st.iso_field, n.clone(), n);
-            }
-        });
+    // A new iso field starts from its own range (the window's rule is the command line's).
+    if let Some(name) = field_box(ui, "iso field", doc, &st.iso_field) {
+        out.push(AppCommand::View(ViewCommand::IsoField {
+            name,
+            keep_iso: false,
+        }));
+    }
     if let Some(f) = doc.field(&st.iso_field) {
         let mut iso = st.iso;
         let mut changed = widgets::iso_histogram(ui, &f.histogram, f.min, f.max, &mut iso);
@@ -155,7 +163,11 @@ fn volume(app: &mut ViewerApp, ui: &mut egui::Ui) {
             .add(egui::Slider::new(&mut iso, lo.min(hi)..=hi.max(lo)).text("iso value"))
             .changed();
         if changed {
-            st.set_iso(iso);
+            // The dvr band follows the iso value, as for a new view on the command line.
+            out.push(AppCommand::View(ViewCommand::Iso {
+                value: iso,
+                band_follows: true,
+            }));
         }
     }
     egui::ComboBox::from_label("strategy")
@@ -191,25 +203,25 @@ fn volume(app: &mut ViewerApp, ui: &mut egui::Ui) {
     }
 }
 
-fn colours(app: &mut ViewerApp, ui: &mut egui::Ui) {
-    let Some(doc) = &app.doc else {
-        return;
-    };
-    let st = &mut app.state;
-    ui.label(RichText::new("Colour map").strong());
-    let before = st.colormap.field.clone();
-    egui::ComboBox::from_label("colour field")
-        .selected_text(st.colormap.field.clone())
+/// A box choosing one of the file's fields, showing `current`; the field chosen in it
+/// this frame, if another.
+fn field_box(ui: &mut egui::Ui, label: &str, doc: &Doc, current: &str) -> Option<String> {
+    let mut chosen = current.to_string();
+    egui::ComboBox::from_label(label)
+        .selected_text(current)
         .show_ui(ui, |ui| {
             for f in &doc.fields {
-                ui.selectable_value(&mut st.colormap.field, f.name.clone(), &f.name);
+                ui.selectable_value(&mut chosen, f.name.clone(), &f.name);
             }
         });
-    if st.colormap.field != before {
-        // A new field gets a map over its own range.
-        if let Some(f) = doc.field(&st.colormap.field) {
-            st.colormap = ColorMap::default_for_range(&f.name, f.min, f.max);
-        }
+    (chosen != current).then_some(chosen)
+}
+
+fn colours(doc: &Doc, st: &mut ViewState, out: &mut Vec<AppCommand>, ui: &mut egui::Ui) {
+    ui.label(RichText::new("Colour map").strong());
+    // A new field gets a map over its own range.
+    if let Some(name) = field_box(ui, "colour field", doc, &st.colormap.field) {
+        out.push(AppCommand::View(ViewCommand::ColourField { name }));
     }
     if let Some(f) = doc.field(&st.colormap.field) {
         widgets::colormap_editor(ui, &mut st.colormap, &f.histogram, f.min, f.max);
@@ -257,31 +269,37 @@ fn colours(app: &mut ViewerApp, ui: &mut egui::Ui) {
     );
 }
 
-fn scene(app: &mut ViewerApp, ui: &mut egui::Ui) {
+fn scene(
+    st: &mut ViewState,
+    controls: &mut ViewControls,
+    out: &mut Vec<AppCommand>,
+    ui: &mut egui::Ui,
+) {
     ui.label(RichText::new("Light and scene").strong());
     let mut follow_changed = ui
-        .checkbox(&mut app.lights_follow, "lights follow the camera")
+        .checkbox(&mut controls.lights_follow, "lights follow the camera")
         .changed();
-    ui.add_enabled_ui(app.lights_follow, |ui| {
+    let dir = &mut controls.light_dir;
+    ui.add_enabled_ui(controls.lights_follow, |ui| {
         follow_changed |= ui
-            .add(egui::Slider::new(&mut app.light_dir[0], -180.0..=180.0).text("light azimuth °"))
+            .add(egui::Slider::new(&mut dir[0], -180.0..=180.0).text("light azimuth °"))
             .changed();
         follow_changed |= ui
-            .add(egui::Slider::new(&mut app.light_dir[1], -89.0..=89.0).text("light elevation °"))
+            .add(egui::Slider::new(&mut dir[1], -89.0..=89.0).text("light elevation °"))
             .changed();
     });
     if follow_changed {
-        app.relight();
+        out.push(AppCommand::Relight);
     }
-    ui.checkbox(&mut app.state.shadows, "shadows");
+    ui.checkbox(&mut st.shadows, "shadows");
     ui.horizontal(|ui| {
         ui.label("background");
-        ui.color_edit_button_rgb(&mut app.state.background);
+        ui.color_edit_button_rgb(&mut st.background);
     });
     ui.label("Meshes");
     let mut remove = None;
     let mut hide = None;
-    for (i, m) in app.state.meshes.iter().enumerate() {
+    for (i, m) in st.meshes.iter().enumerate() {
         ui.horizontal(|ui| {
             let mut on = true;
             if ui.checkbox(&mut on, m.path.display().to_string()).changed() {
@@ -293,49 +311,53 @@ fn scene(app: &mut ViewerApp, ui: &mut egui::Ui) {
         });
     }
     let mut show = None;
-    for (i, m) in app.hidden_meshes.iter().enumerate() {
+    for (i, m) in controls.hidden_meshes.iter().enumerate() {
         let mut on = false;
         if ui.checkbox(&mut on, m.path.display().to_string()).changed() {
             show = Some(i);
         }
     }
     if let Some(i) = remove {
-        app.state.meshes.remove(i);
+        out.push(AppCommand::RemoveMesh(i));
     } else if let Some(i) = hide {
-        let m = app.state.meshes.remove(i);
-        app.hidden_meshes.push(m);
+        out.push(AppCommand::HideMesh(i));
     } else if let Some(i) = show {
-        let m = app.hidden_meshes.remove(i);
-        app.state.meshes.push(m);
+        out.push(AppCommand::ShowMesh(i));
     }
     ui.horizontal(|ui| {
         ui.add(
-            egui::TextEdit::singleline(&mut app.mesh_spec)
+            egui::TextEdit::singleline(&mut controls.mesh_spec)
                 .hint_text("PATH[@x,y,z,scale]")
                 .desired_width(150.0),
         );
         if ui.button("Add").clicked() {
-            app.add_mesh_from_spec();
+            out.push(AppCommand::AddMesh);
         }
         if ui.button("Browse…").clicked() {
-            app.open_dialog(DialogPurpose::AddMesh);
+            out.push(AppCommand::Dialog(DialogPurpose::AddMesh));
         }
     });
 }
 
-fn camera(app: &mut ViewerApp, ui: &mut egui::Ui) {
+fn camera(
+    st: &mut ViewState,
+    picking: &mut bool,
+    resolution_scale: &mut f32,
+    out: &mut Vec<AppCommand>,
+    ui: &mut egui::Ui,
+) {
     ui.label(RichText::new("Camera and render").strong());
-    let aspect = f64::from(app.state.width) / f64::from(app.state.height.max(1));
-    let mut ortho = matches!(app.state.camera.projection, Projection::Orthographic { .. });
+    let aspect = f64::from(st.width) / f64::from(st.height.max(1));
+    let mut ortho = matches!(st.camera.projection, Projection::Orthographic { .. });
     ui.horizontal(|ui| {
         let before = ortho;
         ui.radio_value(&mut ortho, false, "perspective");
         ui.radio_value(&mut ortho, true, "orthographic");
         if ortho != before {
-            navigation::set_orthographic(&mut app.state.camera, ortho, aspect);
+            navigation::set_orthographic(&mut st.camera, ortho, aspect);
         }
     });
-    match &mut app.state.camera.projection {
+    match &mut st.camera.projection {
         Projection::Perspective { fov_deg } => {
             ui.add(egui::Slider::new(fov_deg, 5.0..=120.0).text("field of view °"));
         }
@@ -350,12 +372,11 @@ fn camera(app: &mut ViewerApp, ui: &mut egui::Ui) {
     }
     ui.horizontal(|ui| {
         if ui.button("Frame data (F)").clicked() {
-            app.frame_data();
-            app.relight();
+            out.push(AppCommand::FrameData);
         }
-        ui.checkbox(&mut app.pick_mode, "pick values under the cursor");
+        ui.checkbox(picking, "pick values under the cursor");
     });
-    ui.add(egui::Slider::new(&mut app.resolution_scale, 0.25..=2.0).text("resolution scale"));
+    ui.add(egui::Slider::new(resolution_scale, 0.25..=2.0).text("resolution scale"));
     ui.label(
         RichText::new(
             "drag: orbit · right/middle or shift-drag: pan · wheel: zoom · double-click: pivot",

@@ -1,0 +1,29 @@
+//! What the window's panel asks for: the changes that are more than setting one value,
+//! handled in one place ([`super::ViewerApp`]'s `handle`). Plain settings (a step, a
+//! colour, a checkbox) the panel edits in place.
+
+use super::dialogs::DialogPurpose;
+use crate::view_state::ViewCommand;
+
+/// A request of the panel (or a key) to the window.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) enum AppCommand {
+    /// A change to the view that follows a rule: an iso or colour field, an iso value.
+    /// The same rules as the command line's flags ([`crate::view_state::ViewState::apply`]).
+    View(ViewCommand),
+    /// Frame the whole data set (and put the lights back for the new camera).
+    FrameData,
+    /// Put the lights where the rig says for the current camera.
+    Relight,
+    /// Open the file dialog for this purpose.
+    Dialog(DialogPurpose),
+    /// Open the frame the sequence player points at.
+    ShowFrame,
+    /// Add the mesh typed into the panel (`PATH[@x,y,z,scale]`).
+    AddMesh,
+    /// Remove, switch off or switch on again the mesh at this index (of the view's
+    /// meshes, or of the switched-off ones for `ShowMesh`).
+    RemoveMesh(usize),
+    HideMesh(usize),
+    ShowMesh(usize),
+}

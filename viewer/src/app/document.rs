@@ -1,0 +1,107 @@
+//! The open data: a file (or the current frame of a sequence), what the panel shows about
+//! it, the field ranges the view's rules use, and the files a save must not overwrite.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use format::sequence::FieldRange;
+
+use super::player::Player;
+use crate::dataset::Dataset;
+use crate::mesh::MeshInstance;
+
+/// The bundled sample, opened when no file is given.
+pub(crate) const DEFAULT_FILE: &str = "data/wake_small.qbk";
+
+/// An open file and what the panel shows about it.
+pub(crate) struct Doc {
+    pub dataset: Arc<Dataset>,
+    pub path: PathBuf,
+    pub cells: u64,
+    pub bricks: usize,
+    pub regions: usize,
+    /// Per field: name, range and histogram (bins over `min..=max`).
+    pub fields: Vec<FieldSummary>,
+}
+
+pub(crate) struct FieldSummary {
+    pub name: String,
+    pub min: f32,
+    pub max: f32,
+    pub histogram: Vec<u64>,
+}
+
+impl Doc {
+    /// Opens, validates and summarises `path`; the error is one line naming the file.
+    pub(crate) fn open(path: &Path) -> Result<Doc, String> {
+        let dataset = Dataset::open(path).map_err(|e| e.to_string())?;
+        let file = dataset.view().file();
+        let cells = file.levels.iter().map(|l| l.cells.to_native()).sum();
+        let fields = file
+            .fields
+            .iter()
+            .map(|f| FieldSummary {
+                name: f.name.to_string(),
+                min: f.min.to_native(),
+                max: f.max.to_native(),
+                histogram: f.histogram.iter().map(|c| c.to_native()).collect(),
+            })
+            .collect();
+        Ok(Doc {
+            bricks: file.bricks.len(),
+            regions: file.regions.len(),
+            cells,
+            fields,
+            path: path.to_path_buf(),
+            dataset: Arc::new(dataset),
+        })
+    }
+
+    pub(crate) fn field(&self, name: &str) -> Option<&FieldSummary> {
+        self.fields.iter().find(|f| f.name == name)
+    }
+}
+
+/// What the window has open.
+#[derive(Default)]
+pub(crate) struct Document {
+    /// The file shown (a sequence's current frame), if one opened.
+    pub doc: Option<Doc>,
+    /// The fields and ranges the view's rules use ([`crate::view_state::ViewCommand`]):
+    /// the open file's, or a whole sequence's, as `render` uses them, so that choosing a
+    /// field in the window starts where `--iso-field` starts.
+    pub ranges: Vec<FieldRange>,
+    /// The view state file loaded last (an input: saves must not overwrite it).
+    pub state_file: Option<PathBuf>,
+}
+
+impl Document {
+    /// Refuses to save over a file the window reads: the open file (every frame of an open
+    /// `sequence`), the view state it loaded, the `meshes` (shown or hidden). The same
+    /// guard every command's outputs go through.
+    pub(crate) fn check_output<'m>(
+        &self,
+        sequence: Option<&Player>,
+        meshes: impl Iterator<Item = &'m MeshInstance>,
+        role: &str,
+        path: &Path,
+    ) -> Result<(), String> {
+        let mut guard = files::guard::Guard::new();
+        if let Some(doc) = &self.doc {
+            guard.input("open file", &doc.path);
+        }
+        if let Some(p) = sequence {
+            for (f, path) in &p.frames {
+                guard.input(format!("frame {f}"), path);
+            }
+        }
+        if let Some(s) = &self.state_file {
+            guard.input("view state", s);
+        }
+        for m in meshes {
+            guard.input("mesh", &m.path);
+        }
+        guard.output(role, path);
+        guard.check().map_err(|e| e.to_string())
+    }
+}
