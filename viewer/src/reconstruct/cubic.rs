@@ -1,90 +1,14 @@
-//! Basis-method reconstruction `B(P) = Σ H_C v_C / Σ H_C` over the cells of a region's
-//! bricks, with its analytic gradient (quotient rule) from the same weights.
-//!
-//! Per brick only the ≤ 2 cells per axis whose tent can be non-zero are visited (the
-//! brick's cell index is `floor(u)` and `floor(u) + 1` with `u` the continuous index), so
-//! a sample costs at most 8 fetches per overlapping brick. Tent derivatives are taken from
-//! the right (at a cell centre the cell on the far side enters with weight 0 and its
-//! slope), so the gradient is the one-sided derivative on lattice planes and the exact
-//! derivative everywhere else.
+//! What `exact` reads of a region along one ray interval: its bricks converted once per
+//! segment ([`DualBrick`]), which side of the iso value the cells of a dual cell lie on
+//! (per interval, or brick by brick for a whole mask), and the cubic the reconstruction is
+//! between two lattice planes ([`Cubic`]).
 
-use crate::volume::{BrickN, StoredF32, Volume};
-
-/// Below this weight sum a point is treated as outside the data (outer support boundary).
-pub(crate) const MIN_WEIGHT: f64 = 1e-9;
-
-/// Reconstruction of the iso field (value and gradient) and optionally a colour field.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct Eval {
-    pub value: f64,
-    pub grad: [f64; 3],
-    pub colour: f64,
-    /// `Σ H_C` (1 inside a complete single-level lattice).
-    pub weight: f64,
-}
-
-/// All fields at a point (probe).
-#[derive(Debug, Clone, PartialEq)]
-pub struct Sample {
-    pub values: Vec<f32>,
-    /// Gradient of the field asked for.
-    pub gradient: [f64; 3],
-}
-
-/// Per axis: up to two (cell index, tent weight, tent slope in world units).
-#[derive(Clone, Copy, Default)]
-struct Axis {
-    n: usize,
-    idx: [i64; 2],
-    w: [f64; 2],
-    dw: [f64; 2],
-}
-
-/// `u.floor()` as an integer without a library call (the baseline x86-64 target has no
-/// SSE4.1 rounding instruction, and a call costs more than the rest of a dual-cell
-/// lookup); exact for `|u| < 2^53`, which the callers check.
-#[inline(always)]
-pub(crate) fn floor_i64(u: f64) -> i64 {
-    let t = u as i64;
-    if (t as f64) > u {
-        t - 1
-    } else {
-        t
-    }
-}
-
-#[inline(always)]
-fn axis_cells(u: f64, dim: i64, inv_w: f64) -> Axis {
-    let mut ax = Axis::default();
-    if !(u >= -1.0 && u < dim as f64) {
-        return ax;
-    }
-    let i0 = floor_i64(u);
-    let d = u - i0 as f64; // in [0, 1)
-    if i0 >= 0 {
-        ax.idx[ax.n] = i0;
-        ax.w[ax.n] = 1.0 - d;
-        ax.dw[ax.n] = -inv_w;
-        ax.n += 1;
-    }
-    if i0 + 1 < dim {
-        ax.idx[ax.n] = i0 + 1;
-        ax.w[ax.n] = d;
-        ax.dw[ax.n] = inv_w;
-        ax.n += 1;
-    }
-    ax
-}
-
-#[inline(always)]
-fn brick_axes(b: &BrickN, p: &[f64; 3]) -> Option<[Axis; 3]> {
-    let u: [f64; 3] = std::array::from_fn(|a| (p[a] - b.origin[a]) * b.inv_w);
-    cells_at(&u, &b.dims, b.inv_w)
-}
+use super::tent::{cells_at, Axis};
+use crate::volume::{StoredF32, Volume};
 
 /// A brick of a region as `exact` reads it along one ray segment (see
-/// [`Volume::dual_bricks`]): the numbers of [`BrickN`] the dual-cell test and the cubic use,
-/// with the row and slice strides.
+/// [`Volume::dual_bricks`]): the numbers of [`BrickN`](crate::volume::BrickN) the
+/// dual-cell test and the cubic use, with the row and slice strides.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct DualBrick {
     origin: [f64; 3],
@@ -95,27 +19,14 @@ pub(crate) struct DualBrick {
     nxy: usize,
 }
 
-/// [`brick_axes`] from the continuous cell index `u` already computed.
+/// `brick_axes` from the continuous cell index `u` already computed.
 #[inline(always)]
 fn dual_axes(b: &DualBrick, u: &[f64; 3]) -> Option<[Axis; 3]> {
     cells_at(u, &b.dims, b.inv_w)
 }
 
-/// The candidate cells on every axis at cell coordinates `u` of a brick of `dims` cells;
-/// `None` when an axis has none.
-#[inline(always)]
-fn cells_at(u: &[f64; 3], dims: &[i64; 3], inv_w: f64) -> Option<[Axis; 3]> {
-    let mut axes = [Axis::default(); 3];
-    for a in 0..3 {
-        axes[a] = axis_cells(u[a], dims[a], inv_w);
-        if axes[a].n == 0 {
-            return None;
-        }
-    }
-    Some(axes)
-}
-
-/// What the cubic's polynomial part reads of one brick (a [`BrickN`] or a [`DualBrick`]).
+/// What the cubic's polynomial part reads of one brick (a [`BrickN`](crate::volume::BrickN)
+/// or a [`DualBrick`]).
 struct BrickPart<'b> {
     origin: &'b [f64; 3],
     inv_w: f64,
@@ -224,182 +135,6 @@ impl Cubic {
 }
 
 impl Volume<'_> {
-    /// Reconstructs field `f` (value and gradient) and optionally field `fc` at the local
-    /// point `p` inside region `r`. `None` where the weights vanish.
-    #[inline]
-    pub fn eval(&self, r: usize, p: [f64; 3], f: usize, fc: Option<usize>) -> Option<Eval> {
-        let (mut sh, mut shv, mut shc) = (0.0f64, 0.0f64, 0.0f64);
-        let mut dh = [0.0f64; 3];
-        let mut dhv = [0.0f64; 3];
-        for b in self.region_brick_ids(r) {
-            let br = &self.brick(b.to_native());
-            let Some([ax, ay, az]) = brick_axes(br, &p) else {
-                continue;
-            };
-            let nx = br.dims[0] as usize;
-            let nxy = nx * br.dims[1] as usize;
-            for k in 0..az.n {
-                let zoff = br.first + az.idx[k] as usize * nxy;
-                for j in 0..ay.n {
-                    let yoff = zoff + ay.idx[j] as usize * nx;
-                    let wyz = ay.w[j] * az.w[k];
-                    let dy = ay.dw[j] * az.w[k];
-                    let dz = ay.w[j] * az.dw[k];
-                    for i in 0..ax.n {
-                        let idx = yoff + ax.idx[i] as usize;
-                        let v = self.value(f, idx) as f64;
-                        let h = ax.w[i] * wyz;
-                        let g = [ax.dw[i] * wyz, ax.w[i] * dy, ax.w[i] * dz];
-                        sh += h;
-                        shv += h * v;
-                        for a in 0..3 {
-                            dh[a] += g[a];
-                            dhv[a] += g[a] * v;
-                        }
-                        if let Some(fc) = fc {
-                            shc += h * self.value(fc, idx) as f64;
-                        }
-                    }
-                }
-            }
-        }
-        if sh < MIN_WEIGHT {
-            return None;
-        }
-        let inv = 1.0 / sh;
-        let value = shv * inv;
-        Some(Eval {
-            value,
-            grad: std::array::from_fn(|a| (dhv[a] - value * dh[a]) * inv),
-            colour: shc * inv,
-            weight: sh,
-        })
-    }
-
-    /// Value of field `f` only (no gradient) at local `p` in region `r`.
-    #[inline]
-    pub fn eval_value(&self, r: usize, p: [f64; 3], f: usize) -> Option<f64> {
-        let (mut sh, mut shv) = (0.0f64, 0.0f64);
-        let vals = self.values[f];
-        for b in self.region_brick_ids(r) {
-            let br = &self.brick(b.to_native());
-            let Some([ax, ay, az]) = brick_axes(br, &p) else {
-                continue;
-            };
-            let nx = br.dims[0] as usize;
-            let nxy = nx * br.dims[1] as usize;
-            for k in 0..az.n {
-                let zoff = br.first + az.idx[k] as usize * nxy;
-                for j in 0..ay.n {
-                    let yoff = zoff + ay.idx[j] as usize * nx;
-                    let wyz = ay.w[j] * az.w[k];
-                    for i in 0..ax.n {
-                        let h = ax.w[i] * wyz;
-                        sh += h;
-                        shv += h * vals[yoff + ax.idx[i] as usize].to_native() as f64;
-                    }
-                }
-            }
-        }
-        (sh >= MIN_WEIGHT).then(|| shv / sh)
-    }
-
-    /// Gradient of field `f` for shading at local `p`: central differences of the
-    /// reconstruction `B` over one cell width of the file's finest level.
-    ///
-    /// The analytic gradient of `B` (what [`Volume::eval`] returns, and what root finding
-    /// needs) is piecewise: its slope jumps at every cell face, so shading with it shows
-    /// every cell as a facet, and across the half-cell band at a level boundary where one
-    /// layer of coarse cells alone contributes, its normal component is exactly zero (a
-    /// dark seam). `B` itself is continuous, so a difference quotient of it over one fixed
-    /// width is continuous too (a width that changed with the local level would jump at
-    /// level boundaries), and a whole fine cell steps over the flat band, which is about
-    /// half a fine cell wide.
-    /// A side that leaves the data falls back to a one-sided difference; `None` when
-    /// neither side of any axis is inside.
-    pub fn shading_gradient(&self, p: [f64; 3], f: usize) -> Option<[f64; 3]> {
-        self.shading_gradient_near(None, p, f)
-    }
-
-    /// [`Self::shading_gradient`] with the region the caller found `p` in (a ray hit knows
-    /// it), which saves a KD descent when it holds `p`; any other hint is ignored.
-    pub(crate) fn shading_gradient_near(
-        &self,
-        region: Option<u32>,
-        p: [f64; 3],
-        f: usize,
-    ) -> Option<[f64; 3]> {
-        let holds = |r: usize, q: &[f64; 3]| {
-            let reg = self.region(r);
-            (0..3).all(|a| q[a] >= reg.min[a] && q[a] < reg.max[a])
-        };
-        let r0 = match region {
-            Some(r) if (r as usize) < self.region_count() && holds(r as usize, &p) => r as usize,
-            _ => self.region_at(p)? as usize,
-        };
-        let h = self.finest_w;
-        // The neighbour points outside `r0` are found from `p`'s own descent.
-        let mut descent = None;
-        let mut at = |q: [f64; 3]| -> Option<f64> {
-            let r = if holds(r0, &q) {
-                r0
-            } else {
-                let near = descent.get_or_insert_with(|| self.descent(p));
-                self.region_near(near, q)? as usize
-            };
-            self.eval_value(r, q, f)
-        };
-        // The centre value only serves the one-sided fallback, which is rare: it is
-        // evaluated on first need (one reconstruction less per shaded point).
-        let mut centre = None;
-        let mut g = [0.0; 3];
-        let mut any = false;
-        for a in 0..3 {
-            let mut q = p;
-            q[a] = p[a] + h;
-            let hi = at(q);
-            q[a] = p[a] - h;
-            let lo = at(q);
-            g[a] = match (lo, hi) {
-                (Some(l), Some(u)) => (u - l) / (2.0 * h),
-                (None, None) => continue,
-                (lo, hi) => {
-                    let Some(c) = *centre.get_or_insert_with(|| at(p)) else {
-                        continue;
-                    };
-                    match (lo, hi) {
-                        (None, Some(u)) => (u - c) / h,
-                        (Some(l), _) => (c - l) / h,
-                        _ => continue,
-                    }
-                }
-            };
-            any = true;
-        }
-        any.then_some(g)
-    }
-
-    /// Value at any local point (region found by KD descent).
-    pub fn value_at(&self, p: [f64; 3], f: usize) -> Option<f64> {
-        let r = self.region_at(p)?;
-        self.eval_value(r as usize, p, f)
-    }
-
-    /// Every field and the gradient of field `grad_field` at the **world** point `p`;
-    /// `None` outside the data.
-    pub fn sample(&self, p_world: [f64; 3], grad_field: usize) -> Option<Sample> {
-        let p = self.to_local(p_world);
-        let r = self.region_at(p)? as usize;
-        let e = self.eval(r, p, grad_field, None)?;
-        let values = (0..self.fields.len())
-            .map(|f| self.eval_value(r, p, f).map_or(f32::NAN, |v| v as f32))
-            .collect();
-        Some(Sample {
-            values,
-            gradient: e.grad,
-        })
-    }
-
     /// The bricks of region `r` as [`Volume::cubic_in`] reads them, into `out` (cleared
     /// first): `exact` converts them from the file once per region segment instead of once
     /// per interval.
@@ -646,7 +381,7 @@ impl Volume<'_> {
         let vals = self.values[f];
         for b in self.region_brick_ids(r) {
             let br = &self.brick(b.to_native());
-            let Some([ax, ay, az]) = brick_axes(br, &pm) else {
+            let Some([ax, ay, az]) = super::tent::brick_axes(br, &pm) else {
                 continue;
             };
             let nx = br.dims[0] as usize;
@@ -679,7 +414,7 @@ impl Volume<'_> {
         let mut wc = [0.0f64; 4];
         for b in self.region_brick_ids(r) {
             let br = &self.brick(b.to_native());
-            let Some(axes) = brick_axes(br, &pm) else {
+            let Some(axes) = super::tent::brick_axes(br, &pm) else {
                 continue;
             };
             let u: [f64; 3] = std::array::from_fn(|a| (pm[a] - br.origin[a]) * br.inv_w);

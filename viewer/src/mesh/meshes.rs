@@ -1,0 +1,323 @@
+//! All meshes of a scene in one SAH BVH: the nearest hit of a ray, and whether anything
+//! blocks a shadow ray.
+
+use format::Aabb;
+use glam::{DVec3, Vec3};
+
+use super::error::MeshError;
+use super::placement::MeshInstance;
+use super::triangles::TriangleMesh;
+use crate::bvh::{box_of, intersect_triangle, Bvh, RayShear};
+use crate::camera::Ray;
+
+/// First intersection with a mesh.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MeshHit {
+    pub t: f64,
+    /// Unit geometric (or interpolated) normal, not yet flipped towards the ray.
+    pub normal: DVec3,
+    pub colour: Vec3,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Tri {
+    v: [DVec3; 3],
+    /// Per-vertex unit normals, or the geometric normal three times.
+    n: [DVec3; 3],
+    mesh: u32,
+}
+
+/// All meshes of a scene in one SAH BVH.
+pub struct Meshes {
+    tris: Vec<Tri>,
+    colours: Vec<Vec3>,
+    bvh: Bvh,
+}
+
+impl std::fmt::Debug for Meshes {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Meshes")
+            .field("meshes", &self.colours.len())
+            .field("triangles", &self.tris.len())
+            .finish()
+    }
+}
+
+impl Meshes {
+    /// Loads and places every instance (errors name the file).
+    pub fn load(instances: &[MeshInstance]) -> Result<Meshes, MeshError> {
+        let meshes = instances
+            .iter()
+            .map(TriangleMesh::load_obj)
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(Meshes::from_meshes(&meshes))
+    }
+
+    /// Builds the BVH over meshes already in world coordinates.
+    pub fn from_meshes(meshes: &[TriangleMesh]) -> Meshes {
+        let mut tris = Vec::new();
+        let mut colours = Vec::new();
+        for (mi, m) in meshes.iter().enumerate() {
+            colours.push(m.colour);
+            for t in &m.triangles {
+                let Some(v) = t
+                    .iter()
+                    .map(|&i| m.positions.get(i as usize).copied())
+                    .collect::<Option<Vec<_>>>()
+                else {
+                    continue;
+                };
+                let v = [v[0], v[1], v[2]];
+                let geo = (v[1] - v[0]).cross(v[2] - v[0]).try_normalize();
+                let Some(geo) = geo else {
+                    continue; // zero area: can never be hit
+                };
+                let n = m
+                    .normals
+                    .as_ref()
+                    .and_then(|ns| {
+                        let n = [
+                            *ns.get(t[0] as usize)?,
+                            *ns.get(t[1] as usize)?,
+                            *ns.get(t[2] as usize)?,
+                        ];
+                        n.iter().all(|x| x.length() > 0.5).then_some(n)
+                    })
+                    .unwrap_or([geo; 3]);
+                tris.push(Tri {
+                    v,
+                    n,
+                    mesh: mi as u32,
+                });
+            }
+        }
+        let boxes: Vec<Aabb> = tris.iter().map(|t| box_of(&t.v)).collect();
+        let bvh = Bvh::build(&boxes);
+        Meshes { tris, colours, bvh }
+    }
+
+    pub fn empty() -> Meshes {
+        Meshes {
+            tris: Vec::new(),
+            colours: Vec::new(),
+            bvh: Bvh::build(&[]),
+        }
+    }
+
+    pub(crate) fn is_empty(&self) -> bool {
+        self.tris.is_empty()
+    }
+
+    pub fn triangle_count(&self) -> usize {
+        self.tris.len()
+    }
+
+    /// Bounds of all triangles, `None` without triangles.
+    #[cfg(test)]
+    pub(crate) fn bounds(&self) -> Option<Aabb> {
+        let b = self.bvh.bounds();
+        (!b.is_empty()).then_some(b)
+    }
+
+    /// Nearest hit with `t` in `(t_min, t_max)`.
+    pub fn intersect(&self, ray: &Ray, t_min: f64, t_max: f64) -> Option<MeshHit> {
+        if self.tris.is_empty() {
+            return None;
+        }
+        let sh = RayShear::new(ray);
+        let mut bary = [0.0; 3];
+        let (prim, t) = self.bvh.nearest(ray, t_min, t_max, |p, lo, hi| {
+            let tri = self.tris.get(p as usize)?;
+            let h = intersect_triangle(&sh, tri.v[0], tri.v[1], tri.v[2], lo, hi)?;
+            bary = h.bary;
+            Some(h.t)
+        })?;
+        // `bary` belongs to the last accepted hit, which is the nearest one.
+        let tri = self.tris.get(prim as usize)?;
+        let n = bary[0] * tri.n[0] + bary[1] * tri.n[1] + bary[2] * tri.n[2];
+        let normal = n
+            .try_normalize()
+            .or_else(|| {
+                (tri.v[1] - tri.v[0])
+                    .cross(tri.v[2] - tri.v[0])
+                    .try_normalize()
+            })
+            .unwrap_or(DVec3::Z);
+        Some(MeshHit {
+            t,
+            normal,
+            colour: self
+                .colours
+                .get(tri.mesh as usize)
+                .copied()
+                .unwrap_or(Vec3::ONE),
+        })
+    }
+
+    /// Whether anything blocks the ray within `(t_min, t_max)` (shadow rays).
+    pub fn occluded(&self, ray: &Ray, t_min: f64, t_max: f64) -> bool {
+        if self.tris.is_empty() {
+            return false;
+        }
+        let sh = RayShear::new(ray);
+        self.bvh.any(ray, t_min, t_max, |p, lo, hi| {
+            let tri = self.tris.get(p as usize)?;
+            intersect_triangle(&sh, tri.v[0], tri.v[1], tri.v[2], lo, hi).map(|h| h.t)
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::icosphere;
+    use proptest::prelude::*;
+
+    #[test]
+    fn nearest_of_several_meshes_gives_its_colour() {
+        let mut a = icosphere(DVec3::new(0.0, 0.0, 0.0), 1.0, 2);
+        a.colour = Vec3::new(1.0, 0.0, 0.0);
+        let mut b = icosphere(DVec3::new(0.0, 0.0, 5.0), 1.0, 2);
+        b.colour = Vec3::new(0.0, 0.0, 1.0);
+        let meshes = Meshes::from_meshes(&[a, b]);
+        assert_eq!(meshes.triangle_count(), 2 * 320);
+        let down = Ray {
+            origin: DVec3::new(0.01, 0.02, 10.0),
+            dir: DVec3::NEG_Z,
+        };
+        let h = meshes.intersect(&down, 0.0, f64::INFINITY).expect("hit");
+        assert_eq!(h.colour, Vec3::new(0.0, 0.0, 1.0));
+        assert!((h.t - 4.0).abs() < 0.02);
+        // Starting between them, the first sphere is the nearest.
+        let h = meshes.intersect(&down, 6.5, f64::INFINITY).expect("hit");
+        assert_eq!(h.colour, Vec3::new(1.0, 0.0, 0.0));
+        assert!((h.t - 9.0).abs() < 0.02);
+        let b = meshes.bounds().expect("bounds");
+        assert!((DVec3::from_array(b.min) - DVec3::new(-1.0, -1.0, -1.0)).length() < 1e-9);
+        assert!((DVec3::from_array(b.max) - DVec3::new(1.0, 1.0, 6.0)).length() < 1e-9);
+        assert!(Meshes::empty().bounds().is_none());
+        assert!(Meshes::empty()
+            .intersect(&down, 0.0, f64::INFINITY)
+            .is_none());
+    }
+
+    #[test]
+    fn rays_through_shared_vertices_and_edges_always_hit() {
+        // An octahedron: its vertices and edge midpoints lie exactly on axes/planes, so
+        // rays aimed at them hit shared edges and vertices exactly.
+        let oct = TriangleMesh {
+            positions: vec![
+                DVec3::X,
+                DVec3::NEG_X,
+                DVec3::Y,
+                DVec3::NEG_Y,
+                DVec3::Z,
+                DVec3::NEG_Z,
+            ],
+            triangles: vec![
+                [0, 2, 4],
+                [2, 1, 4],
+                [1, 3, 4],
+                [3, 0, 4],
+                [2, 0, 5],
+                [1, 2, 5],
+                [3, 1, 5],
+                [0, 3, 5],
+            ],
+            normals: None,
+            colour: Vec3::ONE,
+        };
+        let meshes = Meshes::from_meshes(std::slice::from_ref(&oct));
+        let mut targets = oct.positions.clone();
+        for t in &oct.triangles {
+            for k in 0..3 {
+                let a = oct.positions[t[k] as usize];
+                let b = oct.positions[t[(k + 1) % 3] as usize];
+                for f in [0.5, 0.25, 1.0 / 3.0] {
+                    targets.push(a + f * (b - a));
+                }
+            }
+        }
+        // From inside, every direction towards a vertex or edge point leaves through
+        // the surface.
+        for target in &targets {
+            for origin in [
+                DVec3::ZERO,
+                DVec3::new(0.1, -0.2, 0.05),
+                DVec3::new(-0.3, 0.1, 0.2),
+            ] {
+                let out = Ray {
+                    origin,
+                    dir: (*target - origin).normalize(),
+                };
+                assert!(
+                    meshes.occluded(&out, 0.0, f64::INFINITY),
+                    "{origin:?} -> {target:?}"
+                );
+                assert!(meshes.intersect(&out, 0.0, f64::INFINITY).is_some());
+            }
+        }
+        // Axis-aligned rays from outside on a 1/8 grid (exact arithmetic): many enter
+        // exactly through shared edges (a coordinate is 0) or vertices. Hit iff
+        // |a| + |b| <= 1, at distance 3 - (1 - |a| - |b|).
+        for axis in 0..3 {
+            for sign in [1.0, -1.0] {
+                for i in -8..=8 {
+                    for j in -8..=8 {
+                        let (a, b) = (f64::from(i) / 8.0, f64::from(j) / 8.0);
+                        let mut o = [0.0; 3];
+                        o[axis] = 3.0 * sign;
+                        o[(axis + 1) % 3] = a;
+                        o[(axis + 2) % 3] = b;
+                        let mut d = [0.0; 3];
+                        d[axis] = -sign;
+                        let ray = Ray {
+                            origin: DVec3::from_array(o),
+                            dir: DVec3::from_array(d),
+                        };
+                        let h = meshes.intersect(&ray, 0.0, f64::INFINITY);
+                        let inside = a.abs() + b.abs() <= 1.0;
+                        assert_eq!(h.is_some(), inside, "axis {axis} sign {sign} at {a},{b}");
+                        if let Some(h) = h {
+                            let want = 3.0 - (1.0 - a.abs() - b.abs());
+                            assert!((h.t - want).abs() < 1e-12, "{} vs {want}", h.t);
+                        }
+                        assert_eq!(meshes.occluded(&ray, 0.0, f64::INFINITY), inside);
+                    }
+                }
+            }
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+        #[test]
+        fn closed_sphere_is_watertight_from_inside(
+            c in (-1.0f64..1.0, -1.0f64..1.0, -1.0f64..1.0),
+            d in (-1.0f64..1.0, -1.0f64..1.0, -1.0f64..1.0),
+            shift in prop_oneof![Just(0.0), Just(1e6)],
+            axis in 0usize..4,
+        ) {
+            let centre = DVec3::splat(shift);
+            let sphere = icosphere(centre, 0.5, 2);
+            let meshes = Meshes::from_meshes(&[sphere]);
+            let origin = centre + 0.2 * DVec3::new(c.0, c.1, c.2);
+            // Mix arbitrary directions with axis-aligned ones (which hit the
+            // icosphere's symmetric vertices and edges).
+            let dir = match axis {
+                0 => DVec3::new(d.0, d.1, d.2),
+                1 => DVec3::new(d.0.signum(), 0.0, 0.0),
+                2 => DVec3::new(0.0, d.1.signum(), 0.0),
+                _ => DVec3::new(0.0, 0.0, d.2.signum()),
+            };
+            prop_assume!(dir.length() > 1e-3);
+            let ray = Ray { origin, dir: dir.normalize() };
+            prop_assert!(meshes.occluded(&ray, 0.0, f64::INFINITY));
+            let h = meshes.intersect(&ray, 0.0, f64::INFINITY);
+            prop_assert!(h.is_some());
+            // Hit lies on the sphere (within the chord error of level 2: ~2% of r).
+            let p = ray.at(h.map_or(0.0, |h| h.t));
+            prop_assert!(((p - centre).length() - 0.5).abs() < 0.02);
+        }
+    }
+}
