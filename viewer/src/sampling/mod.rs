@@ -248,6 +248,11 @@ pub struct Tracer<'v> {
     pub vol: &'v Volume<'v>,
     /// The trees the rays walk, built for the field and iso value of `params`.
     accel: &'v Accel,
+    /// `accel`'s packed tree (taken once here, not at every ray).
+    packed: Option<&'v crate::packed::Packed>,
+    /// `accel`'s active tree, once an iso-surface ray has asked for it (a dvr tracer
+    /// never builds it).
+    active: Option<Option<&'v ActiveTree>>,
     pub params: Params,
     pub stats: Stats,
     /// Set to `Some` to record what the next rays do (`--pixel`).
@@ -280,6 +285,8 @@ impl<'v> Tracer<'v> {
         Tracer {
             vol,
             accel,
+            packed: accel.packed(vol),
+            active: None,
             params,
             stats: Stats::default(),
             log: None,
@@ -297,7 +304,7 @@ impl<'v> Tracer<'v> {
         if self.params.tf.mode != Mode::Iso {
             return Start::Root;
         }
-        match self.accel.active_tree(self.vol) {
+        match self.active_walk().0 {
             Some(tree) => tree.start_in(frustum),
             None => Start::Root,
         }
@@ -347,13 +354,15 @@ impl<'v> Tracer<'v> {
 
     /// The active tree of the view's iso value, and where the next ray's walk starts in it
     /// (the group start the frame loop set, found in the same tree).
-    fn active_walk(&self) -> (Option<&'v ActiveTree>, Start) {
-        (self.accel.active_tree(self.vol), self.start)
+    fn active_walk(&mut self) -> (Option<&'v ActiveTree>, Start) {
+        let (accel, vol) = (self.accel, self.vol);
+        let tree = *self.active.get_or_insert_with(|| accel.active_tree(vol));
+        (tree, self.start)
     }
 
     /// The file's tree packed with the iso field's ranges, for walks that skip by them.
     fn packed(&self) -> Option<&'v crate::packed::Packed> {
-        self.accel.packed(self.vol)
+        self.packed
     }
 
     /// Counts (and logs) the stretch `[t0, t1]` of the data that a walk of the active tree
