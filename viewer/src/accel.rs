@@ -2,7 +2,7 @@
 //!
 //! Three things depend on the view and not only on the file: the KD-tree packed with the
 //! iso field's value ranges (rays skip subtrees by them), the tree of the regions that can
-//! hold the iso value ([`crate::active`], what iso-surface rays walk), and the box of the
+//! hold the iso value (`crate::active`, what iso-surface rays walk), and the box of the
 //! regions that can contribute to the band (rays are clipped to it). An [`Accel`] holds
 //! them for one [`AccelKey`], the settings that decide them; a scene owns one
 //! ([`crate::scene::Scene`]), and the ray code takes them from it, so no ray asks which
@@ -37,7 +37,7 @@ pub struct AccelKey {
 /// it (a scene pairs them).
 ///
 /// The clip box is found when the acceleration is made (one pass over the regions). The
-/// two trees are built when first needed: by [`Accel::prepare`] before a frame's tiles, on
+/// two trees are built when first needed: by `Accel::prepare` before a frame's tiles, on
 /// the render pool, or by the first ray that asks (a `--pixel` trace, a pick in the
 /// window, a test). So a scene costs nothing until it is rendered, a dvr view never builds
 /// the active tree unless a pick asks for the iso-surface, and a headless render reports

@@ -27,7 +27,7 @@ pub use crate::scene::Scene;
 pub use crate::tiles::{tiles, Tile, TileResult};
 
 /// Edge in pixels of the groups whose rays share one start in the active tree
-/// ([`crate::sampling::Tracer::start_group`]): small enough that most groups beside a
+/// (`Tracer::group_start`): small enough that most groups beside a
 /// thin surface see none of it, large enough that finding the start costs little per ray.
 const GROUP: u32 = 4;
 

@@ -84,7 +84,7 @@ impl<'a> Scene<'a> {
 
 /// The ray parameters of `state` in `vol`: the iso and colour fields' indices (a name the
 /// file lacks is an error naming the view-state key), the strategy the mode uses
-/// ([`ViewState::effective_strategy`]: `exact` is an iso-surface strategy), the transfer
+/// (`ViewState::effective_strategy`: `exact` is an iso-surface strategy), the transfer
 /// function and its pre-integration table, the opacity's reference length. No clip box:
 /// that is the acceleration's.
 pub fn resolve(vol: &Volume, state: &ViewState) -> Result<Params, UnknownField> {

@@ -1,6 +1,6 @@
 //! Front-to-back region traversal along a ray: the file's KD walk
 //! ([`format::kd::segments`]) in the volume's local frame, over the tree packed with the
-//! walked field's ranges ([`crate::packed`]) so that a subtree whose values cannot matter
+//! walked field's ranges (`crate::packed`) so that a subtree whose values cannot matter
 //! is stepped over as one segment.
 
 pub use format::kd::{inverse, ray_box, Segment, Skip, SKIPPED};

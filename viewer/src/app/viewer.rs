@@ -35,7 +35,7 @@ type Outcome = Arc<Mutex<Option<anyhow::Result<Option<OrbitReport>>>>>;
 /// The window.
 pub struct ViewerApp {
     /// The view being shown. The panel edits its plain settings in place and asks for
-    /// the changes that follow a rule ([`AppCommand`], handled in [`ViewerApp::handle`]).
+    /// the changes that follow a rule (an `AppCommand`, handled in `ViewerApp::handle`).
     pub state: ViewState,
     /// Point the camera orbits around.
     pub pivot: [f64; 3],

@@ -294,7 +294,7 @@ impl Volume<'_> {
     /// bricks are `bricks` (from [`Volume::dual_bricks`]; cells are collected at the
     /// interval's midpoint).
     ///
-    /// The same numbers as [`Volume::cubic`] (same cells, same operations in the same
+    /// The same numbers as `Volume::cubic`, the tests' reference (same cells, same operations in the same
     /// order), with the brick conversions hoisted out and, where all eight corners of a
     /// brick's dual cell exist (everywhere but its outer cell layer), the dual-cell test
     /// read as eight fixed offsets instead of the general per-axis loops. `straddles`:

@@ -19,12 +19,12 @@ use crate::fields::UnknownField;
 pub enum ViewCommand {
     /// Take the iso-surface (or dvr band) of the field called `name`. A field that
     /// changes starts over from its range: the iso value and band width of
-    /// [`default_iso`], since a value meant for another field shows nothing useful. With
+    /// `default_iso`, since a value meant for another field shows nothing useful. With
     /// `keep_iso` the caller chose the iso value itself (`--iso` beside `--iso-field`), so
     /// only the field changes. Naming the current field changes nothing.
     IsoField { name: String, keep_iso: bool },
     /// Colour by the field called `name`. A field that changes gets a colour map spread
-    /// over its range ([`ColorMap::default_for_range`]); naming the current field keeps
+    /// over its range (`ColorMap::default_for_range`); naming the current field keeps
     /// the map, even a hand-made one.
     ColourField { name: String },
     /// Set the iso value. With `band_follows` the dvr band's width follows it (8 % of it,
