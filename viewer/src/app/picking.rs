@@ -27,6 +27,13 @@ pub(crate) struct Picking {
 }
 
 impl Picking {
+    /// Forgets the point picked and the accelerations of the data shown so far (another
+    /// file or frame is opened: its trees would only keep the old file mapped).
+    pub(crate) fn forget(&mut self) {
+        self.pick = None;
+        self.accels = DatasetAccels::default();
+    }
+
     /// The first surface (the iso-surface found with `exact`, or a mesh) under image
     /// position (`x`, `y`) in render pixels of the view `state` of `dataset`, and the
     /// field values there.

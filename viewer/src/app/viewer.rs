@@ -155,7 +155,7 @@ impl ViewerApp {
                 self.start_view(state);
                 self.document.doc = Some(doc);
                 self.frames.finished = None;
-                self.picking.pick = None;
+                self.picking.forget();
                 self.sequence = None;
             }
             Err(e) => self.error = Some(e),
@@ -204,7 +204,7 @@ impl ViewerApp {
         else {
             return;
         };
-        self.picking.pick = None;
+        self.picking.forget();
         self.frames.finished = None;
         match Doc::open(&path) {
             Ok(doc) => {
