@@ -275,12 +275,13 @@ impl<'v> Tracer<'v> {
     /// must be an acceleration of `vol` for the field and iso value of `params` (the key
     /// [`Params::accel_key`] gives; the clip box is `params.clip`'s business).
     pub fn new(vol: &'v Volume<'v>, accel: &'v Accel, params: Params) -> Self {
+        // The same iso value: equal, or both NaN (a key is compared with `==`, so a NaN
+        // key is never shared, but it still describes its own tracer).
+        let (key, iso) = (accel.key(), params.tf.iso);
         debug_assert!(
-            accel.key().field == params.field && accel.key().iso == params.tf.iso,
-            "an acceleration for {:?} traced with field {} at iso {}",
-            accel.key(),
+            key.field == params.field && (key.iso == iso || (key.iso.is_nan() && iso.is_nan())),
+            "an acceleration for {key:?} traced with field {} at iso {iso}",
             params.field,
-            params.tf.iso
         );
         Tracer {
             vol,
