@@ -86,7 +86,14 @@ impl ColorMap {
         } else {
             (0.0, 1.0)
         };
-        let mid = lo + 0.5 * (hi - lo);
+        // A range wider than `f32::MAX` (a field from -3e38 to 3e38, which a manifest or a
+        // file may hold) overflows `hi - lo` to infinity, which gave a middle point and
+        // band that `validate` refuses; halving each end first stays finite.
+        let (mid, band) = if (hi - lo).is_finite() {
+            (lo + 0.5 * (hi - lo), 0.02 * (hi - lo))
+        } else {
+            (0.5 * lo + 0.5 * hi, 0.02 * hi - 0.02 * lo)
+        };
         ColorMap {
             field: field.to_string(),
             points: vec![
@@ -103,7 +110,7 @@ impl ColorMap {
                     colour: RED,
                 },
             ],
-            band: 0.02 * (hi - lo),
+            band,
         }
     }
 
@@ -283,6 +290,23 @@ mod tests {
         assert!(c.validate().is_ok());
         let n = ColorMap::default_for_range("n", f32::NAN, 1.0);
         assert!(n.validate().is_ok());
+    }
+
+    /// Caught by the `sequence_state` fuzz target's check of the default state (on a
+    /// written input, not by mutation): a manifest range from -3e38 to 3e38 made the
+    /// default colour map's middle and band infinite, so a sequence without a state file
+    /// failed with `view state: colormap.band: … found inf`.
+    #[test]
+    fn default_for_range_wider_than_f32_max_is_valid() {
+        for (lo, hi) in [(-3e38, 3e38), (f32::MIN, f32::MAX), (-f32::MAX, 1.0)] {
+            let m = ColorMap::default_for_range("q", lo, hi);
+            assert_eq!(m.validate(), Ok(()), "{lo} … {hi}: {m:?}");
+            assert_eq!((m.points[0].value, m.points[2].value), (lo, hi));
+            assert!(lo <= m.points[1].value && m.points[1].value <= hi, "{m:?}");
+            assert!(m.band > 0.0, "{m:?}");
+            assert_eq!(m.colour(lo), BLUE);
+            assert_eq!(m.colour(hi), RED);
+        }
     }
 
     #[test]
