@@ -259,6 +259,8 @@ const CASES: &[Case] = &[
         2, "qbricks-view: a 16384x16384 image needs about 12288 MiB, more than the limit of"),
     case(VIEW, &["render", "w.qbk", "-o", "x.png", "--state", "st_meshes.json"], 2,
         "qbricks-view: st_meshes.json: meshes: expected at most 64 entries, found 65"),
+    case(VIEW, &["render", "w.qbk", "-o", "x.png", "--state", "st_lights.json"], 2,
+        "qbricks-view: st_lights.json: lights: expected at most 64 entries, found 65"),
     case(VIEW, &["render", "w.qbk", "-o", "x.png", "--state", "/dev/zero"], 2,
         "qbricks-view: /dev/zero: expected a JSON view state of at most 16777216 bytes"),
     case(VIEW, &["render", "w.qbk", "-o", "x.png", "--state", "dir"], 2,
@@ -566,6 +568,9 @@ fn write_states(dir: &Path) {
     let mut bad = st.clone();
     bad.meshes = vec![viewer::mesh::MeshInstance::at_origin("s.obj"); 65];
     save("st_meshes.json", &bad);
+    let mut bad = st.clone();
+    bad.lights = vec![st.lights[0]; 65];
+    save("st_lights.json", &bad);
 }
 
 struct Outcome {
