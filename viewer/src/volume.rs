@@ -21,11 +21,13 @@ pub enum VolumeError {
     /// `available` lists the file's fields, comma-separated.
     #[error("field {name:?} is not in the file (fields: {available})")]
     NoSuchField { name: String, available: String },
-    /// A view setting names a field the file does not have.
-    #[error("{setting}: {source}")]
+    /// A view setting names a field the file does not have. The inner error is part of
+    /// this one's message and deliberately not its `source`: a report that prints the
+    /// chain of sources (`{:#}`) would otherwise say it twice.
+    #[error("{setting}: {error}")]
     Setting {
         setting: &'static str,
-        source: Box<VolumeError>,
+        error: Box<VolumeError>,
     },
 }
 
@@ -370,6 +372,25 @@ impl<'a> Volume<'a> {
 mod tests {
     use super::*;
     use crate::testvol;
+
+    /// Issue 32: a view setting naming a missing field said the field twice wherever a
+    /// report prints the chain of sources (`{:#}`, as both programs do): the inner error
+    /// is part of the message, not its source.
+    #[test]
+    fn a_setting_error_names_the_missing_field_once() {
+        let e = VolumeError::Setting {
+            setting: "colormap.field",
+            error: Box::new(VolumeError::NoSuchField {
+                name: "nope".into(),
+                available: "q, speed".into(),
+            }),
+        };
+        assert!(std::error::Error::source(&e).is_none());
+        assert_eq!(
+            e.to_string(),
+            "colormap.field: field \"nope\" is not in the file (fields: q, speed)"
+        );
+    }
 
     /// The box of the regions that can contribute is the union over exactly those regions
     /// (checked by brute force over every region), for bands that meet some, all or none;
