@@ -187,16 +187,15 @@ pub enum InvalidViewState {
 /// (where the vortex cores of Q stand out), else the middle of its range; σ at 8 % of the
 /// iso value as in the seed report, never zero.
 pub(crate) fn default_iso(f: &FieldRange) -> (f64, f64) {
-    let (iso, span) = if f.min.is_finite() && f.max.is_finite() {
-        let (lo, hi) = (f64::from(f.min.min(f.max)), f64::from(f.min.max(f.max)));
+    let (iso, span) = {
+        let (lo, hi) = crate::colormap::finite_range(f.min, f.max);
+        let (lo, hi) = (f64::from(lo), f64::from(hi));
         let iso = if hi > 0.0 && lo < 0.1 * hi {
             0.1 * hi
         } else {
             0.5 * (lo + hi)
         };
         (iso, hi - lo)
-    } else {
-        (0.0, 1.0)
     };
     let mut sigma = 0.08 * iso.abs();
     if sigma <= 0.0 || sigma.is_nan() {
@@ -501,6 +500,31 @@ mod tests {
         ViewState::default_for([0.0; 3], [1.0; 3], &nan)
             .validate()
             .expect("nan range");
+    }
+
+    /// Issue 32: a file whose Q overflowed f32 (stored as ±f32::MAX by the baker, or ±inf
+    /// in a file written otherwise) rendered with "colormap.band: expected a finite
+    /// number" although no state was given. Every default is finite and valid, whatever
+    /// the ranges.
+    #[test]
+    fn defaults_from_overflowing_ranges_are_valid() {
+        for (min, max) in [
+            (-f32::MAX, f32::MAX),
+            (f32::NEG_INFINITY, f32::INFINITY),
+            (0.0, f32::INFINITY),
+            (f32::NEG_INFINITY, f32::NAN),
+        ] {
+            // Q alone: the colour map falls back to the iso field.
+            let q = [FieldRange {
+                name: "q".into(),
+                min,
+                max,
+            }];
+            let s = ViewState::default_for([0.0; 3], [1.0; 3], &q);
+            s.validate()
+                .unwrap_or_else(|e| panic!("[{min}, {max}]: {e}"));
+            assert!(s.iso.is_finite() && s.colormap.band.is_finite());
+        }
     }
 
     #[test]
