@@ -40,6 +40,12 @@ use rkyv::{Archive, Deserialize, Serialize};
 /// cells of 1 mm are a million kilometres.
 pub const MAX_REACH_LOG2: i32 = 40;
 
+/// Most bytes an archive can hold. Its relative pointers are 32-bit (see `header`'s
+/// flags), and the root, written last, points back to the start of the first array, so
+/// everything must lie within 2 GiB of it; rkyv panics while writing an archive past that
+/// rather than failing, so writers check the size first.
+pub const MAX_ARCHIVE_BYTES: u64 = i32::MAX as u64;
+
 /// Root of the archive.
 #[derive(Archive, Serialize, Deserialize, Debug, Clone, PartialEq)]
 #[rkyv(derive(Debug))]

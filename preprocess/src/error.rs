@@ -3,6 +3,8 @@
 //! itself. It lives apart from both so that neither module has to import the other for it;
 //! `crate::bake::BakeError` re-exports it.
 
+use files::limits::LimitError;
+
 /// Why a bake was refused.
 #[derive(Debug, thiserror::Error)]
 pub enum BakeError {
@@ -45,8 +47,16 @@ pub enum BakeError {
         voxel_size: f64,
         finest: f64,
     },
-    #[error("{cells} input cells (tiles counted as voxels) exceed the limit of {limit}")]
-    TooManyCells { cells: u64, limit: u64 },
+    /// The bake's memory estimate (or an allocation) is over the shared limit.
+    #[error(transparent)]
+    Memory(#[from] LimitError),
+    /// The file would be larger than the format can address ([`format::MAX_ARCHIVE_BYTES`]).
+    #[error("{leaf_cells} leaf cells with {fields} field(s) make a .qbk archive of about {} MiB, more than the {} MiB its 32-bit offsets reach; bake a part of the data, or fewer fields", bytes >> 20, format::MAX_ARCHIVE_BYTES >> 20)]
+    TooLargeForFormat {
+        leaf_cells: u64,
+        fields: u64,
+        bytes: u64,
+    },
     #[error("grid \"{grid}\": {count} non-finite values (first at voxel {first:?}); refused because of --strict")]
     NonFinite {
         grid: String,

@@ -8,7 +8,10 @@
 
 use std::collections::{BTreeMap, HashMap};
 
-use crate::bake::{select_grids, BakeError, GridKind, DEFAULT_MAX_CELLS};
+use files::limits::{self, LimitError};
+
+use crate::bake::memory::{leaf_bytes, GridFootprint};
+use crate::bake::{select_grids, BakeError, GridKind};
 use crate::grid::{AnyGrid, Grid, Leaf, Transform, LEAF_DIM, LEAF_VOXELS};
 use crate::vdb::{GridDescriptor, ValueType, VdbError, VdbFile};
 
@@ -32,8 +35,6 @@ pub struct ReadOptions {
     /// Velocity candidates by name (`--velocity`), see [`choose_velocity`].
     pub velocity: Vec<String>,
     pub layout: Layout,
-    /// Largest number of active voxels per component grid (0: [`DEFAULT_MAX_CELLS`]).
-    pub max_cells: u64,
     /// Scalar grids baked as extra fields (every scalar grid of each name is read too).
     pub extra: Vec<String>,
 }
@@ -97,11 +98,6 @@ pub fn read_inputs(
         read_extra(file, &kinds, &opts.extra, &chosen, &mut grids)?;
         return Ok((grids, mac));
     };
-    let max_cells = if opts.max_cells == 0 {
-        DEFAULT_MAX_CELLS
-    } else {
-        opts.max_cells
-    };
     let mut grids = Vec::new();
     let mut mac = Vec::new();
     let mut read = Vec::new();
@@ -123,11 +119,11 @@ pub fn read_inputs(
                 let [x, y, z] = parts.map(|i| file.read_grid(i));
                 let merged = match (x?, y?, z?) {
                     (AnyGrid::Float(x), AnyGrid::Float(y), AnyGrid::Float(z)) => {
-                        merge_components(&name, [&x, &y, &z], max_cells)?
+                        merge_components(&name, [&x, &y, &z])?
                     }
                     (x, y, z) => {
                         let [x, y, z] = [x, y, z].map(widen);
-                        merge_components(&name, [&x, &y, &z], max_cells)?
+                        merge_components(&name, [&x, &y, &z])?
                     }
                 };
                 grids.push(AnyGrid::Vec3d(merged));
@@ -240,12 +236,8 @@ pub enum InputError {
     AmbiguousVelocity { candidates: String },
     #[error("component grids {grids}: {what}")]
     ComponentMismatch { grids: String, what: String },
-    #[error("component grids {grids}: {cells} voxels exceed the limit of {limit}")]
-    TooManyCells {
-        grids: String,
-        cells: u64,
-        limit: u64,
-    },
+    #[error("component grids {grids}: {error}")]
+    Memory { grids: String, error: LimitError },
 }
 
 fn quoted<'a>(names: impl IntoIterator<Item = &'a str>) -> String {
@@ -413,12 +405,12 @@ fn blocks<V: Copy + Default>(g: &Grid<V>) -> Blocks<V> {
 
 /// Joins three scalar component grids into one vec3 grid `name` (values widened to f64).
 /// Refused when the transforms differ or the active voxels differ (leaf/tile structure may
-/// differ: a tile and a full leaf holding the same voxels match), or when the grids hold
-/// more than `max_cells` active voxels (checked before tiles are expanded).
+/// differ: a tile and a full leaf holding the same voxels match), or when expanding them
+/// would take more memory than the shared limit allows (estimated before tiles are
+/// expanded: three grids of blocks and the merged one).
 pub fn merge_components<V: Copy + Default + Into<f64>>(
     name: &str,
     parts: [&Grid<V>; 3],
-    max_cells: u64,
 ) -> Result<Grid<[f64; 3]>, InputError> {
     let grids = quoted(parts.iter().map(|g| g.name.as_str()));
     let t0: Transform = parts[0].transform;
@@ -435,13 +427,30 @@ pub fn merge_components<V: Copy + Default + Into<f64>>(
         }
     }
     let counts = parts.map(Grid::active_voxel_count);
-    if let Some(&cells) = counts.iter().find(|&&c| c > max_cells) {
-        return Err(InputError::TooManyCells {
-            grids,
-            cells,
-            limit: max_cells,
-        });
-    }
+    // Every block of every part as a map entry with its values, and the merged leaves.
+    let part_blocks = parts
+        .iter()
+        .map(|p| GridFootprint::of_grid(p).blocks)
+        .fold(0u64, u64::saturating_add);
+    let need = part_blocks
+        .saturating_mul(leaf_bytes::<V>() + 64)
+        .saturating_add(
+            GridFootprint::of_grid(parts[0])
+                .blocks
+                .saturating_mul(leaf_bytes::<[f64; 3]>()),
+        );
+    let memory = |error| InputError::Memory {
+        grids: grids.clone(),
+        error,
+    };
+    limits::check_memory(
+        format!(
+            "merging {} active voxels into the velocity \"{name}\"",
+            counts[0]
+        ),
+        need,
+    )
+    .map_err(memory)?;
     if counts[0] != counts[1] || counts[0] != counts[2] {
         return Err(InputError::ComponentMismatch {
             grids,
@@ -452,7 +461,8 @@ pub fn merge_components<V: Copy + Default + Into<f64>>(
         });
     }
     let [bx, by, bz] = parts.map(blocks);
-    let mut leaves = Vec::with_capacity(bx.len());
+    let mut leaves =
+        limits::with_capacity(format!("the velocity \"{name}\""), bx.len()).map_err(memory)?;
     for (origin, (mask, xv)) in &bx {
         let (yb, zb) = match (by.get(origin), bz.get(origin)) {
             (Some(y), Some(z)) if y.0 == *mask && z.0 == *mask => (y, z),

@@ -4,6 +4,7 @@
 //! field array (bricks lie one after the other, x fastest), so there are no per-brick
 //! buffers to interleave afterwards; the values do not depend on the thread count.
 
+use files::limits::{self, LimitError};
 use rayon::prelude::*;
 
 use crate::bricks::BrickBox;
@@ -22,7 +23,11 @@ pub(super) struct FieldValues {
 /// The value of every field at every cell of every brick, derived from the velocity (Q,
 /// speed, velocity components) or resampled from an extra scalar grid; a scalar grid baked
 /// on its own is its only field. Cells of a brick that are not leaf cells read as zero.
-pub(super) fn derive_fields(cells: &Cells, bricks: &Bricks, opts: &BakeOptions) -> FieldValues {
+pub(super) fn derive_fields(
+    cells: &Cells,
+    bricks: &Bricks,
+    opts: &BakeOptions,
+) -> Result<FieldValues, LimitError> {
     match &cells.input {
         Input::Vector(sets, vals, faces) => {
             let kinds = opts
@@ -77,8 +82,8 @@ pub(super) fn derive_fields(cells: &Cells, bricks: &Bricks, opts: &BakeOptions) 
                         }
                     }
                 });
-            });
-            FieldValues { names, values }
+            })?;
+            Ok(FieldValues { names, values })
         }
         Input::Scalar(sets, vals, name) => {
             let values = per_brick(&bricks.boxes, 1, |b, out| {
@@ -87,24 +92,27 @@ pub(super) fn derive_fields(cells: &Cells, bricks: &Bricks, opts: &BakeOptions) 
                 b.for_each_cell(set, |i, _, slot| {
                     out[0][i] = slot.map(|s| v[s]).unwrap_or_default() as f32;
                 });
-            });
-            FieldValues {
+            })?;
+            Ok(FieldValues {
                 names: vec![name.clone()],
                 values,
-            }
+            })
         }
     }
 }
 
 /// Runs `cell_values` on every brick in parallel with the brick's slice of each of the `nf`
 /// field arrays (which it must fill), and returns the arrays: brick after brick, x fastest.
+/// The arrays are allocated fallibly (they are the largest allocations after the cells).
 fn per_brick(
     bricks: &[BrickBox],
     nf: usize,
     cell_values: impl Fn(&BrickBox, &mut [&mut [f32]]) + Sync,
-) -> Vec<Vec<f32>> {
+) -> Result<Vec<Vec<f32>>, LimitError> {
     let total: usize = bricks.iter().map(|b| b.cells() as usize).sum();
-    let mut fields: Vec<Vec<f32>> = (0..nf).map(|_| vec![0.0; total]).collect();
+    let mut fields: Vec<Vec<f32>> = (0..nf)
+        .map(|_| limits::vec_of("the baked field values", total))
+        .collect::<Result<_, _>>()?;
     // Cut every field into the bricks' slices, then regroup them per brick.
     let mut rest: Vec<&mut [f32]> = fields.iter_mut().map(Vec::as_mut_slice).collect();
     let mut slices: Vec<Vec<&mut [f32]>> = Vec::with_capacity(bricks.len());
@@ -124,5 +132,5 @@ fn per_brick(
         .into_par_iter()
         .zip(bricks)
         .for_each(|(mut out, b)| cell_values(b, &mut out));
-    fields
+    Ok(fields)
 }

@@ -90,11 +90,11 @@ pub(super) fn extra_fields(
         for g in mine {
             let (set, v, bg) = match g {
                 AnyGrid::Float(g) => {
-                    let (s, v) = CellSet::from_grid(g, 0, f64::from);
+                    let (s, v) = CellSet::from_grid(g, 0, f64::from)?;
                     (s, v, f64::from(g.background))
                 }
                 AnyGrid::Double(g) => {
-                    let (s, v) = CellSet::from_grid(g, 0, |v: f64| v);
+                    let (s, v) = CellSet::from_grid(g, 0, |v: f64| v)?;
                     (s, v, g.background)
                 }
                 _ => continue,
