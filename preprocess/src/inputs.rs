@@ -12,6 +12,7 @@ use files::limits::{self, LimitError};
 
 use crate::bake::memory::{leaf_bytes, GridFootprint};
 use crate::bake::{select_grids, BakeError, GridKind};
+use crate::error::field_grid_not_found;
 use crate::grid::{AnyGrid, Grid, Leaf, Transform, LEAF_DIM, LEAF_VOXELS};
 use crate::vdb::{GridDescriptor, ValueType, VdbError, VdbFile};
 
@@ -145,18 +146,7 @@ fn read_extra(
 ) -> Result<(), ReadError> {
     let scalar = |n: &str| kinds.iter().any(|(g, k)| *k == GridKind::Scalar && *g == n);
     if let Some(missing) = extra.iter().find(|n| !scalar(n)) {
-        let mut names: Vec<&str> = kinds
-            .iter()
-            .filter(|(_, k)| *k == GridKind::Scalar)
-            .map(|(g, _)| *g)
-            .collect();
-        names.sort_unstable();
-        names.dedup();
-        return Err(BakeError::FieldGridNotFound {
-            name: missing.clone(),
-            available: quoted(names),
-        }
-        .into());
+        return Err(field_grid_not_found(missing, kinds).into());
     }
     for (i, (name, kind)) in kinds.iter().enumerate() {
         if *kind == GridKind::Scalar && !done.contains(&i) && extra.iter().any(|e| e == name) {
@@ -238,6 +228,13 @@ pub enum InputError {
     ComponentMismatch { grids: String, what: String },
     #[error("component grids {grids}: {error}")]
     Memory { grids: String, error: LimitError },
+    /// Three component names are there, but one is held by several grids.
+    #[error("component grids {grids} cannot make the velocity \"{name}\": {duplicates} (each component must be exactly one grid; rename or remove the others)")]
+    DuplicateComponent {
+        name: String,
+        grids: String,
+        duplicates: String,
+    },
 }
 
 fn quoted<'a>(names: impl IntoIterator<Item = &'a str>) -> String {
@@ -324,6 +321,56 @@ pub(crate) fn velocity_candidates(grids: &[(&str, GridKind)]) -> Vec<Velocity> {
     out
 }
 
+/// Component sets that are complete but for a name several grids hold (`vel.x` twice):
+/// no velocity candidate (which grid would be the x component?), but worth naming, since
+/// otherwise the file only seems to have no velocity. One error per set, keyed by its base
+/// name, in file order.
+fn duplicated_sets(grids: &[(&str, GridKind)]) -> Vec<(String, InputError)> {
+    let mut count: HashMap<&str, usize> = HashMap::new();
+    for (name, kind) in grids {
+        if *kind == GridKind::Scalar {
+            *count.entry(name).or_default() += 1;
+        }
+    }
+    let mut out: Vec<(String, InputError)> = Vec::new();
+    for style in STYLES {
+        for (name, kind) in grids {
+            let Some(base) = name.strip_suffix(&format!("{style}x")) else {
+                continue;
+            };
+            if *kind != GridKind::Scalar
+                || (style.is_empty() && (base.is_empty() || base.ends_with(['.', '_'])))
+                || out.iter().any(|(b, _)| b == base)
+            {
+                continue;
+            }
+            let names = ["x", "y", "z"].map(|c| format!("{base}{style}{c}"));
+            let counts = names
+                .clone()
+                .map(|n| count.get(n.as_str()).copied().unwrap_or(0));
+            if counts.contains(&0) || counts.iter().all(|&c| c == 1) {
+                continue;
+            }
+            let duplicates = names
+                .iter()
+                .zip(counts)
+                .filter(|(_, c)| *c > 1)
+                .map(|(n, c)| format!("{c} grids are named \"{n}\""))
+                .collect::<Vec<_>>()
+                .join(", ");
+            out.push((
+                base.to_string(),
+                InputError::DuplicateComponent {
+                    name: base.to_string(),
+                    grids: quoted(names.iter().map(String::as_str)),
+                    duplicates,
+                },
+            ));
+        }
+    }
+    out
+}
+
 /// The velocity to bake: the candidates named in `names` (any number, e.g. the levels of a
 /// nested set), or `None` when no name is given and the file has no component grids (the
 /// caller then keeps its default: every vec3 grid). Without names, one component set and no
@@ -337,12 +384,16 @@ pub(crate) fn choose_velocity(
     if !names.is_empty() {
         let mut out = Vec::new();
         for n in names {
-            let v = cands.iter().find(|v| v.name() == n).ok_or_else(|| {
-                InputError::VelocityNotFound {
+            let Some(v) = cands.iter().find(|v| v.name() == n) else {
+                // A set of that name with a duplicated component says so.
+                if let Some((_, e)) = duplicated_sets(grids).into_iter().find(|(b, _)| b == n) {
+                    return Err(e);
+                }
+                return Err(InputError::VelocityNotFound {
                     name: n.clone(),
                     candidates: list(),
-                }
-            })?;
+                });
+            };
             if !out.contains(v) {
                 out.push(v.clone());
             }
@@ -354,6 +405,11 @@ pub(crate) fn choose_velocity(
         .filter(|v| matches!(v, Velocity::Split { .. }))
         .count();
     match (split, cands.len()) {
+        // Without any velocity, a component set broken by a duplicate is what was meant.
+        (0, 0) => match duplicated_sets(grids).into_iter().next() {
+            Some((_, e)) => Err(e),
+            None => Ok(None),
+        },
         (0, _) => Ok(None),
         (1, 1) => Ok(Some(cands)),
         _ => Err(InputError::AmbiguousVelocity { candidates: list() }),
@@ -584,5 +640,32 @@ mod tests {
         // No component grids: the caller's default applies.
         let g = kinds(&[("v", Vector), ("d", Scalar)]);
         assert_eq!(choose_velocity(&g, &[]).unwrap(), None);
+    }
+
+    /// Issue 32: `vel.x` twice made no candidate, and the file seemed to hold several
+    /// unrelated scalar grids (or no velocity "vel" at all, with --velocity vel).
+    #[test]
+    fn a_duplicated_component_is_named() {
+        use GridKind::*;
+        let g = kinds(&[
+            ("vel.x", Scalar),
+            ("vel.x", Scalar),
+            ("vel.y", Scalar),
+            ("vel.z", Scalar),
+        ]);
+        let expected = "component grids \"vel.x\", \"vel.y\", \"vel.z\" cannot make the \
+                        velocity \"vel\": 2 grids are named \"vel.x\" (each component must be \
+                        exactly one grid; rename or remove the others)";
+        let e = choose_velocity(&g, &[]).unwrap_err();
+        assert_eq!(e.to_string(), expected);
+        let e = choose_velocity(&g, &["vel".into()]).unwrap_err();
+        assert_eq!(e.to_string(), expected);
+        // With a vec3 grid the default stays every vec3 grid; naming the set still says
+        // why it is no candidate.
+        let mut g = g;
+        g.push(("flow", Vector));
+        assert_eq!(choose_velocity(&g, &[]).unwrap(), None);
+        let e = choose_velocity(&g, &["vel".into()]).unwrap_err();
+        assert_eq!(e.to_string(), expected);
     }
 }

@@ -17,6 +17,7 @@ use files::limits::LimitError;
 use crate::bricks::{make_bricks, BrickBox};
 use crate::cells::{classify_leaves, CellSet};
 use crate::derive::{centre_from_faces, Stencil};
+use crate::error::{field_grid_not_found, grid_labels, GridCount, GridCounts};
 use crate::fields::{range_and_histogram, region_ranges, FieldKind, RangeInput, HISTOGRAM_BINS};
 use crate::grid::{AnyGrid, Transform};
 use crate::levels::assign_levels;
@@ -174,34 +175,43 @@ fn to_sets<T: Send>(
 }
 
 /// Replaces the non-finite values of every set by the average of their finite neighbours,
-/// with one warning per grid, or refuses them with `strict`. Returns how many there were.
+/// with one warning naming every grid that had some (with its count), or refuses them with
+/// `strict`. Returns how many there were.
 fn fix_nonfinite<T: CellValue>(
     sets: &[CellSet],
     values: &mut [Vec<T>],
     strict: bool,
     warnings: &mut Vec<String>,
 ) -> Result<u64, BakeError> {
-    let mut total = 0;
-    for (set, vals) in sets.iter().zip(values.iter_mut()) {
+    let labels = grid_labels(sets.iter().map(|s| s.name.as_str()));
+    let mut found = Vec::new();
+    for ((set, vals), label) in sets.iter().zip(values.iter()).zip(labels) {
         let rep = nonfinite::count(set, vals);
-        if rep.count == 0 {
-            continue;
-        }
-        let first = rep.first.unwrap_or([0; 3]);
-        if strict {
-            return Err(BakeError::NonFinite {
-                grid: set.name.clone(),
+        if rep.count > 0 {
+            found.push(GridCount {
+                grid: label,
                 count: rep.count,
-                first,
+                first: rep.first.unwrap_or([0; 3]),
             });
         }
-        nonfinite::replace(set, vals);
-        warnings.push(format!(
-            "grid \"{}\": replaced {} non-finite values (first at voxel {:?}) by the average of their finite neighbours",
-            set.name, rep.count, first
-        ));
-        total += rep.count;
     }
+    let total: u64 = found.iter().map(|g| g.count).sum();
+    if total == 0 {
+        return Ok(0);
+    }
+    let grids = GridCounts(found);
+    if strict {
+        return Err(BakeError::NonFinite {
+            count: total,
+            grids,
+        });
+    }
+    for (set, vals) in sets.iter().zip(values.iter_mut()) {
+        nonfinite::replace(set, vals);
+    }
+    warnings.push(format!(
+        "replaced {total} non-finite values by the average of their finite neighbours: {grids}"
+    ));
     Ok(total)
 }
 
@@ -320,22 +330,12 @@ fn select_input(grids: Vec<AnyGrid>, opts: &BakeOptions) -> Result<Selection, Ba
         .iter()
         .find(|n| !extra_grids.iter().any(|g| g.name() == n.as_str()))
     {
-        let mut available: Vec<&str> = grids
+        let kinds: Vec<(&str, GridKind)> = grids
             .iter()
             .chain(&extra_grids)
-            .filter(|g| !g.is_vector())
-            .map(AnyGrid::name)
+            .map(|g| (g.name(), GridKind::of(g)))
             .collect();
-        available.sort_unstable();
-        available.dedup();
-        return Err(BakeError::FieldGridNotFound {
-            name: missing.clone(),
-            available: available
-                .iter()
-                .map(|n| format!("\"{n}\""))
-                .collect::<Vec<_>>()
-                .join(", "),
-        });
+        return Err(field_grid_not_found(missing, &kinds));
     }
     let grids = select(grids, &opts.grids)?;
     if grids.is_empty() {
@@ -485,8 +485,8 @@ fn brick(sets: &[CellSet], max_brick: u32) -> Bricks {
 }
 
 /// Values that overflowed f32 (or were NaN): counted, refused with `strict`, otherwise
-/// clamped (see [`clamp_nonfinite`]) with one warning per field naming the first cell.
-/// Returns how many there were.
+/// clamped (see [`clamp_nonfinite`]) with one warning per field naming every grid they were
+/// found in, each with its count and first cell. Returns how many there were.
 fn clamp_fields(
     fields: &mut FieldValues,
     bricks: &Bricks,
@@ -494,29 +494,43 @@ fn clamp_fields(
     strict: bool,
     warnings: &mut Vec<String>,
 ) -> Result<u64, BakeError> {
+    let labels = grid_labels(sets.iter().map(|s| s.name.as_str()));
     let mut nonfinite_derived = 0;
     for (name, vals) in fields.names.iter().zip(fields.values.iter_mut()) {
-        let Some((count, at)) = clamp_nonfinite(vals) else {
+        // Counted brick by brick, so each value's grid (and its first cell) is known.
+        let mut per_set: Vec<Option<GridCount>> = vec![None; sets.len()];
+        let mut count = 0u64;
+        for (b, bx) in bricks.boxes.iter().enumerate() {
+            let first = bricks.first[b] as usize;
+            let part = &mut vals[first..first + bx.cells() as usize];
+            let Some((n, at)) = clamp_nonfinite(part) else {
+                continue;
+            };
+            count += n;
+            let entry = per_set[bx.set].get_or_insert_with(|| {
+                let (nx, ny) = (at % bx.dims[0] as usize, at / bx.dims[0] as usize);
+                let off = [nx, ny % bx.dims[1] as usize, ny / bx.dims[1] as usize];
+                GridCount {
+                    grid: labels[bx.set].clone(),
+                    count: 0,
+                    first: [0, 1, 2].map(|a| bx.lo[a] + off[a] as i32),
+                }
+            });
+            entry.count += n;
+        }
+        if count == 0 {
             continue;
-        };
-        let first = &bricks.first;
-        let b = first.partition_point(|&f| f <= at as u64) - 1;
-        let bx = &bricks.boxes[b];
-        let local = at as u64 - first[b];
-        let (nx, ny) = (u64::from(bx.dims[0]), u64::from(bx.dims[1]));
-        let off = [local % nx, (local / nx) % ny, local / (nx * ny)];
-        let first_cell = [0, 1, 2].map(|a| bx.lo[a] + off[a] as i32);
-        let grid = sets[bx.set].name.clone();
+        }
+        let grids = GridCounts(per_set.into_iter().flatten().collect());
         if strict {
             return Err(BakeError::NonFiniteDerived {
-                grid,
                 field: name.clone(),
                 count,
-                first: first_cell,
+                grids,
             });
         }
         warnings.push(format!(
-            "grid \"{grid}\": field \"{name}\": {count} values are not finite as 32-bit floats (first at voxel {first_cell:?}); stored as ±{:e} (infinities) and 0 (NaN)",
+            "field \"{name}\": {count} values are not finite as 32-bit floats: {grids}; stored as ±{:e} (infinities) and 0 (NaN)",
             f32::MAX
         ));
         nonfinite_derived += count;
