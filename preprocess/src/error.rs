@@ -7,6 +7,29 @@ use std::fmt;
 
 use files::limits::LimitError;
 
+/// How far from the origin, in voxels of the finest baked size, a baked voxel may lie.
+/// The bake works in world coordinates and decides what it cuts and merges with a
+/// tolerance of 1e-7 of a cell (leaf-cell classification, support snapping); at 2^26
+/// voxels out a coordinate's double-precision spacing is 2^-26 (1.5e-8) of a voxel, well
+/// inside it, and bakes of one layout placed anywhere up to there give the same bricks and
+/// regions (tested; the first difference showed near 2^32). Far enough out (a grid
+/// translated to 1e300 with voxels of 0.1) neighbouring centres are the same number and
+/// the file would be nonsense. 2^26 voxels of 0.1 m are 6700 km, so data placed in a
+/// geographic frame still fits at that resolution. The viewer's own bound
+/// ([`format::MAX_REACH_LOG2`], 2^40) is wider, so everything baked opens.
+pub const MAX_BAKE_REACH_LOG2: i32 = 26;
+/// [`MAX_BAKE_REACH_LOG2`] as a number.
+pub const MAX_REACH: f64 = (1u64 << MAX_BAKE_REACH_LOG2) as f64;
+
+/// `1.2e13`-style for huge counts, plain below a million.
+fn fmt_cells(x: f64) -> String {
+    if x < 1e6 {
+        format!("{x:.0}")
+    } else {
+        format!("{x:.1e}")
+    }
+}
+
 /// One grid's share of a count of values (non-finite, overflowing), for messages.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GridCount {
@@ -156,6 +179,13 @@ pub enum BakeError {
     /// The bake's memory estimate (or an allocation) is over the shared limit.
     #[error(transparent)]
     Memory(#[from] LimitError),
+    #[error("grid \"{grid}\" (voxel size {voxel_size}): voxels reach {reach:e} from the origin, {} voxels of the finest size {finest} out: too far for double precision to place cells exactly (the bake takes 2^{MAX_BAKE_REACH_LOG2}, about {:.1e}, finest voxels); translate the grid towards the origin", fmt_cells(*reach / *finest), MAX_REACH)]
+    FarFromOrigin {
+        grid: String,
+        reach: f64,
+        voxel_size: f64,
+        finest: f64,
+    },
     /// The file would be larger than the format can address ([`format::MAX_ARCHIVE_BYTES`]).
     #[error("{leaf_cells} leaf cells with {fields} field(s) make a .qbk archive of about {} MiB, more than the {} MiB its 32-bit offsets reach; bake a part of the data, or fewer fields", bytes >> 20, format::MAX_ARCHIVE_BYTES >> 20)]
     TooLargeForFormat {

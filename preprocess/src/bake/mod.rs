@@ -31,11 +31,13 @@ pub use select::{select_grids, GridKind};
 mod derived;
 mod extra;
 pub(crate) mod memory;
+mod reach;
 mod select;
 
 use derived::{derive_fields, FieldValues};
 use extra::{extra_fields, ExtraGrid};
 use memory::check_bake_memory;
+use reach::check_reach;
 use select::select;
 
 /// Default cap on brick edge length (cells).
@@ -343,6 +345,7 @@ fn select_input(grids: Vec<AnyGrid>, opts: &BakeOptions) -> Result<Selection, Ba
     }
     let named: Vec<(&str, Transform)> = grids.iter().map(|g| (g.name(), g.transform())).collect();
     let (levels, widths) = assign_levels(&named)?;
+    check_reach(&grids, widths[0])?;
     let input_cells: u64 = grids.iter().map(AnyGrid::active_voxel_count).sum();
     if input_cells == 0 {
         return Err(BakeError::Empty);
