@@ -195,6 +195,14 @@ pub enum BakeError {
     },
     #[error("{count} non-finite values: {grids}; refused because of --strict")]
     NonFinite { count: u64, grids: GridCounts },
+    #[error("field \"{field}\": grid \"{field}\" has no active voxel at any of the velocity's {cells} leaf cells, so every value would be its background {background} (its voxels lie in {extra}, the velocity's cells in {velocity})")]
+    FieldNotCovered {
+        field: String,
+        cells: u64,
+        background: f64,
+        extra: String,
+        velocity: String,
+    },
     #[error("--max-brick must be at least 1, found {0}")]
     BadMaxBrick(u32),
     #[error("grids have no active cells")]

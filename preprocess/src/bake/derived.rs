@@ -4,6 +4,8 @@
 //! field array (bricks lie one after the other, x fastest), so there are no per-brick
 //! buffers to interleave afterwards; the values do not depend on the thread count.
 
+use std::sync::atomic::{AtomicU64, Ordering};
+
 use files::limits::{self, LimitError};
 use rayon::prelude::*;
 
@@ -18,6 +20,9 @@ use super::{BakeOptions, Bricks, Cells, Input};
 pub(super) struct FieldValues {
     pub(super) names: Vec<String>,
     pub(super) values: Vec<Vec<f32>>,
+    /// Per field, for one resampled from an extra scalar grid: how many leaf cells have an
+    /// active voxel of that grid around their centre (see [`super::extra_coverage`]).
+    pub(super) covered: Vec<Option<u64>>,
 }
 
 /// The value of every field at every cell of every brick, derived from the velocity (Q,
@@ -48,13 +53,17 @@ pub(super) fn derive_fields(
                     _ => None,
                 })
                 .collect();
+            // Covered cells per extra field, summed brick by brick (the sum does not
+            // depend on the order).
+            let covered: Vec<AtomicU64> = kinds.iter().map(|_| AtomicU64::new(0)).collect();
             let values = per_brick(&bricks.boxes, names.len(), |b, out| {
                 let set = &sets[b.set];
                 let v = &vals[b.set];
+                let mut hits = vec![0u64; kinds.len()];
                 b.for_each_cell(set, |i, ijk, slot| {
                     let u = slot.map(|s| v[s]).unwrap_or_default();
                     let mut f = 0;
-                    for (k, extra) in kinds.iter().zip(&extras) {
+                    for (ki, (k, extra)) in kinds.iter().zip(&extras).enumerate() {
                         match k {
                             FieldKind::Q => {
                                 let g = match slot.filter(|&s| set.is_active(s)) {
@@ -76,14 +85,38 @@ pub(super) fn derive_fields(
                             }
                             FieldKind::Scalar(_) => {
                                 let p = set.centre(ijk);
-                                out[f][i] = extra.map_or(0.0, |e| e.sample(p)) as f32;
+                                let value = extra.map_or(0.0, |e| match e.sample(p) {
+                                    Some(x) => {
+                                        hits[ki] += 1;
+                                        x
+                                    }
+                                    None => e.background(),
+                                });
+                                out[f][i] = value as f32;
                                 f += 1;
                             }
                         }
                     }
                 });
+                for (c, h) in covered.iter().zip(hits) {
+                    if h > 0 {
+                        c.fetch_add(h, Ordering::Relaxed);
+                    }
+                }
             })?;
-            Ok(FieldValues { names, values })
+            let covered = kinds
+                .iter()
+                .zip(covered)
+                .flat_map(|(k, c)| {
+                    let c = matches!(k, FieldKind::Scalar(_)).then(|| c.into_inner());
+                    vec![c; k.names().len()]
+                })
+                .collect();
+            Ok(FieldValues {
+                names,
+                values,
+                covered,
+            })
         }
         Input::Scalar(sets, vals, name) => {
             let values = per_brick(&bricks.boxes, 1, |b, out| {
@@ -96,6 +129,7 @@ pub(super) fn derive_fields(
             Ok(FieldValues {
                 names: vec![name.clone()],
                 values,
+                covered: vec![None],
             })
         }
     }

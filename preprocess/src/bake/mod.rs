@@ -31,12 +31,14 @@ pub use select::{select_grids, GridKind};
 mod derived;
 mod extra;
 pub(crate) mod memory;
+mod overlap;
 mod reach;
 mod select;
 
 use derived::{derive_fields, FieldValues};
-use extra::{extra_fields, ExtraGrid};
+use extra::{extra_coverage, extra_fields, ExtraGrid};
 use memory::check_bake_memory;
+use overlap::same_level_overlaps;
 use reach::check_reach;
 use select::select;
 
@@ -250,6 +252,7 @@ fn run(
         .saturating_mul(nfields * 4)
         .saturating_add(leaf_cells / u64::from(opts.max_brick).pow(3) * 64);
     check_archive(leaf_cells, nfields, at_least)?;
+    warnings.extend(same_level_overlaps(&cells.input));
     let sets = cells.input.sets();
 
     stage("bricking");
@@ -257,6 +260,7 @@ fn run(
 
     stage("deriving fields");
     let mut fields = derive_fields(&cells, &bricks, opts)?;
+    extra_coverage(&cells, &fields, sets, leaf_cells, &mut warnings)?;
     let nonfinite_derived = clamp_fields(&mut fields, &bricks, sets, opts.strict, &mut warnings)?;
 
     stage("building regions");
