@@ -250,7 +250,7 @@ fn run(
     let nfields = field_names(&cells.input, opts).len() as u64;
     let at_least = leaf_cells
         .saturating_mul(nfields * 4)
-        .saturating_add(leaf_cells / u64::from(opts.max_brick).pow(3) * 64);
+        .saturating_add(leaf_cells / u64::from(opts.max_brick).saturating_pow(3) * 64);
     check_archive(leaf_cells, nfields, at_least)?;
     warnings.extend(same_level_overlaps(&cells.input));
     let sets = cells.input.sets();

@@ -288,3 +288,16 @@ fn non_finite_values_in_two_grids_name_both() {
     // Every leaf cell's Q is about 1e60.
     assert_eq!(s.nonfinite_derived, s.leaf_cells, "{q}");
 }
+
+/// The archive bound's lower estimate divides by the largest brick's cells: any
+/// `--max-brick` (up to u32::MAX) bakes, without overflow.
+#[test]
+fn the_largest_max_brick_bakes() {
+    let g = vel("vel", unit(1.0, 0.0), [0; 3], [16; 3], swirl);
+    let opts = BakeOptions {
+        max_brick: u32::MAX,
+        ..BakeOptions::default()
+    };
+    let (file, _) = bake(vec![AnyGrid::Vec3s(g)], &opts).expect("bake");
+    assert_eq!(file.bricks.len(), 1);
+}
