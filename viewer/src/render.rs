@@ -59,7 +59,7 @@ impl<'a> Scene<'a> {
         let setting = |setting| {
             move |e| VolumeError::Setting {
                 setting,
-                source: Box::new(e),
+                error: Box::new(e),
             }
         };
         let field = vol

@@ -21,12 +21,37 @@ pub enum VolumeError {
     /// `available` lists the file's fields, comma-separated.
     #[error("field {name:?} is not in the file (fields: {available})")]
     NoSuchField { name: String, available: String },
-    /// A view setting names a field the file does not have.
-    #[error("{setting}: {source}")]
+    /// A view setting names a field the file does not have. The inner error is part of
+    /// this one's message and deliberately not its `source`: a report that prints the
+    /// chain of sources (`{:#}`) would otherwise say it twice.
+    #[error("{setting}: {error}")]
     Setting {
         setting: &'static str,
-        source: Box<VolumeError>,
+        error: Box<VolumeError>,
     },
+    /// The data lies too far from the origin for its cell width (see
+    /// [`format::MAX_REACH_LOG2`]): positions there cannot be told apart in double
+    /// precision, so no view of it (and no default camera) would mean anything.
+    #[error(
+        "the data's bounds {min:?}..{max:?} reach {} cells of the finest width {finest} from the origin, more than the 2^{} within which double precision places cells to 1/4096 of a cell; re-bake the data nearer the origin",
+        cells(*reach / *finest),
+        format::MAX_REACH_LOG2
+    )]
+    OutOfReach {
+        min: [f64; 3],
+        max: [f64; 3],
+        reach: f64,
+        finest: f64,
+    },
+}
+
+/// A cell count for messages: plain below a million, else `1.2e13`.
+fn cells(x: f64) -> String {
+    if x < 1e6 {
+        format!("{x:.0}")
+    } else {
+        format!("{x:.1e}")
+    }
 }
 
 /// A brick in the local frame, as the reconstruction reads it.
@@ -123,6 +148,19 @@ impl<'a> Volume<'a> {
             .iter()
             .map(|br| br.cell_width.to_native())
             .fold(f64::INFINITY, f64::min);
+        let reach = bmin
+            .iter()
+            .chain(&bmax)
+            .map(|x| x.abs())
+            .fold(0.0f64, f64::max);
+        if finest_w.is_finite() && reach / finest_w > (1u64 << format::MAX_REACH_LOG2) as f64 {
+            return Err(VolumeError::OutOfReach {
+                min: bmin,
+                max: bmax,
+                reach,
+                finest: finest_w,
+            });
+        }
         Ok(Volume {
             frame,
             bounds_min: std::array::from_fn(|a| bmin[a] - frame[a]),
@@ -370,6 +408,56 @@ impl<'a> Volume<'a> {
 mod tests {
     use super::*;
     use crate::testvol;
+
+    /// Issue 32: a view setting naming a missing field said the field twice wherever a
+    /// report prints the chain of sources (`{:#}`, as both programs do): the inner error
+    /// is part of the message, not its source.
+    #[test]
+    fn a_setting_error_names_the_missing_field_once() {
+        let e = VolumeError::Setting {
+            setting: "colormap.field",
+            error: Box::new(VolumeError::NoSuchField {
+                name: "nope".into(),
+                available: "q, speed".into(),
+            }),
+        };
+        assert!(std::error::Error::source(&e).is_none());
+        assert_eq!(
+            e.to_string(),
+            "colormap.field: field \"nope\" is not in the file (fields: q, speed)"
+        );
+    }
+
+    /// Issue 32: a file of data at 1e300 (valid as a file) rendered nonsense and then
+    /// failed with "camera.up is parallel to the view direction". Data beyond 2^40 finest
+    /// cells from the origin is refused at open, saying so; at 2^38 it opens.
+    #[test]
+    fn data_too_far_from_the_origin_is_refused_with_its_reach() {
+        let f = |p: [f64; 3]| p[0];
+        for (offset, opens) in [
+            (2f64.powi(38), true),
+            (2f64.powi(45), false),
+            (1e300, false),
+        ] {
+            let file = testvol::nested(4, [offset; 3], &[("f", &f)], 4);
+            let Ok(view) = testvol::open(&file) else {
+                assert!(!opens, "{offset:e}: the file should open");
+                continue;
+            };
+            match Volume::new(&view) {
+                Ok(_) => assert!(opens, "{offset:e}: opened"),
+                Err(e) => {
+                    assert!(!opens, "{offset:e}: {e}");
+                    let m = e.to_string();
+                    assert!(
+                        m.starts_with("the data's bounds [")
+                            && m.contains("from the origin, more than the 2^40 within"),
+                        "{m}"
+                    );
+                }
+            }
+        }
+    }
 
     /// The box of the regions that can contribute is the union over exactly those regions
     /// (checked by brute force over every region), for bands that meet some, all or none;

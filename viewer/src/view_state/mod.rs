@@ -220,16 +220,15 @@ pub enum InvalidViewState {
 /// (where the vortex cores of Q stand out), else the middle of its range; σ at 8 % of the
 /// iso value as in the seed report, never zero.
 pub(crate) fn default_iso(f: &FieldRange) -> (f64, f64) {
-    let (iso, span) = if f.min.is_finite() && f.max.is_finite() {
-        let (lo, hi) = (f64::from(f.min.min(f.max)), f64::from(f.min.max(f.max)));
+    let (iso, span) = {
+        let (lo, hi) = crate::colormap::finite_range(f.min, f.max);
+        let (lo, hi) = (f64::from(lo), f64::from(hi));
         let iso = if hi > 0.0 && lo < 0.1 * hi {
             0.1 * hi
         } else {
             0.5 * (lo + hi)
         };
         (iso, hi - lo)
-    } else {
-        (0.0, 1.0)
     };
     let mut sigma = 0.08 * iso.abs();
     if sigma <= 0.0 || sigma.is_nan() {
@@ -352,14 +351,26 @@ impl ViewState {
         }
         // An up vector along the view direction leaves the image's roll undefined; the
         // camera would silently pick a world axis instead.
-        let forward = std::array::from_fn::<f64, 3, _>(|a| c.look_at[a] - c.eye[a]);
+        // Both vectors scaled to a largest component of 1 first (the direction is halved
+        // before the subtraction), so that cameras far out (coordinates beyond 1e154,
+        // whose squares overflow) are judged by their direction, not by infinities.
+        let unit = |v: [f64; 3]| {
+            let m = v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+            if m > 0.0 {
+                v.map(|x| x / m)
+            } else {
+                v
+            }
+        };
+        let forward = unit(std::array::from_fn(|a| 0.5 * c.look_at[a] - 0.5 * c.eye[a]));
+        let up = unit(c.up);
         let cross = [
-            forward[1] * c.up[2] - forward[2] * c.up[1],
-            forward[2] * c.up[0] - forward[0] * c.up[2],
-            forward[0] * c.up[1] - forward[1] * c.up[0],
+            forward[1] * up[2] - forward[2] * up[1],
+            forward[2] * up[0] - forward[0] * up[2],
+            forward[0] * up[1] - forward[1] * up[0],
         ];
         let norm = |v: [f64; 3]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
-        let sine_ok = norm(cross) > 1e-9 * norm(forward) * norm(c.up);
+        let sine_ok = norm(cross) > 1e-9 * norm(forward) * norm(up);
         if !sine_ok {
             return Err(InvalidViewState::UpAlongView { up: c.up });
         }
@@ -557,6 +568,45 @@ mod tests {
         ViewState::default_for([0.0; 3], [1.0; 3], &wide)
             .validate()
             .expect("ranges wider than f32::MAX");
+    }
+
+    /// Issue 32: a file whose Q overflowed f32 (stored as ±f32::MAX by the baker, or ±inf
+    /// in a file written otherwise) rendered with "colormap.band: expected a finite
+    /// number" although no state was given. Every default is finite and valid, whatever
+    /// the ranges.
+    #[test]
+    fn defaults_from_overflowing_ranges_are_valid() {
+        for (min, max) in [
+            (-f32::MAX, f32::MAX),
+            (f32::NEG_INFINITY, f32::INFINITY),
+            (0.0, f32::INFINITY),
+            (f32::NEG_INFINITY, f32::NAN),
+        ] {
+            // Q alone: the colour map falls back to the iso field.
+            let q = [FieldRange {
+                name: "q".into(),
+                min,
+                max,
+            }];
+            let s = ViewState::default_for([0.0; 3], [1.0; 3], &q);
+            s.validate()
+                .unwrap_or_else(|e| panic!("[{min}, {max}]: {e}"));
+            assert!(s.iso.is_finite() && s.colormap.band.is_finite());
+        }
+    }
+
+    /// A camera placed far out (its squared coordinates overflow) is judged by its
+    /// direction: it used to be refused with "camera.up is parallel to the view direction".
+    #[test]
+    fn a_camera_far_from_the_origin_is_valid() {
+        let s = ViewState::default_for([1e200; 3], [1.0001e200; 3], &fields());
+        s.validate().expect("valid far out");
+        let mut s = s;
+        s.camera.up = std::array::from_fn(|a| s.camera.look_at[a] - s.camera.eye[a]);
+        assert!(matches!(
+            s.validate(),
+            Err(InvalidViewState::UpAlongView { .. })
+        ));
     }
 
     #[test]
