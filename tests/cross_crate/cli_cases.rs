@@ -123,10 +123,6 @@ impl Case {
         self.exact = true;
         self
     }
-    const fn exact(mut self) -> Self {
-        self.exact = true;
-        self
-    }
 }
 
 /// Malformed first lines of a points file: each must be an error at line 1, not a header.
