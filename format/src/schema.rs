@@ -30,6 +30,22 @@
 
 use rkyv::{Archive, Deserialize, Serialize};
 
+/// How far from the origin data may lie, as a power of two of finest cell widths: the
+/// viewer refuses to open a file whose bounds reach beyond it, and the baker keeps well
+/// inside it (its own bound, `preprocess::error::MAX_BAKE_REACH_LOG2`, is 2^26); the format
+/// itself only asks for finite numbers. At 2^40 cells a coordinate's double-precision
+/// spacing is 2^-12 of a cell, which is what "sub-cell precision" above can promise; much
+/// further out (a grid translated to 1e300 with cells of 0.1) neighbouring cell centres are
+/// the same number and the data collapses to a point. Real data sits far inside: 2^40
+/// cells of 1 mm are a million kilometres.
+pub const MAX_REACH_LOG2: i32 = 40;
+
+/// Most bytes an archive can hold. Its relative pointers are 32-bit (see `header`'s
+/// flags), and the root, written last, points back to the start of the first array, so
+/// everything must lie within 2 GiB of it; rkyv panics while writing an archive past that
+/// rather than failing, so writers check the size first.
+pub const MAX_ARCHIVE_BYTES: u64 = i32::MAX as u64;
+
 /// Root of the archive.
 #[derive(Archive, Serialize, Deserialize, Debug, Clone, PartialEq)]
 #[rkyv(derive(Debug))]

@@ -28,10 +28,13 @@ use viewer::transfer::Mode;
 use viewer::view_state::ViewState;
 use viewer::volume::Volume;
 
+use files::limits::{check_memory, with_capacity, LimitError};
+
 use crate::analytic::{self, Flow};
+use crate::bake::memory::{bake_bytes, GridFootprint, CELL_BYTES, VELOCITY_SLOT_BYTES};
 use crate::bake::{bake, BakeError, BakeOptions};
 use crate::derive::Stencil;
-use crate::grid::AnyGrid;
+use crate::grid::{AnyGrid, Vec3};
 use crate::synth::{scene_grids, scene_layout, SynthError};
 
 /// What to measure.
@@ -84,6 +87,48 @@ pub enum AccuracyError {
     /// The viewer refused the bake (a bug: a fresh bake always opens).
     #[error("n0 {0}: the viewer cannot open the bake: {1}")]
     View(u32, String),
+    /// A resolution whose estimated peak ([`memory_needed`]) is over the shared limit.
+    #[error("n0 {0}: {1}")]
+    Memory(u32, LimitError),
+}
+
+/// Bytes per leaf cell a measurement holds once its bake is done: the file's two fields
+/// (8), the exact and stored values kept per cell (48) and one sorted copy of the exact
+/// values for the percentile (8), plus the bake's per-cell bookkeeping that is still held
+/// (bricks, regions).
+const MEASURE_CELL_BYTES: u64 = 8 + std::mem::size_of::<CellVal>() as u64 + 8 + CELL_BYTES;
+
+/// One leaf cell of a bake with the exact values at its centre.
+struct CellVal {
+    level: u32,
+    width: f64,
+    q: f64,
+    q_exact: f64,
+    s: f64,
+    s_exact: f64,
+}
+
+/// The estimated peak of measuring `scene` at `n0`: the larger of its bake (the one
+/// estimate every bake is checked with, [`crate::bake::memory`]) and what the comparison
+/// holds afterwards, both with the sampled grids' leaves. From the layout alone, so it is
+/// known before anything is sampled.
+pub fn memory_needed(scene: &str, n0: u32, levels: u32) -> Result<u64, SynthError> {
+    let layouts = scene_layout(scene, n0, levels)?;
+    let grids: Vec<(GridFootprint, u64)> = layouts
+        .iter()
+        .map(|l| {
+            (
+                GridFootprint::leaves::<Vec3>(l.leaf_count(), l.voxel_count()),
+                VELOCITY_SLOT_BYTES,
+            )
+        })
+        .collect();
+    let bake = bake_bytes(&grids, &[], 2);
+    let (decoded, cells) = grids.iter().fold((0u64, 0u64), |(d, c), (f, _)| {
+        (d.saturating_add(f.decoded), c.saturating_add(f.cells))
+    });
+    let after = decoded.saturating_add(cells.saturating_mul(MEASURE_CELL_BYTES));
+    Ok(bake.max(after))
 }
 
 /// Absolute and relative error statistics of one quantity over a set of points.
@@ -404,16 +449,13 @@ fn measure(
     let fq = field_index(&file, "q")?;
     let fs = field_index(&file, "speed")?;
 
-    // Exact values at every leaf-cell centre, per brick.
-    struct CellVal {
-        level: u32,
-        width: f64,
-        q: f64,
-        q_exact: f64,
-        s: f64,
-        s_exact: f64,
-    }
-    let mut cells = Vec::new();
+    // Exact values at every leaf-cell centre, per brick (room for all of them at once:
+    // growing the list by doubling would need half as much again while it moves).
+    let mut cells: Vec<CellVal> = with_capacity(
+        format!("the exact values at {} leaf cells", summary.leaf_cells),
+        summary.leaf_cells as usize,
+    )
+    .map_err(|e| AccuracyError::Memory(n0, e))?;
     for b in &file.bricks {
         let [nx, ny, nz] = b.dims.map(|d| d as usize);
         for z in 0..nz {
@@ -529,6 +571,19 @@ pub fn accuracy(
         Some(v) => v,
         None => default_iso(flow.as_ref(), opts)?,
     };
+    // Every resolution is checked before the first is sampled: a run that cannot finish
+    // does not start.
+    for &n0 in &opts.n0 {
+        let need = memory_needed(&opts.scene, n0, opts.levels)?;
+        check_memory(
+            format!(
+                "measuring scene \"{}\" (sampled, baked and compared in memory)",
+                opts.scene
+            ),
+            need,
+        )
+        .map_err(|e| AccuracyError::Memory(n0, e))?;
+    }
     let mut resolutions = Vec::new();
     for &n0 in &opts.n0 {
         progress(n0);

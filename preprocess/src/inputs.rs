@@ -8,7 +8,11 @@
 
 use std::collections::{BTreeMap, HashMap};
 
-use crate::bake::{select_grids, BakeError, GridKind, DEFAULT_MAX_CELLS};
+use files::limits::{self, LimitError};
+
+use crate::bake::memory::{leaf_bytes, GridFootprint};
+use crate::bake::{select_grids, BakeError, GridKind};
+use crate::error::field_grid_not_found;
 use crate::grid::{AnyGrid, Grid, Leaf, Transform, LEAF_DIM, LEAF_VOXELS};
 use crate::vdb::{GridDescriptor, ValueType, VdbError, VdbFile};
 
@@ -32,8 +36,6 @@ pub struct ReadOptions {
     /// Velocity candidates by name (`--velocity`), see [`choose_velocity`].
     pub velocity: Vec<String>,
     pub layout: Layout,
-    /// Largest number of active voxels per component grid (0: [`DEFAULT_MAX_CELLS`]).
-    pub max_cells: u64,
     /// Scalar grids baked as extra fields (every scalar grid of each name is read too).
     pub extra: Vec<String>,
 }
@@ -97,11 +99,6 @@ pub fn read_inputs(
         read_extra(file, &kinds, &opts.extra, &chosen, &mut grids)?;
         return Ok((grids, mac));
     };
-    let max_cells = if opts.max_cells == 0 {
-        DEFAULT_MAX_CELLS
-    } else {
-        opts.max_cells
-    };
     let mut grids = Vec::new();
     let mut mac = Vec::new();
     let mut read = Vec::new();
@@ -123,11 +120,11 @@ pub fn read_inputs(
                 let [x, y, z] = parts.map(|i| file.read_grid(i));
                 let merged = match (x?, y?, z?) {
                     (AnyGrid::Float(x), AnyGrid::Float(y), AnyGrid::Float(z)) => {
-                        merge_components(&name, [&x, &y, &z], max_cells)?
+                        merge_components(&name, [&x, &y, &z])?
                     }
                     (x, y, z) => {
                         let [x, y, z] = [x, y, z].map(widen);
-                        merge_components(&name, [&x, &y, &z], max_cells)?
+                        merge_components(&name, [&x, &y, &z])?
                     }
                 };
                 grids.push(AnyGrid::Vec3d(merged));
@@ -149,18 +146,7 @@ fn read_extra(
 ) -> Result<(), ReadError> {
     let scalar = |n: &str| kinds.iter().any(|(g, k)| *k == GridKind::Scalar && *g == n);
     if let Some(missing) = extra.iter().find(|n| !scalar(n)) {
-        let mut names: Vec<&str> = kinds
-            .iter()
-            .filter(|(_, k)| *k == GridKind::Scalar)
-            .map(|(g, _)| *g)
-            .collect();
-        names.sort_unstable();
-        names.dedup();
-        return Err(BakeError::FieldGridNotFound {
-            name: missing.clone(),
-            available: quoted(names),
-        }
-        .into());
+        return Err(field_grid_not_found(missing, kinds).into());
     }
     for (i, (name, kind)) in kinds.iter().enumerate() {
         if *kind == GridKind::Scalar && !done.contains(&i) && extra.iter().any(|e| e == name) {
@@ -240,11 +226,14 @@ pub enum InputError {
     AmbiguousVelocity { candidates: String },
     #[error("component grids {grids}: {what}")]
     ComponentMismatch { grids: String, what: String },
-    #[error("component grids {grids}: {cells} voxels exceed the limit of {limit}")]
-    TooManyCells {
+    #[error("component grids {grids}: {error}")]
+    Memory { grids: String, error: LimitError },
+    /// Three component names are there, but one is held by several grids.
+    #[error("component grids {grids} cannot make the velocity \"{name}\": {duplicates} (each component must be exactly one grid; rename or remove the others)")]
+    DuplicateComponent {
+        name: String,
         grids: String,
-        cells: u64,
-        limit: u64,
+        duplicates: String,
     },
 }
 
@@ -332,6 +321,56 @@ pub(crate) fn velocity_candidates(grids: &[(&str, GridKind)]) -> Vec<Velocity> {
     out
 }
 
+/// Component sets that are complete but for a name several grids hold (`vel.x` twice):
+/// no velocity candidate (which grid would be the x component?), but worth naming, since
+/// otherwise the file only seems to have no velocity. One error per set, keyed by its base
+/// name, in file order.
+fn duplicated_sets(grids: &[(&str, GridKind)]) -> Vec<(String, InputError)> {
+    let mut count: HashMap<&str, usize> = HashMap::new();
+    for (name, kind) in grids {
+        if *kind == GridKind::Scalar {
+            *count.entry(name).or_default() += 1;
+        }
+    }
+    let mut out: Vec<(String, InputError)> = Vec::new();
+    for style in STYLES {
+        for (name, kind) in grids {
+            let Some(base) = name.strip_suffix(&format!("{style}x")) else {
+                continue;
+            };
+            if *kind != GridKind::Scalar
+                || (style.is_empty() && (base.is_empty() || base.ends_with(['.', '_'])))
+                || out.iter().any(|(b, _)| b == base)
+            {
+                continue;
+            }
+            let names = ["x", "y", "z"].map(|c| format!("{base}{style}{c}"));
+            let counts = names
+                .clone()
+                .map(|n| count.get(n.as_str()).copied().unwrap_or(0));
+            if counts.contains(&0) || counts.iter().all(|&c| c == 1) {
+                continue;
+            }
+            let duplicates = names
+                .iter()
+                .zip(counts)
+                .filter(|(_, c)| *c > 1)
+                .map(|(n, c)| format!("{c} grids are named \"{n}\""))
+                .collect::<Vec<_>>()
+                .join(", ");
+            out.push((
+                base.to_string(),
+                InputError::DuplicateComponent {
+                    name: base.to_string(),
+                    grids: quoted(names.iter().map(String::as_str)),
+                    duplicates,
+                },
+            ));
+        }
+    }
+    out
+}
+
 /// The velocity to bake: the candidates named in `names` (any number, e.g. the levels of a
 /// nested set), or `None` when no name is given and the file has no component grids (the
 /// caller then keeps its default: every vec3 grid). Without names, one component set and no
@@ -345,12 +384,16 @@ pub(crate) fn choose_velocity(
     if !names.is_empty() {
         let mut out = Vec::new();
         for n in names {
-            let v = cands.iter().find(|v| v.name() == n).ok_or_else(|| {
-                InputError::VelocityNotFound {
+            let Some(v) = cands.iter().find(|v| v.name() == n) else {
+                // A set of that name with a duplicated component says so.
+                if let Some((_, e)) = duplicated_sets(grids).into_iter().find(|(b, _)| b == n) {
+                    return Err(e);
+                }
+                return Err(InputError::VelocityNotFound {
                     name: n.clone(),
                     candidates: list(),
-                }
-            })?;
+                });
+            };
             if !out.contains(v) {
                 out.push(v.clone());
             }
@@ -362,6 +405,11 @@ pub(crate) fn choose_velocity(
         .filter(|v| matches!(v, Velocity::Split { .. }))
         .count();
     match (split, cands.len()) {
+        // Without any velocity, a component set broken by a duplicate is what was meant.
+        (0, 0) => match duplicated_sets(grids).into_iter().next() {
+            Some((_, e)) => Err(e),
+            None => Ok(None),
+        },
         (0, _) => Ok(None),
         (1, 1) => Ok(Some(cands)),
         _ => Err(InputError::AmbiguousVelocity { candidates: list() }),
@@ -413,12 +461,12 @@ fn blocks<V: Copy + Default>(g: &Grid<V>) -> Blocks<V> {
 
 /// Joins three scalar component grids into one vec3 grid `name` (values widened to f64).
 /// Refused when the transforms differ or the active voxels differ (leaf/tile structure may
-/// differ: a tile and a full leaf holding the same voxels match), or when the grids hold
-/// more than `max_cells` active voxels (checked before tiles are expanded).
+/// differ: a tile and a full leaf holding the same voxels match), or when expanding them
+/// would take more memory than the shared limit allows (estimated before tiles are
+/// expanded: three grids of blocks and the merged one).
 pub fn merge_components<V: Copy + Default + Into<f64>>(
     name: &str,
     parts: [&Grid<V>; 3],
-    max_cells: u64,
 ) -> Result<Grid<[f64; 3]>, InputError> {
     let grids = quoted(parts.iter().map(|g| g.name.as_str()));
     let t0: Transform = parts[0].transform;
@@ -435,13 +483,30 @@ pub fn merge_components<V: Copy + Default + Into<f64>>(
         }
     }
     let counts = parts.map(Grid::active_voxel_count);
-    if let Some(&cells) = counts.iter().find(|&&c| c > max_cells) {
-        return Err(InputError::TooManyCells {
-            grids,
-            cells,
-            limit: max_cells,
-        });
-    }
+    // Every block of every part as a map entry with its values, and the merged leaves.
+    let part_blocks = parts
+        .iter()
+        .map(|p| GridFootprint::of_grid(p).blocks)
+        .fold(0u64, u64::saturating_add);
+    let need = part_blocks
+        .saturating_mul(leaf_bytes::<V>() + 64)
+        .saturating_add(
+            GridFootprint::of_grid(parts[0])
+                .blocks
+                .saturating_mul(leaf_bytes::<[f64; 3]>()),
+        );
+    let memory = |error| InputError::Memory {
+        grids: grids.clone(),
+        error,
+    };
+    limits::check_memory(
+        format!(
+            "merging {} active voxels into the velocity \"{name}\"",
+            counts[0]
+        ),
+        need,
+    )
+    .map_err(memory)?;
     if counts[0] != counts[1] || counts[0] != counts[2] {
         return Err(InputError::ComponentMismatch {
             grids,
@@ -452,7 +517,8 @@ pub fn merge_components<V: Copy + Default + Into<f64>>(
         });
     }
     let [bx, by, bz] = parts.map(blocks);
-    let mut leaves = Vec::with_capacity(bx.len());
+    let mut leaves =
+        limits::with_capacity(format!("the velocity \"{name}\""), bx.len()).map_err(memory)?;
     for (origin, (mask, xv)) in &bx {
         let (yb, zb) = match (by.get(origin), bz.get(origin)) {
             (Some(y), Some(z)) if y.0 == *mask && z.0 == *mask => (y, z),
@@ -574,5 +640,32 @@ mod tests {
         // No component grids: the caller's default applies.
         let g = kinds(&[("v", Vector), ("d", Scalar)]);
         assert_eq!(choose_velocity(&g, &[]).unwrap(), None);
+    }
+
+    /// Issue 32: `vel.x` twice made no candidate, and the file seemed to hold several
+    /// unrelated scalar grids (or no velocity "vel" at all, with --velocity vel).
+    #[test]
+    fn a_duplicated_component_is_named() {
+        use GridKind::*;
+        let g = kinds(&[
+            ("vel.x", Scalar),
+            ("vel.x", Scalar),
+            ("vel.y", Scalar),
+            ("vel.z", Scalar),
+        ]);
+        let expected = "component grids \"vel.x\", \"vel.y\", \"vel.z\" cannot make the \
+                        velocity \"vel\": 2 grids are named \"vel.x\" (each component must be \
+                        exactly one grid; rename or remove the others)";
+        let e = choose_velocity(&g, &[]).unwrap_err();
+        assert_eq!(e.to_string(), expected);
+        let e = choose_velocity(&g, &["vel".into()]).unwrap_err();
+        assert_eq!(e.to_string(), expected);
+        // With a vec3 grid the default stays every vec3 grid; naming the set still says
+        // why it is no candidate.
+        let mut g = g;
+        g.push(("flow", Vector));
+        assert_eq!(choose_velocity(&g, &[]).unwrap(), None);
+        let e = choose_velocity(&g, &["vel".into()]).unwrap_err();
+        assert_eq!(e.to_string(), expected);
     }
 }

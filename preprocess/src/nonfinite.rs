@@ -131,7 +131,7 @@ mod tests {
             leaves: vec![leaf],
             tiles: vec![],
         };
-        let (set, mut vals) = CellSet::from_grid(&grid, 0, |v| v);
+        let (set, mut vals) = CellSet::from_grid(&grid, 0, |v| v).expect("small");
         assert_eq!(count(&set, &vals).count, 3);
         assert_eq!(replace(&set, &mut vals), 3);
         let at = |c: [i32; 3]| vals[set.active_slot(c).expect("active")];

@@ -26,7 +26,10 @@ use format::Aabb;
 use rayon::prelude::*;
 use thiserror::Error;
 
+use files::limits::{self, LimitError};
+
 use crate::analytic::{self, Flow};
+use crate::bake::memory::leaf_bytes;
 use crate::grid::{leaf_offset, AnyGrid, Grid, Leaf, Transform, Vec3, LEAF_DIM, LEAF_VOXELS};
 use crate::vdb::write::{
     write_vdb_with, Compression, MetaMap, MetaValue, WriteError, WriteOptions,
@@ -41,10 +44,10 @@ use crate::vdb::write::{
 /// `wake --n0 160 --levels 3`, takes 140 MB) and below what the project's machines have.
 pub(crate) const MAX_LEAF_BYTES: u64 = 4 << 30;
 
-/// Bytes one leaf of `V` takes: the struct in the grid's leaf list and its boxed values.
-fn leaf_bytes<V>() -> u64 {
-    (std::mem::size_of::<Leaf<V>>() + std::mem::size_of::<[V; LEAF_VOXELS]>()) as u64
-}
+/// What `synth` holds at its peak per byte of leaves: the grids and, while the file is
+/// written, every grid's encoded body (at most as large as its leaves); measured 2.0 (a
+/// 256³ Lamb–Oseen grid, 204 MB of leaves, 413 MB resident at the peak), taken as 2.5.
+const PEAK_PER_LEAF_BYTE: (u64, u64) = (5, 2);
 
 #[derive(Debug, Error)]
 pub enum SynthError {
@@ -59,6 +62,7 @@ pub enum SynthError {
         max: u32,
         found: u32,
     },
+    /// Over [`MAX_LEAF_BYTES`], whatever the machine.
     #[error(
         "scene {name:?} with n0 {n0} in {grids} grid(s) needs {leaves} leaves ({} MiB of grid memory), more than the limit of {} MiB; use a smaller --n0 or fewer --levels",
         bytes >> 20,
@@ -72,6 +76,10 @@ pub enum SynthError {
         bytes: u64,
         limit: u64,
     },
+    /// Within [`MAX_LEAF_BYTES`] but over what this machine (or `ulimit -v`) leaves: the
+    /// shared limit of every command.
+    #[error("{0}; use a smaller --n0 or fewer --levels")]
+    Memory(LimitError),
 }
 
 const WAKE_DOMAIN: Aabb = Aabb {
@@ -101,7 +109,6 @@ pub struct GridLayout {
 impl GridLayout {
     /// Active voxels in the box, saturating at `u64::MAX` (an allowed `--n0` with ten levels
     /// has a finest box of 2^75 voxels, which a plain product would overflow).
-    #[cfg(test)]
     pub(crate) fn voxel_count(&self) -> u64 {
         saturating_product((0..3).map(|a| self.hi[a].saturating_sub(self.lo[a])))
     }
@@ -203,13 +210,14 @@ fn saturating_product(extents: impl Iterator<Item = i64>) -> u64 {
 }
 
 /// Refuses a scene whose leaves (velocity, plus speed when `speed_grids`) would take more than
-/// [`MAX_LEAF_BYTES`], before anything is sampled.
+/// [`MAX_LEAF_BYTES`], whatever the machine, before anything is sampled. Returns the leaf
+/// count and bytes.
 pub(crate) fn check_memory(
     scene: &str,
     n0: u32,
     layouts: &[GridLayout],
     speed_grids: bool,
-) -> Result<(), SynthError> {
+) -> Result<(u64, u64), SynthError> {
     let per_leaf = leaf_bytes::<Vec3>() + if speed_grids { leaf_bytes::<f32>() } else { 0 };
     let leaves = layouts
         .iter()
@@ -225,7 +233,28 @@ pub(crate) fn check_memory(
             limit: MAX_LEAF_BYTES,
         });
     }
-    Ok(())
+    Ok((leaves, bytes))
+}
+
+/// [`check_memory`], and then the peak of writing the scene (leaves and the file's encoded
+/// grids) against the shared memory limit ([`files::limits::check_memory`]), which depends
+/// on the machine and `ulimit -v`.
+fn check_write_memory(
+    scene: &str,
+    n0: u32,
+    layouts: &[GridLayout],
+    speed_grids: bool,
+) -> Result<(), SynthError> {
+    let (leaves, bytes) = check_memory(scene, n0, layouts, speed_grids)?;
+    let (num, den) = PEAK_PER_LEAF_BYTE;
+    limits::check_memory(
+        format!(
+            "scene {scene:?} with n0 {n0} in {} grid(s) ({leaves} leaves, sampled and written)",
+            layouts.len()
+        ),
+        bytes.saturating_mul(num) / den,
+    )
+    .map_err(SynthError::Memory)
 }
 
 fn check_range(what: &'static str, found: u32, min: u32, max: u32) -> Result<(), SynthError> {
@@ -396,7 +425,7 @@ pub fn write_scene(
     opts: &SynthOptions,
 ) -> Result<(Vec<GridSummary>, u64), SynthError> {
     let layouts = scene_layout(&opts.scene, opts.n0, opts.levels)?;
-    check_memory(&opts.scene, opts.n0, &layouts, opts.speed_grids)?;
+    check_write_memory(&opts.scene, opts.n0, &layouts, opts.speed_grids)?;
     let velocity = scene_grids_with(
         &opts.scene,
         opts.n0,

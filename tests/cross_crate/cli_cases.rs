@@ -1,6 +1,6 @@
-//! Every hostile command-line case of issue 12 in one table: the command, the exit code, the
-//! start of what it prints on stderr, and the files that must be byte-identical (or absent)
-//! afterwards.
+//! Every hostile command-line case of issues 12 and 32 in one table: the command, the exit
+//! code, the start of what it prints on stderr (or all of it), and the files that must be
+//! byte-identical (or absent) afterwards.
 //!
 //! Each case runs in a fresh directory holding copies of the inputs it names, under an
 //! address-space limit (`ulimit -v`, so a runaway allocation fails inside the case instead of
@@ -9,6 +9,7 @@
 //! named and what is said about it.
 
 use crate::common;
+use crate::hostile_inputs;
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -42,6 +43,9 @@ struct Case {
     links: &'static [&'static str],
     /// Address-space limit of the case, KiB.
     limit_kib: u64,
+    /// Stderr must be exactly `stderr` (one line), not only start with it: for messages
+    /// whose fault was saying something twice.
+    exact: bool,
     /// Stdout must contain this (ignored when empty or when stdout is closed).
     stdout: &'static str,
     /// Files that must be byte-identical to what the case directory held before.
@@ -72,6 +76,7 @@ const fn case(
         has: &[],
         links: &[],
         limit_kib: MEMORY_LIMIT_KIB,
+        exact: false,
         stdout: "",
         same: &[],
         absent: &[],
@@ -112,6 +117,10 @@ impl Case {
     }
     const fn limit_kib(mut self, kib: u64) -> Self {
         self.limit_kib = kib;
+        self
+    }
+    const fn exact(mut self) -> Self {
+        self.exact = true;
         self
     }
 }
@@ -259,6 +268,8 @@ const CASES: &[Case] = &[
         2, "qbricks-view: a 16384x16384 image needs about 12288 MiB, more than the limit of"),
     case(VIEW, &["render", "w.qbk", "-o", "x.png", "--state", "st_meshes.json"], 2,
         "qbricks-view: st_meshes.json: meshes: expected at most 64 entries, found 65"),
+    case(VIEW, &["render", "w.qbk", "-o", "x.png", "--state", "st_lights.json"], 2,
+        "qbricks-view: st_lights.json: lights: expected at most 64 entries, found 65"),
     case(VIEW, &["render", "w.qbk", "-o", "x.png", "--state", "/dev/zero"], 2,
         "qbricks-view: /dev/zero: expected a JSON view state of at most 16777216 bytes"),
     case(VIEW, &["render", "w.qbk", "-o", "x.png", "--state", "dir"], 2,
@@ -268,7 +279,8 @@ const CASES: &[Case] = &[
         "--up", "0,0,1"], 2,
         "qbricks-view: view state: camera.up: [0.0, 0.0, 1.0] is zero or parallel to the view direction"),
     case(VIEW, &["render", "w.qbk", "-o", "x.png", "--state", "st_field.json"], 2,
-        "qbricks-view: w.qbk: colormap.field: field \"nope\" is not in the file (fields: q, speed)"),
+        "qbricks-view: w.qbk: colormap.field: field \"nope\" is not in the file (fields: q, speed)")
+        .exact(),
     case(VIEW, &["render", "w.qbk", "-o", "x.png", "--state", "st_points.json"], 2,
         "qbricks-view: st_points.json: colormap.points: expected at least one control point"),
     case(VIEW, &["render", "w.qbk", "-o", "x.png", "--state", "st.json", "--strategy", "exact",
@@ -407,6 +419,88 @@ const CASES: &[Case] = &[
         .absent(&["p_0002.png", "p_0004.png"]),
     case(VIEW, &["bench", "w.qbk", "--reference-step", "1e-30", "--size", "8x6"], 2,
         "qbricks-view: w.qbk: --reference-step: step: expected a finite number ≥ 0.001 (cell widths), found 1e-30"),
+    // Issue 32, 2. A 9 kB file holding one active 640³ tile: refused by the bake's memory
+    // estimate (it aborted with SIGABRT at 6.5 GB).
+    case(BAKE, &["bake", "tile640.vdb", "-o", "t.qbk"], 2,
+        "qbricks-bake: tile640.vdb: the bake of 262144000 input cells (grid \"vel\") needs about 10076 MiB, more than the limit of")
+        .absent(&["t.qbk"]),
+    // 2. Estimated from n0 and the levels before anything is sampled.
+    case(BAKE, &["accuracy", "lamb-oseen", "--n0", "512"], 2,
+        "qbricks-bake: n0 512: measuring scene \"lamb-oseen\" (sampled, baked and compared in memory) needs about 10774 MiB, more than the limit of"),
+    case(BAKE, &["synth", "lamb-oseen", "--n0", "512", "-o", "a.vdb"], 2,
+        "qbricks-bake: synth lamb-oseen: scene \"lamb-oseen\" with n0 512 in 1 grid(s) (262144 leaves, sampled and written) needs about 3895 MiB, more than the limit of")
+        .absent(&["a.vdb"]),
+    // 3. Coordinates beyond double precision: refused by the baker, and by the viewer for
+    // a file made by hand (it said "camera.up is parallel to the view direction").
+    case(BAKE, &["bake", "far.vdb", "-o", "f.qbk"], 2,
+        "qbricks-bake: far.vdb: grid \"vel\" (voxel size 0.1): voxels reach 1e300 from the origin, 1.0e301 voxels of the finest size 0.1 out: too far for double precision to place cells exactly (the bake takes 2^26, about 6.7e7, finest voxels); translate the grid towards the origin")
+        .exact()
+        .absent(&["f.qbk"]),
+    case(VIEW, &["render", "far.qbk", "-o", "x.png"], 2,
+        "qbricks-view: far.qbk: the data's bounds [1e300, 1e300, 1e300]..[1e300, 1e300, 1e300] reach 1.0e301 cells of the finest width 0.1 from the origin, more than the 2^40 within which double precision places cells to 1/4096 of a cell; re-bake the data nearer the origin")
+        .exact()
+        .absent(&["x.png"]),
+    // 4. Q beyond f32: a warning at the bake (a refusal with --strict); the stored ±f32::MAX
+    // range gives valid defaults (it said "colormap.band: expected a finite number").
+    case(BAKE, &["bake", "huge_q.vdb", "-o", "h.qbk", "--fields", "q"], 0,
+        "qbricks-bake: warning: huge_q.vdb: field \"q\": 512 values are not finite as 32-bit floats: 512 in grid \"vel\" (first at voxel [0, 0, 0]); stored as ±3.4028235e38 (infinities) and 0 (NaN)")
+        .exact()
+        .made(&[("h.qbk", "")]),
+    case(BAKE, &["bake", "huge_q.vdb", "-o", "h.qbk", "--strict"], 2,
+        "qbricks-bake: huge_q.vdb: field \"q\": 512 values are not finite as 32-bit floats: 512 in grid \"vel\" (first at voxel [0, 0, 0]); refused because of --strict")
+        .absent(&["h.qbk"]),
+    case(VIEW, &["render", "huge_q.qbk", "-o", "x.png", "--width", "8", "--height", "6"], 0, "")
+        .made(&[("x.png", "")]),
+    // 5a. Unknown field names said once.
+    case(VIEW, &["render", "w.qbk", "-o", "x.png", "--state", "st_iso.json"], 2,
+        "qbricks-view: w.qbk: iso_field: field \"nope\" is not in the file (fields: q, speed)")
+        .exact(),
+    case(VIEW, &["render", "w.qbk", "-o", "x.png", "--iso-field", "nope"], 2,
+        "qbricks-view: w.qbk: --iso-field: no field named \"nope\" (fields: q, speed)")
+        .exact(),
+    case(VIEW, &["render", "w.qbk", "-o", "x.png", "--colour-field", "nope"], 2,
+        "qbricks-view: w.qbk: --colour-field: no field named \"nope\" (fields: q, speed)")
+        .exact(),
+    case(BAKE, &["bake", "w.vdb", "-o", "x.qbk", "--fields", "q,nope"], 2,
+        "qbricks-bake: w.vdb: --fields: no scalar grid named \"nope\" (the file has no scalar grids)")
+        .exact()
+        .absent(&["x.qbk"]),
+    // 5b. A duplicated component grid is named.
+    case(BAKE, &["bake", "dup_component.vdb", "-o", "d.qbk"], 2,
+        "qbricks-bake: dup_component.vdb: component grids \"vel.x\", \"vel.y\", \"vel.z\" cannot make the velocity \"vel\": 2 grids are named \"vel.x\" (each component must be exactly one grid; rename or remove the others)")
+        .exact()
+        .absent(&["d.qbk"]),
+    case(BAKE, &["bake", "dup_component.vdb", "-o", "d.qbk", "--velocity", "vel"], 2,
+        "qbricks-bake: dup_component.vdb: component grids \"vel.x\", \"vel.y\", \"vel.z\" cannot make the velocity \"vel\": 2 grids are named \"vel.x\"")
+        .absent(&["d.qbk"]),
+    // 5c. A vec3 grid asked for as a field says what it is and what to do.
+    case(BAKE, &["bake", "vec3_field.vdb", "-o", "v.qbk", "--fields", "q,vel2"], 2,
+        "qbricks-bake: vec3_field.vdb: --fields: \"vel2\" is a vec3 grid, and a field list takes q, speed, velocity and scalar grids: to bake it as the velocity, give --velocity vel2 (with --fields q,speed,velocity for its components)")
+        .exact()
+        .absent(&["v.qbk"]),
+    // 5d. Non-finite values in two grids: both named, each with its count.
+    case(BAKE, &["bake", "nan_two.vdb", "-o", "n.qbk"], 0,
+        "qbricks-bake: warning: nan_two.vdb: replaced 3 non-finite values by the average of their finite neighbours: 2 in grid \"fine\" (first at voxel [0, 0, 1]), 1 in grid \"coarse\" (first at voxel [7, 7, 7])")
+        .exact()
+        .made(&[("n.qbk", "")]),
+    // 6a. Two grids of one voxel size overlapping with different values: a warning;
+    // with equal values (one field in two grids) none.
+    case(BAKE, &["bake", "overlap.vdb", "-o", "o.qbk"], 0,
+        "qbricks-bake: warning: overlap.vdb: grids \"a\" and \"b\" (voxel size 1) overlap in 2048 cells, 2048 of them with different values (largest difference 1, at voxel [8, 0, 0] of \"a\"); the file keeps both and the viewer averages them there")
+        .exact()
+        .made(&[("o.qbk", "")]),
+    case(BAKE, &["bake", "overlap_equal.vdb", "-o", "o.qbk"], 0, "")
+        .made(&[("o.qbk", "")]),
+    // 6b. An extra field that covers part of the velocity: a warning with the share; one
+    // that covers none: refused.
+    case(BAKE, &["bake", "density_half.vdb", "-o", "d.qbk", "--fields", "q,speed,density"], 0,
+        "qbricks-bake: warning: density_half.vdb: field \"density\": grid \"density\" covers 50.0 % of the velocity's leaf cells (2048 of 4096); the others read its background 0")
+        .exact()
+        .made(&[("d.qbk", "")]),
+    case(BAKE, &["bake", "density_elsewhere.vdb", "-o", "d.qbk", "--fields", "q,speed,density"], 2,
+        "qbricks-bake: density_elsewhere.vdb: field \"density\": grid \"density\" has no active voxel at any of the velocity's 4096 leaf cells, so every value would be its background 0 (its voxels lie in [95.5, 95.5, 95.5]..[103.5, 103.5, 103.5], the velocity's cells in [-0.5, -0.5, -0.5]..[15.5, 15.5, 15.5])")
+        .exact()
+        .absent(&["d.qbk"]),
 ];
 
 /// Writes the inputs a case may name into `dir`: copies of the bundled sample, a directory,
@@ -459,6 +553,16 @@ fn populate(dir: &Path, case: &Case) {
     }
     std::fs::write(dir.join("header.csv"), "x,y,z\n0.5,0,0\n").expect("csv");
     populate_issue_32(dir, &wanted);
+    for name in hostile_inputs::NAMES {
+        if wanted(name) {
+            hostile_inputs::write(dir, name);
+        }
+    }
+    for name in hostile_inputs::QBK_NAMES {
+        if wanted(name) {
+            hostile_inputs::write_qbk(dir, name);
+        }
+    }
 }
 
 /// The inputs of the output-policy cases: frames named so that a pattern's output lands
@@ -561,11 +665,17 @@ fn write_states(dir: &Path) {
     bad.colormap.field = "nope".into();
     save("st_field.json", &bad);
     let mut bad = st.clone();
+    bad.iso_field = "nope".into();
+    save("st_iso.json", &bad);
+    let mut bad = st.clone();
     bad.colormap.points.clear();
     save("st_points.json", &bad);
     let mut bad = st.clone();
     bad.meshes = vec![viewer::mesh::MeshInstance::at_origin("s.obj"); 65];
     save("st_meshes.json", &bad);
+    let mut bad = st.clone();
+    bad.lights = vec![st.lights[0]; 65];
+    save("st_lights.json", &bad);
 }
 
 struct Outcome {
@@ -684,15 +794,22 @@ fn every_case_exits_with_its_code_and_message() {
         }
         let stderr_ok = if case.stderr.is_empty() {
             o.stderr.is_empty()
+        } else if case.exact {
+            o.stderr.trim_end() == case.stderr
         } else {
             o.stderr.starts_with(case.stderr)
                 && o.stderr.trim_end().lines().count() == case.lines
                 && case.has.iter().all(|h| o.stderr.contains(h))
         };
         if !stderr_ok {
+            let how = if case.exact {
+                "exactly".to_string()
+            } else {
+                format!("{} line(s) starting", case.lines)
+            };
             why.push(format!(
-                "stderr {:?}, expected {} line(s) starting {:?} with {:?}",
-                o.stderr, case.lines, case.stderr, case.has
+                "stderr {:?}, expected {how} {:?} with {:?}",
+                o.stderr, case.stderr, case.has
             ));
         }
         for (f, before) in case.links.iter().zip(&links) {

@@ -9,10 +9,18 @@ use std::path::{Path, PathBuf};
 /// and tests (except this file, whose examples name documents that do not exist).
 fn sources(root: &Path) -> Vec<PathBuf> {
     let mut out = vec![root.join("README.md")];
-    let mut stack: Vec<PathBuf> = ["docs", "format", "preprocess", "viewer", "tests", "src"]
-        .iter()
-        .map(|d| root.join(d))
-        .collect();
+    let mut stack: Vec<PathBuf> = [
+        "docs",
+        "files",
+        "format",
+        "preprocess",
+        "viewer",
+        "tests",
+        "src",
+    ]
+    .iter()
+    .map(|d| root.join(d))
+    .collect();
     while let Some(dir) = stack.pop() {
         let Ok(entries) = std::fs::read_dir(&dir) else {
             continue;
@@ -205,4 +213,239 @@ fn flag_scan_finds_long_flags_and_whole_words() {
     );
     assert!(names_flag("use --iso 3", "--iso"));
     assert!(!names_flag("use --iso-field q", "--iso"));
+}
+
+/// GitHub's anchor of a Markdown heading: lower case, punctuation other than `-` and `_`
+/// dropped, spaces as `-`.
+fn anchor_of(heading: &str) -> String {
+    heading
+        .trim()
+        .to_lowercase()
+        .chars()
+        .filter(|c| c.is_alphanumeric() || *c == ' ' || *c == '-' || *c == '_')
+        .map(|c| if c == ' ' { '-' } else { c })
+        .collect()
+}
+
+/// The headings of a Markdown text (outside code blocks), as written.
+fn headings(text: &str) -> Vec<String> {
+    let mut in_code = false;
+    let mut out = Vec::new();
+    for line in text.lines() {
+        if line.trim_start().starts_with("```") {
+            in_code = !in_code;
+            continue;
+        }
+        if !in_code && line.starts_with('#') {
+            out.push(line.trim_start_matches('#').trim().to_string());
+        }
+    }
+    out
+}
+
+/// Links to a section of a document, `doc.md#anchor`, and prose references to one,
+/// `` `docs/doc.md`, "Section title" ``: (document, anchor or title, is a title).
+fn section_references(text: &str) -> Vec<(String, String, bool)> {
+    let mut out = Vec::new();
+    for w in text.split(|c: char| c.is_whitespace() || "()[]<>\"',;|*`".contains(c)) {
+        if let Some((doc, anchor)) = w.split_once(".md#") {
+            if !doc.starts_with("http") && !anchor.is_empty() {
+                out.push((format!("{doc}.md"), anchor.to_string(), false));
+            }
+        }
+    }
+    // `docs/x.md`, "Title" (a title in quotes right after the document's name).
+    let mut rest = text;
+    while let Some(i) = rest.find(".md`, \"") {
+        let before = &rest[..i];
+        let start = before.rfind('`').map_or(0, |s| s + 1);
+        let doc = format!("{}.md", &before[start..]);
+        let after = &rest[i + ".md`, \"".len()..];
+        if let Some(end) = after.find('"') {
+            out.push((doc, after[..end].to_string(), true));
+        }
+        rest = &rest[i + 1..];
+    }
+    out
+}
+
+/// A link into a section that was renamed or moved lands at the top of the document; a
+/// "see docs/x.md, section" that names a section it does not have sends the reader
+/// looking for it.
+#[test]
+fn every_referenced_section_exists() {
+    let root = common::root();
+    let mut missing = Vec::new();
+    let mut seen = 0;
+    for file in sources(&root) {
+        let Ok(text) = std::fs::read_to_string(&file) else {
+            continue;
+        };
+        let here = file.parent().unwrap_or(&root);
+        for (doc, target, is_title) in section_references(&text) {
+            let path = [here.join(&doc), root.join(&doc)]
+                .into_iter()
+                .find(|p| p.exists());
+            let Some(path) = path else {
+                continue; // every_referenced_document_exists reports it
+            };
+            seen += 1;
+            let heads = headings(&std::fs::read_to_string(&path).unwrap_or_default());
+            let found = if is_title {
+                heads.iter().any(|h| h.contains(&target))
+            } else {
+                heads.iter().any(|h| anchor_of(h) == target)
+            };
+            if !found {
+                missing.push(format!(
+                    "{}: {doc} has no section {target:?}",
+                    file.display()
+                ));
+            }
+        }
+    }
+    assert!(seen > 0, "no section references found: the scan is broken");
+    assert!(
+        missing.is_empty(),
+        "missing sections:\n{}",
+        missing.join("\n")
+    );
+}
+
+#[test]
+fn section_scan_finds_anchors_and_quoted_titles() {
+    assert_eq!(anchor_of("Files (`files/`)"), "files-files");
+    assert_eq!(
+        anchor_of("Speed, structure, open, bake, frames (format 3)"),
+        "speed-structure-open-bake-frames-format-3"
+    );
+    assert_eq!(
+        section_references(
+            "see [d](docs/a.md#x-y) and (see `docs/design.md`, \"Sampling strategies\")"
+        ),
+        vec![
+            ("docs/a.md".to_string(), "x-y".to_string(), false),
+            (
+                "docs/design.md".to_string(),
+                "Sampling strategies".to_string(),
+                true
+            )
+        ]
+    );
+}
+
+/// Every `fn` of the workspace with whether it is `pub` (without a restriction), and the
+/// names of its modules (`mod x` and the files and folders that hold them).
+fn functions(root: &Path) -> (std::collections::HashMap<String, bool>, Vec<String>) {
+    let mut fns: std::collections::HashMap<String, bool> = std::collections::HashMap::new();
+    let mut modules = Vec::new();
+    for file in sources(root)
+        .iter()
+        .filter(|p| p.extension().is_some_and(|x| x == "rs"))
+    {
+        if let Some(stem) = file.file_stem() {
+            modules.push(stem.to_string_lossy().into_owned());
+        }
+        if let Some(dir) = file.parent().and_then(Path::file_name) {
+            modules.push(dir.to_string_lossy().into_owned());
+        }
+        let text = std::fs::read_to_string(file).unwrap_or_default();
+        for line in text.lines() {
+            let t = line.trim_start();
+            if let Some(m) = t.split("mod ").nth(1).filter(|_| t.contains("mod ")) {
+                let name: String = m
+                    .chars()
+                    .take_while(|c| c.is_alphanumeric() || *c == '_')
+                    .collect();
+                modules.push(name);
+            }
+            let Some(i) = t.find("fn ") else { continue };
+            let head = &t[..i];
+            if !head.split_whitespace().all(|w| {
+                w.starts_with("pub") || ["const", "async", "unsafe", "extern"].contains(&w)
+            }) {
+                continue;
+            }
+            let name: String = t[i + 3..]
+                .chars()
+                .take_while(|c| c.is_alphanumeric() || *c == '_')
+                .collect();
+            if name.is_empty() {
+                continue;
+            }
+            let public = head.split_whitespace().any(|w| w == "pub");
+            let e = fns.entry(name).or_insert(false);
+            *e |= public;
+        }
+    }
+    (fns, modules)
+}
+
+/// `` `a::b::name` `` words of a document whose last part is a snake_case name.
+fn named_functions(text: &str) -> Vec<String> {
+    text.split('`')
+        .skip(1)
+        .step_by(2)
+        .filter(|w| w.contains("::") && !w.contains(' '))
+        .filter_map(|w| {
+            let w = w.split('(').next().unwrap_or(w);
+            let last = w.rsplit("::").next()?;
+            (last.starts_with(|c: char| c.is_ascii_lowercase())
+                && last
+                    .chars()
+                    .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_'))
+            .then(|| w.to_string())
+        })
+        .collect()
+}
+
+/// A document that tells users to call a function that is gone costs them the time to
+/// find out; one that tells them to call a function private to its crate, too. Every
+/// `` `path::function` `` the documents name, whose first part is one of the workspace's
+/// crates or types, must be a function of the workspace; in the documents written for
+/// users of the libraries (the README and the `.qbk` format's), a `pub` one. (The design
+/// notes may name internal functions: they are for the people changing them.)
+#[test]
+fn every_function_the_documents_name_exists_and_users_can_call() {
+    let root = common::root();
+    let (fns, modules) = functions(&root);
+    let ours = [
+        "format",
+        "files",
+        "preprocess",
+        "viewer",
+        "qbricks_viewer",
+        "qbricks_preprocess",
+    ];
+    let for_users = [root.join("README.md"), root.join("docs/format.md")];
+    let mut wrong = Vec::new();
+    let mut seen = 0;
+    for file in sources(&root)
+        .iter()
+        .filter(|p| p.extension().is_some_and(|x| x == "md"))
+    {
+        let text = std::fs::read_to_string(file).unwrap_or_default();
+        for path in named_functions(&text) {
+            let first = path.split("::").next().unwrap_or("");
+            let is_type = first.starts_with(|c: char| c.is_ascii_uppercase());
+            if !ours.contains(&first) && !is_type {
+                continue;
+            }
+            let name = path.rsplit("::").next().unwrap_or("");
+            match fns.get(name) {
+                Some(true) => seen += 1,
+                Some(false) if !for_users.contains(file) => seen += 1,
+                Some(false) => wrong.push(format!("{}: {path} is not pub", file.display())),
+                // A module (`format::kd`), or a type of another crate (`Vec::new`).
+                None if is_type || modules.iter().any(|m| m == name) => {}
+                None => wrong.push(format!("{}: {path} does not exist", file.display())),
+            }
+        }
+    }
+    assert!(seen > 10, "only {seen} functions found: the scan is broken");
+    assert!(
+        wrong.is_empty(),
+        "documents name functions users cannot call:\n{}",
+        wrong.join("\n")
+    );
 }

@@ -1,6 +1,7 @@
 //! Cross-crate tests, one test binary: whole chains through both programs and what holds
 //! for both (they link the viewer and the preprocessor, and run both binaries):
-//! * `cli_cases`: every hostile command-line case of issue 12 in one table;
+//! * `cli_cases`: every hostile command-line case of issues 12 and 32 in one table;
+//! * `hostile_inputs`: the small VDB and `.qbk` inputs of issue 32, written at test time;
 //! * `interrupt`: SIGINT/SIGTERM in the middle of writing an output;
 //! * `render_sequence`: bake the bundled cache, then render the frames;
 //! * `docs_exist`: the documents and the README against the code and `--help`;
@@ -18,6 +19,7 @@ mod common;
 
 mod cli_cases;
 mod docs_exist;
+mod hostile_inputs;
 mod interrupt;
 mod render_sequence;
 mod shading_wake;

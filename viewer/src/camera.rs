@@ -246,11 +246,19 @@ impl Camera {
             (Some(a), Some(b)) => (a.min(b), a.max(b)),
             _ => (DVec3::ZERO, DVec3::ONE),
         };
-        let centre = 0.5 * (lo + hi);
+        // Halves first and lengths of scaled vectors: boxes far out (coordinates beyond
+        // 1e154, whose squares overflow) frame as boxes near the origin do.
+        let centre = 0.5 * lo + 0.5 * hi;
         // Bounding-sphere radius; a flat or point box still gets a visible extent that
         // is representable next to its (possibly huge) coordinates.
         let floor = (centre.abs().max_element() * 1e-9).max(1e-6);
-        let radius = (0.5 * (hi - lo).length()).max(floor);
+        let half_size = 0.5 * hi - 0.5 * lo;
+        let mut radius = half_size.length();
+        if !radius.is_finite() {
+            let scale = half_size.abs().max_element();
+            radius = scale * (half_size / scale).length();
+        }
+        let radius = radius.max(floor);
         let dir = DVec3::new(1.0, -1.6, 0.9).normalize();
         let mut cam = Camera {
             eye: (centre + radius * dir).to_array(),
@@ -265,7 +273,7 @@ impl Camera {
         // 5 % margin. Tighter than the bounding sphere for elongated boxes.
         let b = cam.basis();
         let tan_half = (0.5 * DEFAULT_FOV_DEG.to_radians()).tan();
-        let half = 0.5 * (hi - lo).max(DVec3::splat(floor));
+        let half = half_size.max(DVec3::splat(0.5 * floor));
         let mut distance = 0.0f64;
         for i in 0..8 {
             let q = DVec3::new(

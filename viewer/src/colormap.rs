@@ -35,6 +35,22 @@ fn lerp(a: [f32; 3], b: [f32; 3], t: f32) -> [f32; 3] {
     ]
 }
 
+/// A field's range as every data-derived default reads it (the colour map here, the iso
+/// value and band in [`crate::view_state`]): sorted, infinities taken as ±`f32::MAX` (the
+/// baker stores overflowing values so; a file written otherwise may still carry them) and
+/// a NaN bound as the other one (0 when both are), so that nothing derived from a file's
+/// ranges is a number no user could have written into a view state.
+pub(crate) fn finite_range(min: f32, max: f32) -> (f32, f32) {
+    let clamp = |v: f32| v.clamp(-f32::MAX, f32::MAX);
+    let (a, b) = match (min.is_nan(), max.is_nan()) {
+        (false, false) => (clamp(min), clamp(max)),
+        (true, false) => (clamp(max), clamp(max)),
+        (false, true) => (clamp(min), clamp(min)),
+        (true, true) => (0.0, 0.0),
+    };
+    (a.min(b), a.max(b))
+}
+
 impl ColorMap {
     /// Colour of value `v`.
     ///
@@ -81,12 +97,17 @@ impl ColorMap {
     /// Control points at the minimum, the middle and the maximum; the band is 2 % of the
     /// range. Swapped or non-finite limits are repaired (non-finite → 0..1).
     pub(crate) fn default_for_range(field: &str, min: f32, max: f32) -> ColorMap {
-        let (lo, hi) = if min.is_finite() && max.is_finite() {
-            (min.min(max), min.max(max))
+        let (lo, hi) = finite_range(min, max);
+        // A range as wide as f32 allows (a field whose overflowing values the baker
+        // stored as ±f32::MAX) has a width beyond f32: then in f64, since a middle or a
+        // band of infinite width is no state a user could have written.
+        let width = hi - lo;
+        let (mid, band) = if width.is_finite() {
+            (lo + 0.5 * width, 0.02 * width)
         } else {
-            (0.0, 1.0)
+            let (lo, hi) = (f64::from(lo), f64::from(hi));
+            ((0.5 * lo + 0.5 * hi) as f32, (0.02 * (hi - lo)) as f32)
         };
-        let mid = lo + 0.5 * (hi - lo);
         ColorMap {
             field: field.to_string(),
             points: vec![
@@ -103,7 +124,7 @@ impl ColorMap {
                     colour: RED,
                 },
             ],
-            band: 0.02 * (hi - lo),
+            band,
         }
     }
 
@@ -283,6 +304,32 @@ mod tests {
         assert!(c.validate().is_ok());
         let n = ColorMap::default_for_range("n", f32::NAN, 1.0);
         assert!(n.validate().is_ok());
+        let i = ColorMap::default_for_range("i", f32::NEG_INFINITY, f32::INFINITY);
+        assert!(i.validate().is_ok(), "{i:?}");
+        assert_eq!(finite_range(f32::INFINITY, 2.0), (2.0, f32::MAX));
+        assert_eq!(finite_range(f32::NAN, f32::NAN), (0.0, 0.0));
+        // The widest finite range (values that overflowed, stored clamped) still gives a
+        // valid map: its width overflows f32.
+        let w = ColorMap::default_for_range("q", -f32::MAX, f32::MAX);
+        assert!(w.validate().is_ok(), "{w:?}");
+        assert_eq!(w.colour(0.0), GREEN);
+    }
+
+    /// Caught by the `sequence_state` fuzz target's check of the default state (on a
+    /// written input, not by mutation): a manifest range from -3e38 to 3e38 made the
+    /// default colour map's middle and band infinite, so a sequence without a state file
+    /// failed with `view state: colormap.band: … found inf`.
+    #[test]
+    fn default_for_range_wider_than_f32_max_is_valid() {
+        for (lo, hi) in [(-3e38, 3e38), (f32::MIN, f32::MAX), (-f32::MAX, 1.0)] {
+            let m = ColorMap::default_for_range("q", lo, hi);
+            assert_eq!(m.validate(), Ok(()), "{lo} … {hi}: {m:?}");
+            assert_eq!((m.points[0].value, m.points[2].value), (lo, hi));
+            assert!(lo <= m.points[1].value && m.points[1].value <= hi, "{m:?}");
+            assert!(m.band > 0.0, "{m:?}");
+            assert_eq!(m.colour(lo), BLUE);
+            assert_eq!(m.colour(hi), RED);
+        }
     }
 
     #[test]

@@ -28,11 +28,35 @@ use crate::packed::Packed;
 /// Archived `f32` as stored in the file.
 pub(crate) type StoredF32 = rkyv::Archived<f32>;
 
-/// Why a volume could not be built: never, once [`BrickFileView`] has validated the file
-/// (every index the volume reads was checked there). The `Result` of [`Volume::new`] keeps
-/// a place for a check a future format may need.
+/// Why a volume could not be built from a file [`BrickFileView`] has validated (every index
+/// the volume reads was checked there): only data placed where double precision cannot
+/// resolve its cells.
 #[derive(Debug, thiserror::Error)]
-pub enum VolumeError {}
+pub enum VolumeError {
+    /// The data lies too far from the origin for its cell width (see
+    /// [`format::MAX_REACH_LOG2`]): positions there cannot be told apart in double
+    /// precision, so no view of it (and no default camera) would mean anything.
+    #[error(
+        "the data's bounds {min:?}..{max:?} reach {} cells of the finest width {finest} from the origin, more than the 2^{} within which double precision places cells to 1/4096 of a cell; re-bake the data nearer the origin",
+        cells(*reach / *finest),
+        format::MAX_REACH_LOG2
+    )]
+    OutOfReach {
+        min: [f64; 3],
+        max: [f64; 3],
+        reach: f64,
+        finest: f64,
+    },
+}
+
+/// A cell count for messages: plain below a million, else `1.2e13`.
+fn cells(x: f64) -> String {
+    if x < 1e6 {
+        format!("{x:.0}")
+    } else {
+        format!("{x:.1e}")
+    }
+}
 
 /// A brick in the local frame, as the reconstruction reads it.
 #[derive(Debug, Clone, Copy)]
@@ -118,6 +142,19 @@ impl<'a> Volume<'a> {
             .iter()
             .map(|br| br.cell_width.to_native())
             .fold(f64::INFINITY, f64::min);
+        let reach = bmin
+            .iter()
+            .chain(&bmax)
+            .map(|x| x.abs())
+            .fold(0.0f64, f64::max);
+        if finest_w.is_finite() && reach / finest_w > (1u64 << format::MAX_REACH_LOG2) as f64 {
+            return Err(VolumeError::OutOfReach {
+                min: bmin,
+                max: bmax,
+                reach,
+                finest: finest_w,
+            });
+        }
         Ok(Volume {
             frame,
             bounds_min: std::array::from_fn(|a| bmin[a] - frame[a]),
@@ -335,6 +372,58 @@ impl<'a> Volume<'a> {
 mod tests {
     use super::*;
     use crate::testvol;
+
+    /// Issue 32: a view setting naming a missing field said the field twice wherever a
+    /// report prints the chain of sources (`{:#}`, as both programs do): the error is one
+    /// message with no source, naming the setting and the field once.
+    #[test]
+    fn a_setting_error_names_the_missing_field_once() {
+        let file = testvol::nested(4, [0.0; 3], &[("q", &|p: [f64; 3]| p[0])], 4);
+        let view = testvol::open(&file).expect("opens");
+        let vol = Volume::new(&view).expect("volume");
+        let e = vol
+            .field_index("nope")
+            .unwrap_err()
+            .named_by("colormap.field");
+        assert!(std::error::Error::source(&e).is_none());
+        let m = e.to_string();
+        assert_eq!(m.matches("nope").count(), 1, "{m}");
+        assert!(
+            m.starts_with("colormap.field: field \"nope\" is not in the file (fields: q"),
+            "{m}"
+        );
+    }
+
+    /// Issue 32: a file of data at 1e300 (valid as a file) rendered nonsense and then
+    /// failed with "camera.up is parallel to the view direction". Data beyond 2^40 finest
+    /// cells from the origin is refused at open, saying so; at 2^38 it opens.
+    #[test]
+    fn data_too_far_from_the_origin_is_refused_with_its_reach() {
+        let f = |p: [f64; 3]| p[0];
+        for (offset, opens) in [
+            (2f64.powi(38), true),
+            (2f64.powi(45), false),
+            (1e300, false),
+        ] {
+            let file = testvol::nested(4, [offset; 3], &[("f", &f)], 4);
+            let Ok(view) = testvol::open(&file) else {
+                assert!(!opens, "{offset:e}: the file should open");
+                continue;
+            };
+            match Volume::new(&view) {
+                Ok(_) => assert!(opens, "{offset:e}: opened"),
+                Err(e) => {
+                    assert!(!opens, "{offset:e}: {e}");
+                    let m = e.to_string();
+                    assert!(
+                        m.starts_with("the data's bounds [")
+                            && m.contains("from the origin, more than the 2^40 within"),
+                        "{m}"
+                    );
+                }
+            }
+        }
+    }
 
     /// The box of the regions that can contribute is the union over exactly those regions
     /// (checked by brute force over every region), for bands that meet some, all or none;

@@ -4,6 +4,9 @@
 //! field array (bricks lie one after the other, x fastest), so there are no per-brick
 //! buffers to interleave afterwards; the values do not depend on the thread count.
 
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use files::limits::{self, LimitError};
 use rayon::prelude::*;
 
 use crate::bricks::BrickBox;
@@ -17,12 +20,19 @@ use super::{BakeOptions, Bricks, Cells, Input};
 pub(super) struct FieldValues {
     pub(super) names: Vec<String>,
     pub(super) values: Vec<Vec<f32>>,
+    /// Per field, for one resampled from an extra scalar grid: how many leaf cells have an
+    /// active voxel of that grid around their centre (see [`super::extra_coverage`]).
+    pub(super) covered: Vec<Option<u64>>,
 }
 
 /// The value of every field at every cell of every brick, derived from the velocity (Q,
 /// speed, velocity components) or resampled from an extra scalar grid; a scalar grid baked
 /// on its own is its only field. Cells of a brick that are not leaf cells read as zero.
-pub(super) fn derive_fields(cells: &Cells, bricks: &Bricks, opts: &BakeOptions) -> FieldValues {
+pub(super) fn derive_fields(
+    cells: &Cells,
+    bricks: &Bricks,
+    opts: &BakeOptions,
+) -> Result<FieldValues, LimitError> {
     match &cells.input {
         Input::Vector(sets, vals, faces) => {
             let kinds = opts
@@ -43,13 +53,17 @@ pub(super) fn derive_fields(cells: &Cells, bricks: &Bricks, opts: &BakeOptions) 
                     _ => None,
                 })
                 .collect();
+            // Covered cells per extra field, summed brick by brick (the sum does not
+            // depend on the order).
+            let covered: Vec<AtomicU64> = kinds.iter().map(|_| AtomicU64::new(0)).collect();
             let values = per_brick(&bricks.boxes, names.len(), |b, out| {
                 let set = &sets[b.set];
                 let v = &vals[b.set];
+                let mut hits = vec![0u64; kinds.len()];
                 b.for_each_cell(set, |i, ijk, slot| {
                     let u = slot.map(|s| v[s]).unwrap_or_default();
                     let mut f = 0;
-                    for (k, extra) in kinds.iter().zip(&extras) {
+                    for (ki, (k, extra)) in kinds.iter().zip(&extras).enumerate() {
                         match k {
                             FieldKind::Q => {
                                 let g = match slot.filter(|&s| set.is_active(s)) {
@@ -71,14 +85,38 @@ pub(super) fn derive_fields(cells: &Cells, bricks: &Bricks, opts: &BakeOptions) 
                             }
                             FieldKind::Scalar(_) => {
                                 let p = set.centre(ijk);
-                                out[f][i] = extra.map_or(0.0, |e| e.sample(p)) as f32;
+                                let value = extra.map_or(0.0, |e| match e.sample(p) {
+                                    Some(x) => {
+                                        hits[ki] += 1;
+                                        x
+                                    }
+                                    None => e.background(),
+                                });
+                                out[f][i] = value as f32;
                                 f += 1;
                             }
                         }
                     }
                 });
-            });
-            FieldValues { names, values }
+                for (c, h) in covered.iter().zip(hits) {
+                    if h > 0 {
+                        c.fetch_add(h, Ordering::Relaxed);
+                    }
+                }
+            })?;
+            let covered = kinds
+                .iter()
+                .zip(covered)
+                .flat_map(|(k, c)| {
+                    let c = matches!(k, FieldKind::Scalar(_)).then(|| c.into_inner());
+                    vec![c; k.names().len()]
+                })
+                .collect();
+            Ok(FieldValues {
+                names,
+                values,
+                covered,
+            })
         }
         Input::Scalar(sets, vals, name) => {
             let values = per_brick(&bricks.boxes, 1, |b, out| {
@@ -87,24 +125,28 @@ pub(super) fn derive_fields(cells: &Cells, bricks: &Bricks, opts: &BakeOptions) 
                 b.for_each_cell(set, |i, _, slot| {
                     out[0][i] = slot.map(|s| v[s]).unwrap_or_default() as f32;
                 });
-            });
-            FieldValues {
+            })?;
+            Ok(FieldValues {
                 names: vec![name.clone()],
                 values,
-            }
+                covered: vec![None],
+            })
         }
     }
 }
 
 /// Runs `cell_values` on every brick in parallel with the brick's slice of each of the `nf`
 /// field arrays (which it must fill), and returns the arrays: brick after brick, x fastest.
+/// The arrays are allocated fallibly (they are the largest allocations after the cells).
 fn per_brick(
     bricks: &[BrickBox],
     nf: usize,
     cell_values: impl Fn(&BrickBox, &mut [&mut [f32]]) + Sync,
-) -> Vec<Vec<f32>> {
+) -> Result<Vec<Vec<f32>>, LimitError> {
     let total: usize = bricks.iter().map(|b| b.cells() as usize).sum();
-    let mut fields: Vec<Vec<f32>> = (0..nf).map(|_| vec![0.0; total]).collect();
+    let mut fields: Vec<Vec<f32>> = (0..nf)
+        .map(|_| limits::vec_of("the baked field values", total))
+        .collect::<Result<_, _>>()?;
     // Cut every field into the bricks' slices, then regroup them per brick.
     let mut rest: Vec<&mut [f32]> = fields.iter_mut().map(Vec::as_mut_slice).collect();
     let mut slices: Vec<Vec<&mut [f32]>> = Vec::with_capacity(bricks.len());
@@ -124,5 +166,5 @@ fn per_brick(
         .into_par_iter()
         .zip(bricks)
         .for_each(|(mut out, b)| cell_values(b, &mut out));
-    fields
+    Ok(fields)
 }

@@ -6,7 +6,8 @@ use crate::cells::CellSet;
 use crate::error::BakeError;
 use crate::grid::AnyGrid;
 
-use super::fix_nonfinite;
+use super::derived::FieldValues;
+use super::{fix_nonfinite, Cells};
 
 /// A scalar grid baked as an extra field: its cells, values and background, finest first
 /// among grids of the same name.
@@ -18,9 +19,11 @@ pub(super) struct ExtraGrid {
 impl ExtraGrid {
     /// Trilinear sample at world point `p` from the finest grid with an active voxel among
     /// the 8 around `p`; inactive or missing voxels count as the background (OpenVDB's
-    /// reading of a sparse grid); the background where no grid has data. At a voxel centre
-    /// (same lattice as the velocity) this is the voxel's value.
-    pub(super) fn sample(&self, p: [f64; 3]) -> f64 {
+    /// reading of a sparse grid). `None` where no grid has an active voxel around `p`: the
+    /// value there is [`ExtraGrid::background`], and the point is not covered (see
+    /// [`extra_coverage`]). At a voxel centre (same lattice as the velocity) this is the
+    /// voxel's value.
+    pub(super) fn sample(&self, p: [f64; 3]) -> Option<f64> {
         for (set, vals, bg) in &self.grids {
             let t = set.transform.translation;
             let mut base = [0i32; 3];
@@ -66,9 +69,14 @@ impl ExtraGrid {
                 }
             }
             if any {
-                return sum;
+                return Some(sum);
             }
         }
+        None
+    }
+
+    /// The value where no grid of the field has data: the finest grid's background.
+    pub(super) fn background(&self) -> f64 {
         self.grids.first().map_or(0.0, |g| g.2)
     }
 }
@@ -90,11 +98,11 @@ pub(super) fn extra_fields(
         for g in mine {
             let (set, v, bg) = match g {
                 AnyGrid::Float(g) => {
-                    let (s, v) = CellSet::from_grid(g, 0, f64::from);
+                    let (s, v) = CellSet::from_grid(g, 0, f64::from)?;
                     (s, v, f64::from(g.background))
                 }
                 AnyGrid::Double(g) => {
-                    let (s, v) = CellSet::from_grid(g, 0, |v: f64| v);
+                    let (s, v) = CellSet::from_grid(g, 0, |v: f64| v)?;
                     (s, v, g.background)
                 }
                 _ => continue,
@@ -117,4 +125,72 @@ pub(super) fn extra_fields(
         });
     }
     Ok(out)
+}
+
+/// How much of the velocity an extra field covers: `covered` of the `leaf_cells` leaf cells
+/// (per field, `None` for fields derived from the velocity) have an active voxel of the
+/// field's grid among the 8 around their centre. A field that covers some of them but not
+/// all is baked, with a warning giving the share (the rest read its background, as OpenVDB
+/// reads a sparse grid: right for a fog volume that is only active where there is smoke,
+/// wrong for a grid that was meant to cover the velocity); one that covers none is refused,
+/// since every value would be the background (most likely a grid in another place or of
+/// another transform than meant).
+pub(super) fn extra_coverage(
+    cells: &Cells,
+    fields: &FieldValues,
+    sets: &[CellSet],
+    leaf_cells: u64,
+    warnings: &mut Vec<String>,
+) -> Result<(), BakeError> {
+    for (name, covered) in fields.names.iter().zip(&fields.covered) {
+        let (Some(covered), Some(extra)) = (covered, cells.extras.iter().find(|e| &e.name == name))
+        else {
+            continue;
+        };
+        if *covered == leaf_cells {
+            continue;
+        }
+        let background = extra.background();
+        if *covered == 0 {
+            let extra_sets: Vec<&CellSet> = extra.grids.iter().map(|g| &g.0).collect();
+            return Err(BakeError::FieldNotCovered {
+                field: name.clone(),
+                cells: leaf_cells,
+                background,
+                extra: world_box(&extra_sets),
+                velocity: world_box(&sets.iter().collect::<Vec<_>>()),
+            });
+        }
+        let share = 100.0 * *covered as f64 / leaf_cells as f64;
+        // One decimal, never rounded up to a full 100.0 %.
+        let share = if share > 99.9 && *covered < leaf_cells {
+            "over 99.9".to_string()
+        } else {
+            format!("{share:.1}")
+        };
+        warnings.push(format!(
+            "field \"{name}\": grid \"{name}\" covers {share} % of the velocity's leaf cells ({covered} of {leaf_cells}); the others read its background {background}"
+        ));
+    }
+    Ok(())
+}
+
+/// The world box of the active cells of `sets` (cell boxes, not centres), as
+/// `[x, y, z]..[x, y, z]`, for messages; `nothing` when there is no active cell.
+fn world_box(sets: &[&CellSet]) -> String {
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for set in sets {
+        for slot in set.active_slots() {
+            let c = set.centre(set.ijk(slot));
+            for a in 0..3 {
+                lo[a] = lo[a].min(c[a] - 0.5 * set.width);
+                hi[a] = hi[a].max(c[a] + 0.5 * set.width);
+            }
+        }
+    }
+    if lo[0] > hi[0] {
+        return "nothing".to_string();
+    }
+    format!("{lo:?}..{hi:?}")
 }

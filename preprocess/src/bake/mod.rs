@@ -12,10 +12,13 @@ use serde::Serialize;
 
 use format::{Aabb, Brick, BrickFile, Field, Level, Provenance, Region, SourceGrid, ValueRange};
 
+use files::limits::LimitError;
+
 use crate::bricks::{make_bricks, BrickBox};
 use crate::cells::{classify_leaves, CellSet};
 use crate::derive::{centre_from_faces, Stencil};
-use crate::fields::{range_and_histogram, region_ranges, FieldKind, RangeInput};
+use crate::error::{field_grid_not_found, grid_labels, GridCount, GridCounts};
+use crate::fields::{range_and_histogram, region_ranges, FieldKind, RangeInput, HISTOGRAM_BINS};
 use crate::grid::{AnyGrid, Transform};
 use crate::levels::assign_levels;
 use crate::nonfinite::{self, CellValue};
@@ -27,16 +30,20 @@ pub use select::{select_grids, GridKind};
 
 mod derived;
 mod extra;
+pub(crate) mod memory;
+mod overlap;
+mod reach;
 mod select;
 
 use derived::{derive_fields, FieldValues};
-use extra::{extra_fields, ExtraGrid};
+use extra::{extra_coverage, extra_fields, ExtraGrid};
+use memory::check_bake_memory;
+use overlap::same_level_overlaps;
+use reach::check_reach;
 use select::select;
 
 /// Default cap on brick edge length (cells).
 pub const DEFAULT_MAX_BRICK: u32 = 8;
-/// Default cap on the number of input cells (tiles counted as the voxels they cover).
-pub(crate) const DEFAULT_MAX_CELLS: u64 = 1 << 28;
 
 /// What to bake and how.
 #[derive(Debug, Clone, Serialize)]
@@ -60,9 +67,6 @@ pub struct BakeOptions {
     /// Source file name recorded in the provenance (not part of the options JSON).
     #[serde(skip)]
     pub source: String,
-    /// Largest accepted number of input cells.
-    #[serde(skip)]
-    pub max_cells: u64,
     /// Run on a pool of this many threads (None: rayon's global pool). Not recorded: the
     /// output does not depend on it.
     #[serde(skip)]
@@ -79,7 +83,6 @@ impl Default for BakeOptions {
             strict: false,
             staggered: Vec::new(),
             source: String::new(),
-            max_cells: DEFAULT_MAX_CELLS,
             threads: None,
         }
     }
@@ -164,46 +167,55 @@ impl Input {
 fn to_sets<T: Send>(
     grids: &[AnyGrid],
     levels: &[u32],
-    one: impl Fn(&AnyGrid, u32) -> Option<(CellSet, Vec<T>)> + Sync,
-) -> (Vec<CellSet>, Vec<Vec<T>>) {
-    grids
+    one: impl Fn(&AnyGrid, u32) -> Option<Result<(CellSet, Vec<T>), LimitError>> + Sync,
+) -> Result<(Vec<CellSet>, Vec<Vec<T>>), BakeError> {
+    Ok(grids
         .par_iter()
         .zip(levels)
         .filter_map(|(g, &l)| one(g, l))
-        .collect::<Vec<_>>()
+        .collect::<Result<Vec<_>, _>>()?
         .into_iter()
-        .unzip()
+        .unzip())
 }
 
 /// Replaces the non-finite values of every set by the average of their finite neighbours,
-/// with one warning per grid, or refuses them with `strict`. Returns how many there were.
+/// with one warning naming every grid that had some (with its count), or refuses them with
+/// `strict`. Returns how many there were.
 fn fix_nonfinite<T: CellValue>(
     sets: &[CellSet],
     values: &mut [Vec<T>],
     strict: bool,
     warnings: &mut Vec<String>,
 ) -> Result<u64, BakeError> {
-    let mut total = 0;
-    for (set, vals) in sets.iter().zip(values.iter_mut()) {
+    let labels = grid_labels(sets.iter().map(|s| s.name.as_str()));
+    let mut found = Vec::new();
+    for ((set, vals), label) in sets.iter().zip(values.iter()).zip(labels) {
         let rep = nonfinite::count(set, vals);
-        if rep.count == 0 {
-            continue;
-        }
-        let first = rep.first.unwrap_or([0; 3]);
-        if strict {
-            return Err(BakeError::NonFinite {
-                grid: set.name.clone(),
+        if rep.count > 0 {
+            found.push(GridCount {
+                grid: label,
                 count: rep.count,
-                first,
+                first: rep.first.unwrap_or([0; 3]),
             });
         }
-        nonfinite::replace(set, vals);
-        warnings.push(format!(
-            "grid \"{}\": replaced {} non-finite values (first at voxel {:?}) by the average of their finite neighbours",
-            set.name, rep.count, first
-        ));
-        total += rep.count;
     }
+    let total: u64 = found.iter().map(|g| g.count).sum();
+    if total == 0 {
+        return Ok(0);
+    }
+    let grids = GridCounts(found);
+    if strict {
+        return Err(BakeError::NonFinite {
+            count: total,
+            grids,
+        });
+    }
+    for (set, vals) in sets.iter().zip(values.iter_mut()) {
+        nonfinite::replace(set, vals);
+    }
+    warnings.push(format!(
+        "replaced {total} non-finite values by the average of their finite neighbours: {grids}"
+    ));
     Ok(total)
 }
 
@@ -233,13 +245,22 @@ fn run(
 
     stage("classifying leaf cells");
     let leaf_cells = classify(&mut cells.input);
+    // The values alone: a file the format cannot hold is refused before its fields are
+    // derived (the whole archive is checked again once it is known, in `assemble`).
+    let nfields = field_names(&cells.input, opts).len() as u64;
+    let at_least = leaf_cells
+        .saturating_mul(nfields * 4)
+        .saturating_add(leaf_cells / u64::from(opts.max_brick).saturating_pow(3) * 64);
+    check_archive(leaf_cells, nfields, at_least)?;
+    warnings.extend(same_level_overlaps(&cells.input));
     let sets = cells.input.sets();
 
     stage("bricking");
     let bricks = brick(sets, opts.max_brick);
 
     stage("deriving fields");
-    let mut fields = derive_fields(&cells, &bricks, opts);
+    let mut fields = derive_fields(&cells, &bricks, opts)?;
+    extra_coverage(&cells, &fields, sets, leaf_cells, &mut warnings)?;
     let nonfinite_derived = clamp_fields(&mut fields, &bricks, sets, opts.strict, &mut warnings)?;
 
     stage("building regions");
@@ -247,6 +268,7 @@ fn run(
     let kd = kd_tree(&tree, &bricks, &fields.values)?;
 
     stage("assembling");
+    check_archive(leaf_cells, nfields, archive_bytes(&bricks, &fields, &kd))?;
     let (file, field_summaries) = assemble(
         opts,
         selection.source_grids,
@@ -314,22 +336,12 @@ fn select_input(grids: Vec<AnyGrid>, opts: &BakeOptions) -> Result<Selection, Ba
         .iter()
         .find(|n| !extra_grids.iter().any(|g| g.name() == n.as_str()))
     {
-        let mut available: Vec<&str> = grids
+        let kinds: Vec<(&str, GridKind)> = grids
             .iter()
             .chain(&extra_grids)
-            .filter(|g| !g.is_vector())
-            .map(AnyGrid::name)
+            .map(|g| (g.name(), GridKind::of(g)))
             .collect();
-        available.sort_unstable();
-        available.dedup();
-        return Err(BakeError::FieldGridNotFound {
-            name: missing.clone(),
-            available: available
-                .iter()
-                .map(|n| format!("\"{n}\""))
-                .collect::<Vec<_>>()
-                .join(", "),
-        });
+        return Err(field_grid_not_found(missing, &kinds));
     }
     let grids = select(grids, &opts.grids)?;
     if grids.is_empty() {
@@ -337,17 +349,12 @@ fn select_input(grids: Vec<AnyGrid>, opts: &BakeOptions) -> Result<Selection, Ba
     }
     let named: Vec<(&str, Transform)> = grids.iter().map(|g| (g.name(), g.transform())).collect();
     let (levels, widths) = assign_levels(&named)?;
+    check_reach(&grids, widths[0])?;
     let input_cells: u64 = grids.iter().map(AnyGrid::active_voxel_count).sum();
-    let extra_cells: u64 = extra_grids.iter().map(AnyGrid::active_voxel_count).sum();
-    if input_cells.saturating_add(extra_cells) > opts.max_cells {
-        return Err(BakeError::TooManyCells {
-            cells: input_cells.saturating_add(extra_cells),
-            limit: opts.max_cells,
-        });
-    }
     if input_cells == 0 {
         return Err(BakeError::Empty);
     }
+    check_bake_memory(&grids, &extra_grids, opts, input_cells)?;
     let source_grids: Vec<SourceGrid> = grids
         .iter()
         .zip(&levels)
@@ -429,7 +436,7 @@ fn cell_sets(grids: Vec<AnyGrid>, levels: &[u32], opts: &BakeOptions) -> Result<
             AnyGrid::Vec3s(g) => Some(CellSet::from_grid(g, l, |v: [f32; 3]| v.map(f64::from))),
             AnyGrid::Vec3d(g) => Some(CellSet::from_grid(g, l, |v: [f64; 3]| v)),
             _ => None,
-        });
+        })?;
         Ok(Input::Vector(sets, vals, Vec::new()))
     } else {
         let name = grids[0].name().to_string();
@@ -440,7 +447,7 @@ fn cell_sets(grids: Vec<AnyGrid>, levels: &[u32], opts: &BakeOptions) -> Result<
             AnyGrid::Float(g) => Some(CellSet::from_grid(g, l, f64::from)),
             AnyGrid::Double(g) => Some(CellSet::from_grid(g, l, |v: f64| v)),
             _ => None,
-        });
+        })?;
         Ok(Input::Scalar(sets, vals, name))
     }
 }
@@ -485,8 +492,8 @@ fn brick(sets: &[CellSet], max_brick: u32) -> Bricks {
 }
 
 /// Values that overflowed f32 (or were NaN): counted, refused with `strict`, otherwise
-/// clamped (see [`clamp_nonfinite`]) with one warning per field naming the first cell.
-/// Returns how many there were.
+/// clamped (see [`clamp_nonfinite`]) with one warning per field naming every grid they were
+/// found in, each with its count and first cell. Returns how many there were.
 fn clamp_fields(
     fields: &mut FieldValues,
     bricks: &Bricks,
@@ -494,29 +501,43 @@ fn clamp_fields(
     strict: bool,
     warnings: &mut Vec<String>,
 ) -> Result<u64, BakeError> {
+    let labels = grid_labels(sets.iter().map(|s| s.name.as_str()));
     let mut nonfinite_derived = 0;
     for (name, vals) in fields.names.iter().zip(fields.values.iter_mut()) {
-        let Some((count, at)) = clamp_nonfinite(vals) else {
+        // Counted brick by brick, so each value's grid (and its first cell) is known.
+        let mut per_set: Vec<Option<GridCount>> = vec![None; sets.len()];
+        let mut count = 0u64;
+        for (b, bx) in bricks.boxes.iter().enumerate() {
+            let first = bricks.first[b] as usize;
+            let part = &mut vals[first..first + bx.cells() as usize];
+            let Some((n, at)) = clamp_nonfinite(part) else {
+                continue;
+            };
+            count += n;
+            let entry = per_set[bx.set].get_or_insert_with(|| {
+                let (nx, ny) = (at % bx.dims[0] as usize, at / bx.dims[0] as usize);
+                let off = [nx, ny % bx.dims[1] as usize, ny / bx.dims[1] as usize];
+                GridCount {
+                    grid: labels[bx.set].clone(),
+                    count: 0,
+                    first: [0, 1, 2].map(|a| bx.lo[a] + off[a] as i32),
+                }
+            });
+            entry.count += n;
+        }
+        if count == 0 {
             continue;
-        };
-        let first = &bricks.first;
-        let b = first.partition_point(|&f| f <= at as u64) - 1;
-        let bx = &bricks.boxes[b];
-        let local = at as u64 - first[b];
-        let (nx, ny) = (u64::from(bx.dims[0]), u64::from(bx.dims[1]));
-        let off = [local % nx, (local / nx) % ny, local / (nx * ny)];
-        let first_cell = [0, 1, 2].map(|a| bx.lo[a] + off[a] as i32);
-        let grid = sets[bx.set].name.clone();
+        }
+        let grids = GridCounts(per_set.into_iter().flatten().collect());
         if strict {
             return Err(BakeError::NonFiniteDerived {
-                grid,
                 field: name.clone(),
                 count,
-                first: first_cell,
+                grids,
             });
         }
         warnings.push(format!(
-            "grid \"{grid}\": field \"{name}\": {count} values are not finite as 32-bit floats (first at voxel {first_cell:?}); stored as ±{:e} (infinities) and 0 (NaN)",
+            "field \"{name}\": {count} values are not finite as 32-bit floats: {grids}; stored as ±{:e} (infinities) and 0 (NaN)",
             f32::MAX
         ));
         nonfinite_derived += count;
@@ -592,6 +613,49 @@ fn count_regions(tree: &regions::RegionTree) -> u64 {
         }
     }
     n
+}
+
+/// Names of the fields a bake of `input` makes.
+fn field_names(input: &Input, opts: &BakeOptions) -> Vec<String> {
+    match input {
+        Input::Vector(..) => opts
+            .fields
+            .as_deref()
+            .unwrap_or(&[FieldKind::Q, FieldKind::Speed])
+            .iter()
+            .flat_map(FieldKind::names)
+            .collect(),
+        Input::Scalar(_, _, name) => vec![name.clone()],
+    }
+}
+
+/// Bytes of the archive of a bake, from the sizes of its arrays (each element as the
+/// schema archives it) and 1 MiB for the rest (names, provenance, alignment).
+fn archive_bytes(bricks: &Bricks, fields: &FieldValues, kd: &Kd) -> u64 {
+    let n = |len: usize, bytes: u64| (len as u64).saturating_mul(bytes);
+    let values: u64 = fields.values.iter().map(|v| n(v.len(), 4)).sum();
+    let histograms = n(fields.values.len(), 8 * HISTOGRAM_BINS as u64);
+    let region_bricks: u64 = kd.regions.iter().map(|(_, ids)| n(ids.len(), 4)).sum();
+    values
+        .saturating_add(histograms)
+        .saturating_add(n(bricks.boxes.len(), 64))
+        .saturating_add(n(kd.regions.len(), 8))
+        .saturating_add(region_bricks)
+        .saturating_add(n(kd.ranges.len(), 8))
+        .saturating_add(n(kd.tree.1.len(), 16 + 1))
+        .saturating_add(1 << 20)
+}
+
+/// Refuses an archive of `bytes` that the format cannot address.
+fn check_archive(leaf_cells: u64, fields: u64, bytes: u64) -> Result<(), BakeError> {
+    if bytes > format::MAX_ARCHIVE_BYTES {
+        return Err(BakeError::TooLargeForFormat {
+            leaf_cells,
+            fields,
+            bytes,
+        });
+    }
+    Ok(())
 }
 
 /// Assembly stage: the [`BrickFile`] (fields with their ranges and histograms, levels,
@@ -757,4 +821,23 @@ pub(crate) fn clamp_nonfinite(vals: &mut [f32]) -> Option<(u64, usize)> {
         };
     }
     first.map(|f| (count, f))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 640³ tile baked (10 GB, two minutes) and then panicked in the writer: 262 M
+    /// cells of two fields and their regions are more than 2 GiB, which the format's
+    /// 32-bit offsets cannot reach. Such an archive is refused instead.
+    #[test]
+    fn an_archive_past_the_formats_offsets_is_refused() {
+        assert!(check_archive(1000, 2, 8000).is_ok());
+        let e = check_archive(262_144_000, 2, 2_200_000_000).expect_err("too large");
+        assert_eq!(
+            e.to_string(),
+            "262144000 leaf cells with 2 field(s) make a .qbk archive of about 2098 MiB, more \
+             than the 2047 MiB its 32-bit offsets reach; bake a part of the data, or fewer fields"
+        );
+    }
 }

@@ -14,6 +14,17 @@ pub enum GridKind {
     Other,
 }
 
+impl GridKind {
+    /// The kind of a decoded grid.
+    pub(crate) fn of(grid: &AnyGrid) -> GridKind {
+        if grid.is_vector() {
+            GridKind::Vector
+        } else {
+            GridKind::Scalar
+        }
+    }
+}
+
 /// Indices (file order) of the grids to bake among `grids` (name, kind): every grid named
 /// in `names`, or by default all vec3 grids, or the scalar grid(s) of the one scalar name
 /// when there is no vec3 grid.
@@ -86,17 +97,7 @@ pub fn select_grids(grids: &[(&str, GridKind)], names: &[String]) -> Result<Vec<
 }
 
 pub(super) fn select(grids: Vec<AnyGrid>, names: &[String]) -> Result<Vec<AnyGrid>, BakeError> {
-    let kinds: Vec<(&str, GridKind)> = grids
-        .iter()
-        .map(|g| {
-            let k = if g.is_vector() {
-                GridKind::Vector
-            } else {
-                GridKind::Scalar
-            };
-            (g.name(), k)
-        })
-        .collect();
+    let kinds: Vec<(&str, GridKind)> = grids.iter().map(|g| (g.name(), GridKind::of(g))).collect();
     let keep = select_grids(&kinds, names)?;
     Ok(grids
         .into_iter()

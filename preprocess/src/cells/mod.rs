@@ -8,6 +8,8 @@
 //! A cell is a *leaf cell* when its box is not fully covered by active cells of finer grids
 //! (smaller voxel size); [`classify_leaves`] finds them.
 
+use files::limits::{self, LimitError};
+
 use crate::grid::{leaf_offset, Grid, Transform, LEAF_VOXELS};
 
 mod classify;
@@ -66,12 +68,15 @@ pub(crate) struct CellSet {
 
 impl CellSet {
     /// Builds the cell set of `grid` and its values converted by `conv`, one per slot.
-    /// Tiles are expanded to cells; the caller bounds the total beforehand.
+    /// Tiles are expanded to cells; the caller bounds the total beforehand (see
+    /// [`crate::bake::memory`]), and the two allocations that grow with it (the blocks'
+    /// values and masks) are fallible, so an estimate that falls short is an error, not an
+    /// abort.
     pub(crate) fn from_grid<V: Copy, T: Copy + Default>(
         grid: &Grid<V>,
         level: u32,
         conv: impl Fn(V) -> T,
-    ) -> (CellSet, Vec<T>) {
+    ) -> Result<(CellSet, Vec<T>), LimitError> {
         let tile_ranges: Vec<([i64; 3], [i64; 3])> = grid
             .tiles
             .iter()
@@ -110,8 +115,9 @@ impl CellSet {
         blocks.sort_unstable_by_key(|o| (o[2], o[1], o[0]));
         blocks.dedup();
         let index = BlockIndex::new(&blocks);
-        let mut active = vec![[0u64; 8]; blocks.len()];
-        let mut values = vec![T::default(); blocks.len() * BLOCK_CELLS];
+        let what = || format!("the cells of grid \"{}\"", grid.name);
+        let mut active: Vec<[u64; 8]> = limits::vec_of(what(), blocks.len())?;
+        let mut values: Vec<T> = limits::vec_of(what(), blocks.len() * BLOCK_CELLS)?;
         let put = |active: &mut [[u64; 8]], values: &mut [T], ijk: [i32; 3], v: T| {
             if let Some(b) = index.get(block_origin(ijk)) {
                 let n = offset_in_block(ijk);
@@ -163,7 +169,7 @@ impl CellSet {
             leaf: active.clone(),
             active,
         };
-        (set, values)
+        Ok((set, values))
     }
 
     /// Slot of `ijk` when its block exists (the cell may be inactive).
@@ -402,7 +408,7 @@ mod tests {
                 value: 2.0,
             }],
         };
-        let (s, v) = CellSet::from_grid(&g, 0, |x| x);
+        let (s, v) = CellSet::from_grid(&g, 0, |x| x).expect("small");
         assert_eq!(s.blocks, vec![[0, 0, 0], [8, 0, 0]]);
         assert_eq!(s.active_count(), 513);
         let at = |ijk| s.active_slot(ijk).map(|slot| v[slot]);
@@ -428,7 +434,7 @@ mod tests {
                 value: 2.0,
             }],
         };
-        let (s, v) = CellSet::from_grid(&g, 0, |x| x);
+        let (s, v) = CellSet::from_grid(&g, 0, |x| x).expect("small");
         assert_eq!(s.active_count(), 512);
         let slot = s.active_slot([-1, 7, 15]).expect("inside tile");
         assert_eq!(v[slot], 2.0);

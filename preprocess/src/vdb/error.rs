@@ -36,6 +36,11 @@ pub enum ErrorKind {
     /// A grid index outside `0..grids().len()`.
     #[error("no grid with index {index} (the file has {count})")]
     NoSuchGrid { index: usize, count: usize },
+    /// Decoding would take more memory than the shared limit allows (compressed leaves
+    /// can decode to a hundred times their size in the file).
+    /// Boxed: as large as the largest other reasons.
+    #[error("{0}")]
+    Memory(Box<files::limits::LimitError>),
 }
 
 /// What makes a value read from the file impossible.

@@ -13,6 +13,7 @@ use super::compress::Inflater;
 use super::cursor::Cursor;
 use super::error::{ErrorKind, Invalid, RawError, RawResult};
 use super::values::{decode_values, locate_values, read_values, Codec};
+use crate::bake::memory::leaf_bytes;
 use crate::grid::{Leaf, Tile, LEAF_VOXELS};
 
 /// Everything read from one tree.
@@ -231,6 +232,14 @@ pub(crate) fn read_tree<V: VdbValue>(
     }
     if !decode_leaves {
         frames.clear();
+    }
+    // Compressed leaves take a few dozen bytes in the file and kilobytes decoded: the
+    // file's size bounds the leaf count, not their memory, so it is checked here.
+    if !frames.is_empty() {
+        let need = (frames.len() as u64).saturating_mul(leaf_bytes::<V>());
+        files::limits::check_memory(format!("decoding {} leaves", frames.len()), need).map_err(
+            |e| RawError::new(cur.pos(), "leaf buffers", ErrorKind::Memory(Box::new(e))),
+        )?;
     }
     // Decoding (decompression, half floats, inactive values) is independent per leaf.
     let leaves = frames

@@ -161,12 +161,9 @@ fn split_components_from_openvdb_bake_as_one_velocity() {
             _ => panic!("float components"),
         })
         .collect();
-    let merged = qbricks_preprocess::inputs::merge_components(
-        "vel",
-        [&parts[0], &parts[1], &parts[2]],
-        1 << 20,
-    )
-    .unwrap();
+    let merged =
+        qbricks_preprocess::inputs::merge_components("vel", [&parts[0], &parts[1], &parts[2]])
+            .unwrap();
     assert_eq!(merged.active_voxel_count(), 16 * 12 * 7 + 512);
     let opts = BakeOptions {
         fields: Some(vec![

@@ -9,6 +9,7 @@ mod common;
 
 mod cache_fixtures;
 mod fields;
+mod hostile;
 mod pipeline;
 mod sample;
 mod select_grids;

@@ -1,5 +1,5 @@
 //! Sampling strategies along one ray: `uniform`, `paper`, `bisect`, `exact`
-//! (see `docs/design.md`, "Sampling strategies").
+//! (see `docs/sampling.md`, "The four strategies").
 //!
 //! In dvr mode all strategies walk the regions front to back ([`Volume::segments`]) and skip
 //! a region whose value bounds miss the transfer function's non-zero band. A skipped region
@@ -56,7 +56,7 @@ mod roots;
 /// Smallest bisection interval of `bisect`, in cell widths.
 pub(crate) const BISECT_RESOLUTION: f64 = 0.005;
 
-/// Sampling strategy along a ray (see `docs/design.md`, "Sampling strategies").
+/// Sampling strategy along a ray (see `docs/sampling.md`, "The four strategies").
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum Strategy {

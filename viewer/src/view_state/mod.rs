@@ -41,6 +41,10 @@ pub(crate) const MIN_STEP: f64 = 1e-3;
 
 /// Most `meshes` entries: each is loaded and placed separately (2,000 took 15 s and 3.3 GB).
 pub(crate) const MAX_MESHES: usize = 64;
+/// Most `lights` entries: every shaded sample loops over them, with a shadow ray each
+/// when `shadows` is on (100,000 lights in a 14 MB state took 24 s for 64×48 pixels on one
+/// thread, about an hour at the default 800×600). The defaults have three.
+pub(crate) const MAX_LIGHTS: usize = 64;
 
 /// Camera and all render settings. JSON field names are the Rust field names.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -99,16 +103,15 @@ fn default_background() -> [f32; 3] {
 /// (where the vortex cores of Q stand out), else the middle of its range; σ at 8 % of the
 /// iso value as in the seed report, never zero.
 pub(crate) fn default_iso(f: &FieldRange) -> (f64, f64) {
-    let (iso, span) = if f.min.is_finite() && f.max.is_finite() {
-        let (lo, hi) = (f64::from(f.min.min(f.max)), f64::from(f.min.max(f.max)));
+    let (iso, span) = {
+        let (lo, hi) = crate::colormap::finite_range(f.min, f.max);
+        let (lo, hi) = (f64::from(lo), f64::from(hi));
         let iso = if hi > 0.0 && lo < 0.1 * hi {
             0.1 * hi
         } else {
             0.5 * (lo + hi)
         };
         (iso, hi - lo)
-    } else {
-        (0.0, 1.0)
     };
     let mut sigma = 0.08 * iso.abs();
     if sigma <= 0.0 || sigma.is_nan() {
@@ -268,6 +271,63 @@ mod tests {
         ViewState::default_for([0.0; 3], [1.0; 3], &nan)
             .validate()
             .expect("nan range");
+        // Ranges wider than f32::MAX (a manifest may hold -3e38 … 3e38; caught by the
+        // `sequence_state` fuzz target's check of the default state) for the colour field
+        // and the iso field.
+        let wide = [
+            FieldRange {
+                name: "q".into(),
+                min: -3e38,
+                max: 3e38,
+            },
+            FieldRange {
+                name: "speed".into(),
+                min: f32::MIN,
+                max: f32::MAX,
+            },
+        ];
+        ViewState::default_for([0.0; 3], [1.0; 3], &wide)
+            .validate()
+            .expect("ranges wider than f32::MAX");
+    }
+
+    /// Issue 32: a file whose Q overflowed f32 (stored as ±f32::MAX by the baker, or ±inf
+    /// in a file written otherwise) rendered with "colormap.band: expected a finite
+    /// number" although no state was given. Every default is finite and valid, whatever
+    /// the ranges.
+    #[test]
+    fn defaults_from_overflowing_ranges_are_valid() {
+        for (min, max) in [
+            (-f32::MAX, f32::MAX),
+            (f32::NEG_INFINITY, f32::INFINITY),
+            (0.0, f32::INFINITY),
+            (f32::NEG_INFINITY, f32::NAN),
+        ] {
+            // Q alone: the colour map falls back to the iso field.
+            let q = [FieldRange {
+                name: "q".into(),
+                min,
+                max,
+            }];
+            let s = ViewState::default_for([0.0; 3], [1.0; 3], &q);
+            s.validate()
+                .unwrap_or_else(|e| panic!("[{min}, {max}]: {e}"));
+            assert!(s.iso.is_finite() && s.colormap.band.is_finite());
+        }
+    }
+
+    /// A camera placed far out (its squared coordinates overflow) is judged by its
+    /// direction: it used to be refused with "camera.up is parallel to the view direction".
+    #[test]
+    fn a_camera_far_from_the_origin_is_valid() {
+        let s = ViewState::default_for([1e200; 3], [1.0001e200; 3], &fields());
+        s.validate().expect("valid far out");
+        let mut s = s;
+        s.camera.up = std::array::from_fn(|a| s.camera.look_at[a] - s.camera.eye[a]);
+        assert!(matches!(
+            s.validate(),
+            Err(InvalidViewState::UpAlongView { .. })
+        ));
     }
 
     #[test]

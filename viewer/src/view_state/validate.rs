@@ -1,7 +1,7 @@
 //! What a view state may hold beyond what its JSON types allow, checked once
 //! ([`ViewState::validate`]) wherever a state comes in: a file, the window, the flags.
 
-use super::{ViewState, MAX_IMAGE_SIDE, MAX_MESHES, MAX_SPP, MIN_STEP};
+use super::{ViewState, MAX_IMAGE_SIDE, MAX_LIGHTS, MAX_MESHES, MAX_SPP, MIN_STEP};
 use crate::camera::Projection;
 use crate::colormap::ColorMapError;
 use crate::mesh::MeshError;
@@ -36,6 +36,8 @@ pub enum InvalidViewState {
     Transfer { name: &'static str, value: f64 },
     #[error("colormap.{0}")]
     ColorMap(ColorMapError),
+    #[error("lights: expected at most {MAX_LIGHTS} entries, found {count}")]
+    TooManyLights { count: usize },
     #[error("lights[{index}].{error}")]
     Light { index: usize, error: ShadingError },
     #[error("material.{0}")]
@@ -65,14 +67,26 @@ impl ViewState {
         }
         // An up vector along the view direction leaves the image's roll undefined; the
         // camera would silently pick a world axis instead.
-        let forward = std::array::from_fn::<f64, 3, _>(|a| c.look_at[a] - c.eye[a]);
+        // Both vectors scaled to a largest component of 1 first (the direction is halved
+        // before the subtraction), so that cameras far out (coordinates beyond 1e154,
+        // whose squares overflow) are judged by their direction, not by infinities.
+        let unit = |v: [f64; 3]| {
+            let m = v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+            if m > 0.0 {
+                v.map(|x| x / m)
+            } else {
+                v
+            }
+        };
+        let forward = unit(std::array::from_fn(|a| 0.5 * c.look_at[a] - 0.5 * c.eye[a]));
+        let up = unit(c.up);
         let cross = [
-            forward[1] * c.up[2] - forward[2] * c.up[1],
-            forward[2] * c.up[0] - forward[0] * c.up[2],
-            forward[0] * c.up[1] - forward[1] * c.up[0],
+            forward[1] * up[2] - forward[2] * up[1],
+            forward[2] * up[0] - forward[0] * up[2],
+            forward[0] * up[1] - forward[1] * up[0],
         ];
         let norm = |v: [f64; 3]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
-        let sine_ok = norm(cross) > 1e-9 * norm(forward) * norm(c.up);
+        let sine_ok = norm(cross) > 1e-9 * norm(forward) * norm(up);
         if !sine_ok {
             return Err(InvalidViewState::UpAlongView { up: c.up });
         }
@@ -106,6 +120,11 @@ impl ViewState {
         self.colormap
             .validate()
             .map_err(InvalidViewState::ColorMap)?;
+        if self.lights.len() > MAX_LIGHTS {
+            return Err(InvalidViewState::TooManyLights {
+                count: self.lights.len(),
+            });
+        }
         for (index, l) in self.lights.iter().enumerate() {
             l.validate()
                 .map_err(|error| InvalidViewState::Light { index, error })?;
@@ -189,6 +208,11 @@ mod tests {
                 "colormap.points",
                 Box::new(|s| s.colormap.points.clear()),
                 |e| matches!(e, I::ColorMap(ColorMapError::NoPoints)),
+            ),
+            (
+                "lights: expected at most 64",
+                Box::new(|s| s.lights = vec![s.lights[0]; MAX_LIGHTS + 1]),
+                |e| matches!(e, I::TooManyLights { count } if *count == MAX_LIGHTS + 1),
             ),
             (
                 "meshes: expected at most 64",

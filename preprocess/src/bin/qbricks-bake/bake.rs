@@ -120,7 +120,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             LayoutArg::Centred => Layout::Centred,
             LayoutArg::Staggered => Layout::Staggered,
         },
-        max_cells: 0,
         extra,
     };
     let opts = BakeOptions {
@@ -251,11 +250,7 @@ pub fn bake_file(
     // Read only the grids that will be baked.
     stage("reading VDB");
     let file = VdbFile::open(input)?;
-    let read = ReadOptions {
-        max_cells: opts.max_cells,
-        ..read.clone()
-    };
-    let (grids, staggered) = match read_inputs(&file, &read) {
+    let (grids, staggered) = match read_inputs(&file, read) {
         Ok(v) => v,
         // Reader errors already name the file.
         Err(ReadError::Vdb(e)) => return Err(e.into()),
