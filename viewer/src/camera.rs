@@ -88,6 +88,62 @@ impl RayGen {
 }
 
 impl RayGen {
+    /// Where the world point `p` appears: the image position (`x`, `y` in pixels, as
+    /// [`RayGen::ray`] takes them) and the parameter `t` of `p` along the ray through
+    /// there (its distance from the eye, or from the image plane for an orthographic
+    /// camera). `None` for a point behind the camera, which no camera ray reaches.
+    pub fn project(&self, p: [f64; 3]) -> Option<(f64, f64, f64)> {
+        let b = &self.basis;
+        let v = DVec3::from_array(p) - self.eye;
+        let z = v.dot(b.forward);
+        if z.is_nan() || z <= 0.0 {
+            return None;
+        }
+        let (sx, sy, t) = if self.ortho {
+            (v.dot(b.right) / self.half_w, v.dot(b.up) / self.half_h, z)
+        } else {
+            (
+                v.dot(b.right) / (z * self.half_w),
+                v.dot(b.up) / (z * self.half_h),
+                v.length(),
+            )
+        };
+        Some((0.5 * (sx + 1.0) * self.w, 0.5 * (1.0 - sy) * self.h, t))
+    }
+
+    /// World length of one pixel at distance `depth` from the eye along the view (any
+    /// depth for an orthographic camera): how long a scale bar is.
+    pub fn pixel_size_at(&self, depth: f64) -> f64 {
+        if self.ortho {
+            2.0 * self.half_h / self.h
+        } else {
+            2.0 * self.half_h * depth / self.h
+        }
+    }
+
+    /// Where perspective rays start (for an orthographic camera, the centre of the
+    /// plane they start from).
+    pub fn eye(&self) -> [f64; 3] {
+        self.eye.to_array()
+    }
+
+    /// Whether the projection is orthographic.
+    pub fn is_orthographic(&self) -> bool {
+        self.ortho
+    }
+
+    /// The camera's unit axes (world): to the right on screen, up on screen, into the
+    /// scene.
+    pub fn axes(&self) -> [[f64; 3]; 3] {
+        [
+            self.basis.right.to_array(),
+            self.basis.up.to_array(),
+            self.basis.forward.to_array(),
+        ]
+    }
+}
+
+impl RayGen {
     /// The rays of every point of the pixel rectangle `[x0, x1] × [y0, y1]` (any
     /// sub-pixel offset), with `frame` subtracted from positions as the volume's local
     /// frame does: see [`Frustum`].
@@ -201,7 +257,7 @@ impl Camera {
     }
 
     /// Per-frame constants of [`Camera::ray`] for a `width`×`height` image.
-    pub(crate) fn ray_generator(&self, width: u32, height: u32) -> RayGen {
+    pub fn ray_generator(&self, width: u32, height: u32) -> RayGen {
         let b = self.basis();
         let w = f64::from(width.max(1));
         let h = f64::from(height.max(1));
@@ -293,6 +349,37 @@ impl Camera {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A point projected and cast back lies on the ray through its pixel, at `t`.
+    #[test]
+    fn projection_inverts_the_camera_rays() {
+        for projection in [
+            Projection::Perspective { fov_deg: 40.0 },
+            Projection::Orthographic { width: 3.0 },
+        ] {
+            let cam = Camera {
+                eye: [3.0, -4.0, 2.0],
+                look_at: [0.5, 0.2, -0.1],
+                up: [0.0, 0.0, 1.0],
+                projection,
+            };
+            let rays = cam.ray_generator(320, 200);
+            for p in [[0.5, 0.2, -0.1], [1.0, -1.0, 0.3], [-0.7, 0.9, 0.8]] {
+                let (x, y, t) = rays.project(p).expect("in front");
+                let r = rays.ray(x, y);
+                let q = r.at(t);
+                assert!(
+                    (q - DVec3::from_array(p)).length() < 1e-9,
+                    "{projection:?} {p:?}"
+                );
+            }
+            // The look-at point is the image centre.
+            let (x, y, _) = rays.project(cam.look_at).expect("in front");
+            assert!((x - 160.0).abs() < 1e-9 && (y - 100.0).abs() < 1e-9);
+            // Behind the eye: nothing.
+            assert!(rays.project([6.0, -8.0, 4.0]).is_none());
+        }
+    }
 
     fn persp(eye: [f64; 3], look_at: [f64; 3], up: [f64; 3], fov: f64) -> Camera {
         Camera {

@@ -22,6 +22,7 @@ pub mod info;
 pub mod integrate;
 mod lattice;
 pub mod mesh;
+pub mod overlay;
 mod packed;
 pub mod probe;
 pub mod progressive;
