@@ -397,6 +397,8 @@ mod tests {
         Frame {
             width: rgb.len() as u32,
             height: 1,
+            depth: vec![f32::INFINITY; rgb.len()],
+            surface_values: vec![f32::NAN; rgb.len()],
             rgb,
             pixel_hits: hits,
             stats: Stats::default(),

@@ -35,6 +35,19 @@ fn lerp(a: [f32; 3], b: [f32; 3], t: f32) -> [f32; 3] {
     ]
 }
 
+/// The range of the colour field over what a picture shows: the finite values of its
+/// surface pixels ([`crate::render::Frame::surface_values`]). `None` when no pixel shows
+/// a surface, or they all show one value (no range to spread a map over).
+pub fn visible_range(values: &[f32]) -> Option<(f32, f32)> {
+    let (lo, hi) = values
+        .iter()
+        .filter(|v| v.is_finite())
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
+            (lo.min(v), hi.max(v))
+        });
+    (lo < hi).then_some((lo, hi))
+}
+
 /// A field's range as every data-derived default reads it (the colour map here, the iso
 /// value and band in [`crate::view_state`]): sorted, infinities taken as ±`f32::MAX` (the
 /// baker stores overflowing values so; a file written otherwise may still carry them) and
@@ -90,6 +103,14 @@ impl ColorMap {
         }
         // lo < v < hi here, so hi - lo > 0.
         lerp(a.colour, b.colour, (v - lo) / (hi - lo))
+    }
+
+    /// The values of the first and last control points (`0..1` for a map without any).
+    pub fn range(&self) -> (f32, f32) {
+        match (self.points.first(), self.points.last()) {
+            (Some(a), Some(b)) => (a.value, b.value),
+            _ => (0.0, 1.0),
+        }
     }
 
     /// Blue/green/red over a field's range, so any data set looks reasonable on first open.

@@ -10,9 +10,10 @@ use std::path::{Path, PathBuf};
 
 use crate::tiles::{Tile, TileResult};
 
-/// Bytes a headless frame holds per pixel: the film's f64 sums and sample counts (28), the
-/// resolved f32 image (12), the 8-bit copy and the PNG encoder's buffer (≈ 6), rounded up.
-pub const FRAME_BYTES_PER_PIXEL: u64 = 48;
+/// Bytes a headless frame holds per pixel: the film's f64 sums and sample counts (28), its
+/// depth and surface values, twice (16), the resolved f32 image (12), the 8-bit copy and
+/// the PNG encoder's buffer (≈ 6), rounded up.
+pub const FRAME_BYTES_PER_PIXEL: u64 = 64;
 /// Most bytes the frames of one request may take (about 13 000² pixels for one frame),
 /// whatever the machine.
 pub const MAX_FRAME_BYTES: u64 = 8 << 30;
@@ -47,6 +48,10 @@ pub(crate) struct Film {
     samples: Vec<u32>,
     /// Of those, samples whose ray hit the surface (iso) or gathered opacity (dvr).
     hits: Vec<u32>,
+    /// What sample 0 of each pixel met first: its distance (infinite before sample 0 and
+    /// where nothing was met) and the colour field's value there.
+    depth: Vec<f32>,
+    values: Vec<f32>,
 }
 
 impl Film {
@@ -58,6 +63,8 @@ impl Film {
             sum: vec![[0.0; 3]; n],
             samples: vec![0; n],
             hits: vec![0; n],
+            depth: vec![f32::INFINITY; n],
+            values: vec![f32::NAN; n],
         }
     }
 
@@ -69,16 +76,17 @@ impl Film {
         for y in y0..y1.min(self.height) {
             for x in x0..x1.min(self.width) {
                 let i = (y * self.width + x) as usize;
-                let c = r.sum[(y - y0) as usize * tw + (x - x0) as usize];
+                let j = (y - y0) as usize * tw + (x - x0) as usize;
+                let c = r.sum[j];
+                if let Some(f) = r.first.get(j) {
+                    self.depth[i] = f.t;
+                    self.values[i] = f.value;
+                }
                 for a in 0..3 {
                     self.sum[i][a] += c[a];
                 }
                 self.samples[i] += n;
-                self.hits[i] += r
-                    .hit_samples
-                    .get((y - y0) as usize * tw + (x - x0) as usize)
-                    .copied()
-                    .unwrap_or(0);
+                self.hits[i] += r.hit_samples.get(j).copied().unwrap_or(0);
             }
         }
     }
@@ -86,6 +94,16 @@ impl Film {
     /// Per pixel (row-major), how many of its samples hit.
     pub(crate) fn hit_samples(&self) -> &[u32] {
         &self.hits
+    }
+
+    /// Per pixel (row-major), the distance to the first surface sample 0 met.
+    pub(crate) fn depth(&self) -> &[f32] {
+        &self.depth
+    }
+
+    /// Per pixel (row-major), the colour field's value where sample 0 met the surface.
+    pub(crate) fn surface_values(&self) -> &[f32] {
+        &self.values
     }
 
     /// Mean colour of pixel `i` (row-major), `None` before its first sample.
@@ -137,16 +155,25 @@ pub fn to_rgb8(rgb: &[[f32; 3]]) -> Vec<u8> {
 
 /// PNG bytes of a `width`×`height` image.
 pub fn encode_png(width: u32, height: u32, rgb: &[[f32; 3]]) -> Result<Vec<u8>, EncodeError> {
-    let wrong_count = || EncodeError::PixelCount {
+    if rgb.len() != width as usize * height as usize {
+        return Err(EncodeError::PixelCount {
+            width,
+            height,
+            found: rgb.len(),
+        });
+    }
+    encode_png_rgb8(width, height, to_rgb8(rgb))
+}
+
+/// PNG bytes of a `width`×`height` image of 8-bit RGB pixels (a picture with its
+/// overlays, [`crate::overlay::picture`]).
+pub fn encode_png_rgb8(width: u32, height: u32, rgb8: Vec<u8>) -> Result<Vec<u8>, EncodeError> {
+    let found = rgb8.len() / 3;
+    let img = image::RgbImage::from_raw(width, height, rgb8).ok_or(EncodeError::PixelCount {
         width,
         height,
-        found: rgb.len(),
-    };
-    if rgb.len() != width as usize * height as usize {
-        return Err(wrong_count());
-    }
-    // Cannot fail after the count check; the same error if it ever did.
-    let img = image::RgbImage::from_raw(width, height, to_rgb8(rgb)).ok_or_else(wrong_count)?;
+        found,
+    })?;
     let mut out = std::io::Cursor::new(Vec::new());
     img.write_to(&mut out, image::ImageFormat::Png)
         .map_err(EncodeError::Png)?;
@@ -155,7 +182,16 @@ pub fn encode_png(width: u32, height: u32, rgb: &[[f32; 3]]) -> Result<Vec<u8>, 
 
 /// Writes the image as a PNG at `path`, atomically.
 pub fn save_png(path: &Path, width: u32, height: u32, rgb: &[[f32; 3]]) -> Result<(), FilmError> {
-    let bytes = encode_png(width, height, rgb).map_err(|error| FilmError::Encode {
+    write_png(path, encode_png(width, height, rgb))
+}
+
+/// Writes a picture of 8-bit RGB pixels as a PNG at `path`, atomically.
+pub fn save_png_rgb8(path: &Path, width: u32, height: u32, rgb8: Vec<u8>) -> Result<(), FilmError> {
+    write_png(path, encode_png_rgb8(width, height, rgb8))
+}
+
+fn write_png(path: &Path, bytes: Result<Vec<u8>, EncodeError>) -> Result<(), FilmError> {
+    let bytes = bytes.map_err(|error| FilmError::Encode {
         path: path.to_path_buf(),
         error,
     })?;

@@ -54,6 +54,25 @@ pub struct RayCaster<'s> {
     /// Rays that hit the iso-surface (iso) or gathered opacity ≥ 0.01 (dvr).
     pub hits: u64,
     pub rays: u64,
+    /// What the last traced ray met first (see [`FirstSurface`]).
+    pub(crate) first: FirstSurface,
+}
+
+/// What a camera ray met first: the iso-surface (iso mode) or a mesh. The overlays hide
+/// the outline box behind it, and "fit to what is visible" takes the colour range of it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct FirstSurface {
+    /// Ray parameter (distance along the unit direction), infinite where nothing was met.
+    pub t: f32,
+    /// The colour field's value there, NaN on a mesh, where nothing was met, or in dvr.
+    pub value: f32,
+}
+
+impl FirstSurface {
+    pub(crate) const NONE: FirstSurface = FirstSurface {
+        t: f32::INFINITY,
+        value: f32::NAN,
+    };
 }
 
 impl<'s> RayCaster<'s> {
@@ -69,6 +88,7 @@ impl<'s> RayCaster<'s> {
             shadow: Tracer::new(scene.vol, &scene.accel, shadow_params),
             hits: 0,
             rays: 0,
+            first: FirstSurface::NONE,
         }
     }
 
@@ -113,6 +133,10 @@ impl<'s> RayCaster<'s> {
             scene.meshes.intersect(ray, 0.0, f64::INFINITY)
         };
         let t_max = mesh_hit.map_or(f64::INFINITY, |h| h.t);
+        self.first = FirstSurface {
+            t: t_max as f32,
+            value: f32::NAN,
+        };
         let bg = st.background.map(f64::from);
         let behind = |w: &mut Self| match mesh_hit {
             Some(h) => w.shade_mesh(ray, &h),
@@ -122,6 +146,13 @@ impl<'s> RayCaster<'s> {
             Mode::Iso => match self.surface_within(ray, t_max, jit) {
                 Some(s) => {
                     self.hits += 1;
+                    self.first = FirstSurface {
+                        t: (s.world - ray.origin).dot(ray.dir) as f32,
+                        value: match (scene.params.colour_field, s.eval) {
+                            (Some(_), Some(e)) => e.colour as f32,
+                            _ => f32::NAN,
+                        },
+                    };
                     self.shade_surface(ray, &s)
                 }
                 None => behind(self),

@@ -16,11 +16,14 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::active::Start;
+use crate::fields::UnknownField;
 use crate::film::Film;
+use crate::mesh::Meshes;
 use crate::ray::RayCaster;
 use crate::sampling::{Event, Stats, Strategy};
 use crate::transfer::Mode;
-use crate::view_state::ViewState;
+use crate::view_state::{ViewCommand, ViewState};
+use crate::volume::Volume;
 
 pub use crate::ray::jitter;
 pub use crate::scene::Scene;
@@ -45,6 +48,12 @@ pub struct Frame {
     /// a reference to count missed and false surfaces, which the colours alone cannot tell
     /// (a surface may be shaded like the background).
     pub(crate) pixel_hits: Vec<u32>,
+    /// Per pixel, the distance along the first sample's ray to the first surface it met
+    /// (iso-surface or mesh; infinite where none): the outline box hides behind it.
+    pub depth: Vec<f32>,
+    /// Per pixel, the colour field's value on the iso-surface the first sample met (NaN
+    /// where it met none): the colour range of what is visible.
+    pub surface_values: Vec<f32>,
 }
 
 /// Tells a frame in flight to stop. Clones share the flag. It also counts the pixel rows
@@ -98,6 +107,8 @@ pub(crate) fn render_tiles(
         let n = ((tile.x1 - tile.x0) * (tile.y1 - tile.y0)) as usize;
         let mut sum = Vec::with_capacity(n);
         let mut hit_samples = Vec::with_capacity(n);
+        let first_wave = samples.start == 0 && !samples.is_empty();
+        let mut first = Vec::with_capacity(if first_wave { n } else { 0 });
         // Where the walks of each group of pixels start (every sample of a group's pixels,
         // at any sub-pixel offset, is a ray through its rectangle).
         let frame = glam::DVec3::from_array(scene.vol.frame);
@@ -131,6 +142,9 @@ pub(crate) fn render_tiles(
                 let hits_before = caster.hits;
                 for s in samples.clone() {
                     let v = caster.sample(x, y, s);
+                    if s == 0 {
+                        first.push(caster.first);
+                    }
                     for a in 0..3 {
                         c[a] += v[a];
                     }
@@ -145,6 +159,7 @@ pub(crate) fn render_tiles(
             samples: samples.clone(),
             sum,
             hit_samples,
+            first,
             stats: caster.stats(),
             rays: caster.rays,
             hits: caster.hits,
@@ -192,6 +207,8 @@ pub fn render(scene: &Scene) -> Frame {
         height: h,
         rgb: film.resolve(),
         pixel_hits: film.hit_samples().to_vec(),
+        depth: film.depth().to_vec(),
+        surface_values: film.surface_values().to_vec(),
         stats: counts.stats,
         rays: counts.rays,
         hits: counts.hits,
@@ -220,6 +237,27 @@ impl Renderer {
     /// [`render`] on this pool.
     pub fn render(&self, scene: &Scene) -> Frame {
         self.pool.install(|| render(scene))
+    }
+
+    /// `--colour-range visible`: renders `state` once (one sample per pixel, enough to
+    /// see which surfaces show) and applies `scale` (a [`ViewCommand::ColourScale`] over
+    /// the given range) with the colour field's range over the surface pixels. Returns
+    /// that range, or `None` when no surface shows (the map is then left as it was).
+    pub fn fit_colours_to_visible(
+        &self,
+        vol: &Volume,
+        state: &mut ViewState,
+        meshes: &Meshes,
+        scale: impl Fn(Option<(f32, f32)>) -> Option<ViewCommand>,
+    ) -> Result<Option<(f32, f32)>, UnknownField> {
+        let mut first = state.clone();
+        first.spp = 1;
+        let frame = self.render(&Scene::new(vol, &first, meshes)?);
+        let range = crate::colormap::visible_range(&frame.surface_values);
+        if let Some(command) = range.and_then(|r| scale(Some(r))) {
+            state.apply(&command, &vol.fields)?;
+        }
+        Ok(range)
     }
 
     /// Runs `f` on this pool.
@@ -381,6 +419,7 @@ pub fn render_aov(scene: &Scene, aov: Aov) -> Frame {
     let span = (tmax - tmin).max(1e-300);
     let mut hits = 0;
     let mut pixel_hits = Vec::with_capacity(w as usize * h as usize);
+    let mut depth = Vec::with_capacity(w as usize * h as usize);
     let rgb = rows
         .into_iter()
         .flatten()
@@ -388,6 +427,7 @@ pub fn render_aov(scene: &Scene, aov: Aov) -> Frame {
             Some((t, c)) => {
                 hits += 1;
                 pixel_hits.push(1);
+                depth.push(t as f32);
                 match aov {
                     Aov::Depth => [(1.0 - 0.85 * (t - tmin) / span) as f32; 3],
                     _ => c,
@@ -395,10 +435,12 @@ pub fn render_aov(scene: &Scene, aov: Aov) -> Frame {
             }
             None => {
                 pixel_hits.push(0);
+                depth.push(f32::INFINITY);
                 scene.state.background
             }
         })
         .collect();
+    let surface_values = vec![f32::NAN; depth.len()];
     Frame {
         width: w,
         height: h,
@@ -407,6 +449,8 @@ pub fn render_aov(scene: &Scene, aov: Aov) -> Frame {
         rays: u64::from(w) * u64::from(h),
         hits,
         pixel_hits,
+        depth,
+        surface_values,
     }
 }
 
@@ -477,6 +521,57 @@ mod tests {
     /// the colours and the work counters of the same pixels traced one by one from the
     /// root, with one and with four samples per pixel (jittered rays reach the groups'
     /// edges), from outside and from inside the data.
+    /// The frame's surface buffers hold, per pixel, the distance to the surface its first
+    /// sample met and the colour field there (what the outline box hides behind and what
+    /// `--colour-range visible` spreads the map over); misses hold infinity and NaN.
+    #[test]
+    fn surface_buffers_hold_the_first_hit_and_its_colour() {
+        let dist = |p: [f64; 3]| {
+            ((p[0] - 16.0).powi(2) + (p[1] - 16.0).powi(2) + (p[2] - 16.0).powi(2)).sqrt()
+        };
+        let z = |p: [f64; 3]| p[2];
+        let file = testvol::nested(16, [0.0; 3], &[("d", &dist), ("z", &z)], 8);
+        let view = testvol::open(&file).expect("open");
+        let vol = Volume::new(&view).expect("volume");
+        let meshes = Meshes::empty();
+        let mut st = ViewState::default_for_volume(&vol);
+        st.iso_field = "d".into();
+        st.colormap.field = "z".into();
+        st.iso = 6.0;
+        st.width = 31;
+        st.height = 31;
+        st.spp = 2;
+        st.camera = Camera {
+            eye: [16.0, 16.0, 60.0],
+            look_at: [16.0, 16.0, 16.0],
+            up: [0.0, 1.0, 0.0],
+            projection: Projection::Orthographic { width: 20.0 },
+        };
+        let scene = Scene::new(&vol, &st, &meshes).expect("scene");
+        let frame = render(&scene);
+        let mut hits = 0;
+        for (i, (&t, &v)) in frame.depth.iter().zip(&frame.surface_values).enumerate() {
+            if frame.pixel_hits[i] == 0 {
+                continue;
+            }
+            if t.is_finite() {
+                hits += 1;
+                // Looking down -z from z = 60: the hit's z is 60 - t, and z is the colour.
+                assert!((v - (60.0 - t)).abs() < 0.05, "pixel {i}: t {t}, z {v}");
+                // The upper half of the sphere of radius 6 around z = 16 faces the camera.
+                assert!(v > 15.9 && v < 22.1, "pixel {i}: z {v}");
+            }
+        }
+        assert!(hits > 200, "{hits} hits");
+        // The centre pixel sees the sphere's top at z = 22.
+        let c = 15 * 31 + 15;
+        assert!((frame.depth[c] - 38.0).abs() < 0.05, "{}", frame.depth[c]);
+        // A corner ray misses: no distance, no value.
+        assert!(frame.depth[0].is_infinite() && frame.surface_values[0].is_nan());
+        let (lo, hi) = crate::colormap::visible_range(&frame.surface_values).expect("range");
+        assert!(lo > 15.9 && hi < 22.1 && hi - lo > 3.0, "{lo}..{hi}");
+    }
+
     #[test]
     fn group_starts_change_no_pixel_and_no_counter() {
         let field =

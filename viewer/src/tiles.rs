@@ -4,6 +4,7 @@
 
 use std::ops::Range;
 
+use crate::ray::FirstSurface;
 use crate::sampling::Stats;
 
 /// Tile edge in pixels.
@@ -42,6 +43,8 @@ pub struct TileResult {
     pub sum: Vec<[f64; 3]>,
     /// Per pixel (row-major inside the tile), how many of `samples` hit.
     pub(crate) hit_samples: Vec<u32>,
+    /// Per pixel, what sample 0 met first; empty when `samples` does not hold sample 0.
+    pub(crate) first: Vec<FirstSurface>,
     pub stats: Stats,
     pub rays: u64,
     pub hits: u64,

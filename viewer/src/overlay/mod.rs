@@ -14,6 +14,7 @@ mod axes;
 pub mod canvas;
 mod legend;
 mod outline;
+mod picture;
 mod scale;
 pub mod ticks;
 
@@ -25,6 +26,7 @@ use serde::{Deserialize, Serialize};
 use crate::camera::RayGen;
 use crate::colormap::ColorMap;
 use canvas::Canvas;
+pub use picture::{annotate, data_bounds, picture};
 
 /// Which overlays a picture carries.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -13,6 +13,8 @@ use format::sequence::FieldRange;
 use super::{default_iso, ViewState};
 use crate::colormap::ColorMap;
 use crate::fields::UnknownField;
+use crate::overlay::Overlays;
+use crate::palette::PaletteSpec;
 
 /// A change to a view state that follows a rule (see the module's docs).
 #[derive(Debug, Clone, PartialEq)]
@@ -31,6 +33,17 @@ pub enum ViewCommand {
     /// [`ViewState::set_iso`]), as in a view the program made; without, the band is kept,
     /// as the user set it in a view state file.
     Iso { value: f64, band_follows: bool },
+    /// Colour the colour field with `palette` over `range` (`None`: the current map's
+    /// range), centred on `centre` for a diverging palette, spaced in log10 with `log`
+    /// (see [`PaletteSpec::colour_map`]). The field stays; the map is rebuilt.
+    ColourScale {
+        palette: PaletteSpec,
+        range: Option<(f32, f32)>,
+        centre: Option<f32>,
+        log: bool,
+    },
+    /// Show the overlays `overlays` (see [`crate::overlay`]).
+    Overlays(Overlays),
 }
 
 impl ViewState {
@@ -73,6 +86,16 @@ impl ViewState {
                     self.iso = *value;
                 }
             }
+            ViewCommand::ColourScale {
+                palette,
+                range,
+                centre,
+                log,
+            } => {
+                let (lo, hi) = range.unwrap_or_else(|| self.colormap.range());
+                self.colormap = palette.colour_map(&self.colormap.field, lo, hi, *centre, *log);
+            }
+            ViewCommand::Overlays(o) => self.overlays = *o,
         }
         Ok(())
     }

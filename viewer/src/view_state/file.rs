@@ -157,6 +157,32 @@ mod tests {
         assert!(text.contains("\"strategy\": \"bisect\""), "{text}");
     }
 
+    /// The overlays are a list of names in the JSON; a state saved before they existed
+    /// (no `overlays` key) shows every overlay but the title, `[]` none, and an unknown
+    /// name is refused naming the known ones.
+    #[test]
+    fn overlays_are_a_list_of_names() {
+        use crate::overlay::Overlays;
+        let mut s = ViewState::default_for([0.0; 3], [1.0; 3], &fields());
+        s.overlays = "legend,title".parse().expect("parse");
+        let mut v: serde_json::Value = serde_json::from_str(&s.to_json()).expect("json");
+        assert_eq!(v["overlays"], serde_json::json!(["legend", "title"]));
+        let path = Path::new("v.json");
+        assert_eq!(ViewState::from_json(path, &v.to_string()).expect("back"), s);
+        v["overlays"] = serde_json::json!([]);
+        let none = ViewState::from_json(path, &v.to_string()).expect("none");
+        assert_eq!(none.overlays, Overlays::NONE);
+        v.as_object_mut().expect("object").remove("overlays");
+        let old = ViewState::from_json(path, &v.to_string()).expect("old state");
+        assert_eq!(old.overlays, Overlays::default());
+        v["overlays"] = serde_json::json!(["grid"]);
+        let e = ViewState::from_json(path, &v.to_string()).expect_err("unknown");
+        assert!(
+            e.to_string().contains("grid") && e.to_string().contains("legend"),
+            "{e}"
+        );
+    }
+
     #[test]
     fn unknown_fields_are_rejected_with_their_name() {
         let s = ViewState::default_for([0.0; 3], [1.0; 3], &fields());

@@ -10,6 +10,7 @@ use serde::{Deserialize, Serialize};
 use crate::camera::Camera;
 use crate::colormap::ColorMap;
 use crate::mesh::MeshInstance;
+use crate::overlay::Overlays;
 pub use crate::sampling::Strategy;
 use crate::shading::{default_lights, Light, Material};
 pub use crate::transfer::{Band, Mode};
@@ -84,6 +85,12 @@ pub struct ViewState {
     /// Colour where rays leave the scene.
     #[serde(default = "default_background")]
     pub background: [f32; 3],
+    /// What the picture carries besides the data: a list of `legend`, `axes`, `box`,
+    /// `scale`, `title` (see [`crate::overlay`]). Absent from a state file it means every
+    /// overlay but the title, as for a new view: a picture should say what its colours
+    /// mean; `[]` gives the bare image.
+    #[serde(default)]
+    pub overlays: Overlays,
     pub width: u32,
     pub height: u32,
 }
@@ -191,6 +198,7 @@ impl ViewState {
             colormap,
             material: Material::default(),
             meshes: Vec::new(),
+            overlays: Overlays::default(),
             shadows: false,
             preintegrated: true,
             background: DEFAULT_BACKGROUND,

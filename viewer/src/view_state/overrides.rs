@@ -7,6 +7,8 @@ use super::{FieldRange, Mode, Strategy, ViewCommand, ViewState};
 use crate::camera::Projection;
 use crate::fields::UnknownField;
 use crate::mesh::{MeshInstance, MeshSpecError};
+use crate::overlay::Overlays;
+use crate::palette::{Palette, PaletteSpec};
 
 /// Command-line changes to a view state (`qbricks-view render` flags). They live here,
 /// next to the state they change, so the window and the headless renderer apply the same
@@ -71,6 +73,67 @@ pub struct Overrides {
     /// starts at 10 % of that field's maximum (else the middle of its range).
     #[arg(long = "iso-field")]
     pub iso_field: Option<String>,
+    /// Colour map: viridis, magma, cividis, coolwarm (diverging) or speed (the default
+    /// blue-green-red); add _r to reverse. Spread over the colour field's range unless
+    /// --colour-range says otherwise.
+    #[arg(long = "colormap", alias = "colourmap")]
+    pub colormap: Option<PaletteSpec>,
+    /// Values at the ends of the colour map: LO,HI, or `visible` for the range of the
+    /// colour field over the surfaces the picture shows (rendered twice).
+    #[arg(
+        long = "colour-range",
+        alias = "color-range",
+        allow_hyphen_values = true
+    )]
+    pub colour_range: Option<ColourRange>,
+    /// Diverging maps (coolwarm): the value in the middle of the map [default: 0 when the
+    /// range holds it, else the middle of the range].
+    #[arg(
+        long = "colour-centre",
+        alias = "color-center",
+        allow_hyphen_values = true
+    )]
+    pub colour_centre: Option<f32>,
+    /// Space the colour map's colours evenly in log10 of the value (positive ranges).
+    #[arg(long)]
+    pub log: bool,
+    /// What the picture carries besides the data: `none` or a comma-separated list of
+    /// legend, axes, box, scale, title [default: legend,axes,box,scale].
+    #[arg(long)]
+    pub overlays: Option<Overlays>,
+}
+
+/// `--colour-range`: two values, or the range of what the picture shows.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ColourRange {
+    Values(f32, f32),
+    Visible,
+}
+
+/// Why a `--colour-range` is refused.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("expected LO,HI (finite numbers, LO < HI) or `visible`, found `{text}`")]
+pub struct ColourRangeError {
+    pub text: String,
+}
+
+impl std::str::FromStr for ColourRange {
+    type Err = ColourRangeError;
+    fn from_str(s: &str) -> Result<Self, ColourRangeError> {
+        let bad = || ColourRangeError {
+            text: s.to_string(),
+        };
+        if s.trim() == "visible" {
+            return Ok(ColourRange::Visible);
+        }
+        let (lo, hi) = s.split_once(',').ok_or_else(bad)?;
+        let lo: f32 = lo.trim().parse().map_err(|_| bad())?;
+        let hi: f32 = hi.trim().parse().map_err(|_| bad())?;
+        if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+            return Err(bad());
+        }
+        Ok(ColourRange::Values(lo, hi))
+    }
 }
 
 /// A `--mesh`, `--eye`, `--look-at` or `--up` flag that does not parse.
@@ -213,7 +276,43 @@ impl Overrides {
                 .apply(&command, fields)
                 .map_err(|e| e.named_by("--colour-field"))?;
         }
+        let range = match self.colour_range {
+            Some(ColourRange::Values(lo, hi)) => Some((lo, hi)),
+            _ => None,
+        };
+        if let Some(command) = self.colour_scale(range) {
+            // Names no field: cannot fail.
+            let _ = state.apply(&command, fields);
+        }
+        if let Some(o) = self.overlays {
+            let _ = state.apply(&ViewCommand::Overlays(o), fields);
+        }
         Ok(())
+    }
+
+    /// The colour map the colour flags ask for, over `range` (`None`: the map's current
+    /// range); `None` when no colour flag was given. `--colour-range`, `--colour-centre`
+    /// and `--log` without `--colormap` rebuild the default `speed` map.
+    pub fn colour_scale(&self, range: Option<(f32, f32)>) -> Option<ViewCommand> {
+        let asked = self.colormap.is_some()
+            || self.colour_range.is_some()
+            || self.colour_centre.is_some()
+            || self.log;
+        asked.then(|| ViewCommand::ColourScale {
+            palette: self.colormap.unwrap_or(PaletteSpec {
+                palette: Palette::Speed,
+                reversed: false,
+            }),
+            range,
+            centre: self.colour_centre,
+            log: self.log,
+        })
+    }
+
+    /// Whether the colour map's range is to be taken from a first picture
+    /// (`--colour-range visible`).
+    pub fn wants_visible_range(&self) -> bool {
+        self.colour_range == Some(ColourRange::Visible)
     }
 }
 
@@ -283,5 +382,74 @@ mod tests {
             .apply_fields(&mut base.clone(), &fields)
             .expect_err("unknown");
         assert_eq!(e.flag, "--iso-field");
+    }
+
+    /// `--colormap`, `--colour-range`, `--colour-centre`, `--log` and `--overlays` reach
+    /// the state through the flags, keeping the colour field.
+    #[test]
+    fn colour_flags_rebuild_the_map_and_overlays_are_set() {
+        use clap::Parser;
+        #[derive(clap::Parser)]
+        struct Cli {
+            #[command(flatten)]
+            view: Overrides,
+        }
+        let fields = fields();
+        let run = |args: &[&str]| {
+            let cli = Cli::try_parse_from(std::iter::once("x").chain(args.iter().copied()))
+                .map_err(|e| e.to_string())?;
+            let mut s = ViewState::default_for([0.0; 3], [1.0; 3], &fields);
+            cli.view.apply(&mut s, false).map_err(|e| e.to_string())?;
+            cli.view
+                .apply_fields(&mut s, &fields)
+                .map_err(|e| e.to_string())?;
+            Ok::<_, String>((s, cli.view))
+        };
+        let (plain, _) = run(&[]).expect("no flags");
+        let field = plain.colormap.field.clone();
+        let (s, _) = run(&["--colormap", "viridis", "--colour-range", "0.5,2"]).expect("viridis");
+        assert_eq!(s.colormap.field, field);
+        assert_eq!(s.colormap.range(), (0.5, 2.0));
+        assert_ne!(s.colormap.points, plain.colormap.points);
+        // Reversed: the same colours the other way round.
+        let (r, _) = run(&["--colormap", "viridis_r", "--colour-range", "0.5,2"]).expect("_r");
+        assert_eq!(
+            r.colormap.points.first().map(|p| p.colour),
+            s.colormap.points.last().map(|p| p.colour)
+        );
+        // A diverging map centred on a value is symmetric around it.
+        let (d, _) = run(&[
+            "--colormap",
+            "coolwarm",
+            "--colour-range=-1,3",
+            "--colour-centre=0",
+        ])
+        .expect("coolwarm");
+        assert_eq!(d.colormap.range(), (-3.0, 3.0));
+        // Log spacing: the middle point is the geometric mean.
+        let (l, _) =
+            run(&["--colormap", "magma", "--colour-range", "0.01,100", "--log"]).expect("log");
+        let mid = l.colormap.points[l.colormap.points.len() / 2].value;
+        assert!((mid - 1.0).abs() < 1e-3, "{mid}");
+        // Overlays.
+        let (o, _) = run(&["--overlays", "legend,title"]).expect("overlays");
+        assert!(o.overlays.legend && o.overlays.title && !o.overlays.axes);
+        let (n, _) = run(&["--overlays", "none"]).expect("none");
+        assert!(!n.overlays.any());
+        assert_eq!(plain.overlays, Overlays::default());
+        // `visible` asks for a first picture and keeps the map until then.
+        let (v, view) = run(&["--colour-range", "visible"]).expect("visible");
+        assert!(view.wants_visible_range());
+        assert_eq!(v.colormap.range(), plain.colormap.range());
+        for bad in [
+            &["--colour-range", "2,1"][..],
+            &["--colour-range", "nan,1"],
+            &["--colour-range", "1"],
+            &["--colormap", "jet"],
+            &["--overlays", "legend,grid"],
+        ] {
+            let e = run(bad).expect_err("refused");
+            assert!(e.contains(bad[0]) && e.contains("expected"), "{e}");
+        }
     }
 }

@@ -10,6 +10,7 @@ use files::output::QuietStdout;
 use format::sequence::FramePattern;
 use qbricks_viewer::film;
 use qbricks_viewer::mesh::Meshes;
+use qbricks_viewer::overlay;
 use qbricks_viewer::render::{Frame, FrameReport, Renderer, Scene};
 use qbricks_viewer::view_state::{Overrides, ViewState};
 use qbricks_viewer::volume::Volume;
@@ -55,6 +56,10 @@ pub struct Args {
     /// Render only pixel X,Y and print its rays' region segments, samples and hits.
     #[arg(long)]
     pub pixel: Option<String>,
+    /// The title line's text, shown with `--overlays …,title` [default: the file's name;
+    /// in a sequence, its name and frame number].
+    #[arg(long)]
+    pub title: Option<String>,
     /// Skip the payload checksum when opening (faster on huge files; the archive is still
     /// validated, so a damaged file is refused, but a flipped value bit would not be).
     #[arg(long)]
@@ -142,9 +147,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     } else {
         Meshes::load(&state.meshes)?
     };
-    let scene = Scene::new(&vol, &state, &meshes).with_context(|| format!("{}", path.display()))?;
-
     let renderer = Renderer::new(args.threads).context("starting worker threads")?;
+    if args.view.wants_visible_range() {
+        fit_visible(&renderer, &vol, &mut state, &meshes, &args.view)
+            .with_context(|| path.display().to_string())?;
+    }
+    let scene = Scene::new(&vol, &state, &meshes).with_context(|| format!("{}", path.display()))?;
 
     // One pixel, explained.
     if let Some(px) = &args.pixel {
@@ -161,7 +169,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
 
     let (frame, ms) = render_frame(&renderer, &scene, &args);
-    write_outputs(&args, &state, Some(&frame))?;
+    let title = args.title.clone().unwrap_or_else(|| file_title(&path));
+    let picture = picture(&frame, &state, &vol, args.aov.is_some(), &title);
+    write_outputs(&args, &state, Some((&frame, picture)))?;
     if args.json {
         let report = FrameReport::new(&frame, &state, ms, open_ms, renderer.threads());
         writeln!(QuietStdout::new(), "{}", serde_json::to_string(&report)?)?;
@@ -227,12 +237,52 @@ pub fn check_frame_memory(width: u32, height: u32) -> anyhow::Result<()> {
     Ok(film::check_frame_memory(width, height, 1)?)
 }
 
-/// Writes the PNG (when there is a frame and `-o`) and the `--save-state` file together,
+/// `--colour-range visible`: the colour map spread over the colour field's values on the
+/// surfaces a first picture shows; a note when none shows.
+pub fn fit_visible(
+    renderer: &Renderer,
+    vol: &Volume,
+    state: &mut ViewState,
+    meshes: &Meshes,
+    view: &Overrides,
+) -> anyhow::Result<()> {
+    let range = renderer.fit_colours_to_visible(vol, state, meshes, |r| view.colour_scale(r))?;
+    if range.is_none() {
+        eprintln!(
+            "qbricks-view: note: --colour-range visible: no surface in the picture; the colour \
+             map keeps the field's range"
+        );
+    }
+    Ok(())
+}
+
+/// The default title: the file's name.
+pub fn file_title(path: &Path) -> String {
+    path.file_name().map_or_else(
+        || path.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    )
+}
+
+/// The 8-bit picture of `frame` with the view's overlays (none on an `--aov` buffer,
+/// which is for looking at values, not for figures).
+pub fn picture(frame: &Frame, state: &ViewState, vol: &Volume, aov: bool, title: &str) -> Vec<u8> {
+    if aov {
+        return film::to_rgb8(&frame.rgb);
+    }
+    overlay::picture(frame, state, Some(overlay::data_bounds(vol)), Some(title))
+}
+
+/// Writes the PNG (when there is a picture and `-o`) and the `--save-state` file together,
 /// only now that the render succeeded, and all or nothing.
-fn write_outputs(args: &Args, state: &ViewState, frame: Option<&Frame>) -> anyhow::Result<()> {
+fn write_outputs(
+    args: &Args,
+    state: &ViewState,
+    frame: Option<(&Frame, Vec<u8>)>,
+) -> anyhow::Result<()> {
     let mut outputs: Vec<(&Path, Vec<u8>)> = Vec::new();
-    if let (Some(out), Some(frame)) = (&args.output, frame) {
-        let png = film::encode_png(frame.width, frame.height, &frame.rgb)
+    if let (Some(out), Some((frame, rgb8))) = (&args.output, frame) {
+        let png = film::encode_png_rgb8(frame.width, frame.height, rgb8)
             .map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
         outputs.push((out, png));
     }

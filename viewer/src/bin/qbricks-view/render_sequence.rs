@@ -16,7 +16,9 @@ use qbricks_viewer::sequence::{self, output_pattern, RangeSource};
 use qbricks_viewer::view_state::ViewState;
 use serde::Serialize;
 
-use crate::render::{check_files, check_frame_memory, render_frame, Args};
+use crate::render::{
+    check_files, check_frame_memory, file_title, fit_visible, picture, render_frame, Args,
+};
 
 /// One line of `--json` per frame: the single-frame report, or the error.
 #[derive(Serialize)]
@@ -150,7 +152,7 @@ pub fn run(args: &Args, path: &Path, pattern: FramePattern) -> anyhow::Result<()
     for (frame, input) in &frames {
         bar.set_message(format!("frame {frame}"));
         let out = out_pattern.path(*frame);
-        let result = render_one(args, input, &out, &state, &meshes, &renderer);
+        let result = render_one(args, (*frame, input), &out, &state, &meshes, &renderer);
         let line = FrameLine {
             frame: *frame,
             file: input.display().to_string(),
@@ -193,7 +195,7 @@ pub fn run(args: &Args, path: &Path, pattern: FramePattern) -> anyhow::Result<()
 /// Opens, renders and writes one frame (the image atomically, as a single render does).
 fn render_one(
     args: &Args,
-    input: &Path,
+    (number, input): (u64, &Path),
     out: &Path,
     state: &ViewState,
     meshes: &Meshes,
@@ -206,10 +208,25 @@ fn render_one(
         verify_checksum: !args.no_checksum,
     };
     let data = Dataset::open_with(input, &options)?;
-    let scene =
-        Scene::new(data.volume(), state, meshes).with_context(|| input.display().to_string())?;
+    let vol = data.volume();
+    // `--colour-range visible` fits each frame's map to what that frame shows.
+    let mut fitted;
+    let state = if args.view.wants_visible_range() {
+        fitted = state.clone();
+        fit_visible(renderer, vol, &mut fitted, meshes, &args.view)
+            .with_context(|| input.display().to_string())?;
+        &fitted
+    } else {
+        state
+    };
+    let scene = Scene::new(vol, state, meshes).with_context(|| input.display().to_string())?;
     let (frame, ms) = render_frame(renderer, &scene, args);
-    let png = film::encode_png(frame.width, frame.height, &frame.rgb)
+    let title = args
+        .title
+        .clone()
+        .unwrap_or_else(|| format!("{}  frame {number}", file_title(input)));
+    let rgb8 = picture(&frame, state, vol, args.aov.is_some(), &title);
+    let png = film::encode_png_rgb8(frame.width, frame.height, rgb8)
         .map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
     files::output::write_atomic(out, |f| f.write_all(&png))
         .with_context(|| out.display().to_string())?;
