@@ -265,7 +265,7 @@ const CASES: &[Case] = &[
     case(VIEW, &["render", "w.qbk", "-o", "x.png", "--spp", "4294967295"], 2,
         "qbricks-view: view state: spp: expected 1..=4096, found 4294967295"),
     case(VIEW, &["render", "w.qbk", "-o", "x.png", "--width", "16384", "--height", "16384"],
-        2, "qbricks-view: a 16384x16384 image needs about 12288 MiB, more than the limit of"),
+        2, "qbricks-view: a 16384x16384 image needs about 16384 MiB, more than the limit of"),
     case(VIEW, &["render", "w.qbk", "-o", "x.png", "--state", "st_meshes.json"], 2,
         "qbricks-view: st_meshes.json: meshes: expected at most 64 entries, found 65"),
     case(VIEW, &["render", "w.qbk", "-o", "x.png", "--state", "st_lights.json"], 2,
@@ -372,7 +372,7 @@ const CASES: &[Case] = &[
         .absent(&["p_0001.png"]),
     // 2. Sizes bounded before allocating.
     case(VIEW, &["bench", "w.qbk", "--size", "16384x16384"], 2,
-        "qbricks-view: a 16384x16384 image (2 copies) needs about 24576 MiB, more than the limit of"),
+        "qbricks-view: a 16384x16384 image (2 copies) needs about 32768 MiB, more than the limit of"),
     case(VIEW, &["probe", "w.qbk", "--points", "big.csv", "--json"], 0, "")
         .closed()
         .limit_kib(1 << 20),

@@ -73,6 +73,34 @@ pub struct Update {
     pub ms: f64,
     /// The full-resolution image with every sample: nothing more will come for this job.
     pub complete: bool,
+    /// What the overlays of this image are drawn from (see [`Update::picture`]).
+    pub view: Arc<ViewState>,
+    /// The data's box, world coordinates.
+    pub bounds: ([f64; 3], [f64; 3]),
+    /// Per pixel of a full-resolution image whose first sample wave is finished, the
+    /// distance to the first surface and the colour field there ([`crate::render::Frame`]).
+    pub surface: Option<Arc<(Vec<f32>, Vec<f32>)>>,
+}
+
+impl Update {
+    /// The picture of this image at the view's full size: 8-bit pixels (a preview scaled
+    /// up) with the view's overlays, the outline hidden behind surfaces once their
+    /// distances are known. What the window shows and Save image… writes.
+    pub fn picture(&self) -> (u32, u32, Vec<u8>) {
+        let (w, h) = (self.view.width.max(1), self.view.height.max(1));
+        let mut rgb8 = if (self.width, self.height) == (w, h) {
+            crate::film::to_rgb8(&self.rgb)
+        } else {
+            crate::film::to_rgb8(&upscale(&self.rgb, self.width, self.height, w, h))
+        };
+        let depth = self
+            .surface
+            .as_ref()
+            .filter(|_| (self.width, self.height) == (w, h))
+            .map(|s| s.0.as_slice());
+        crate::overlay::annotate(&mut rgb8, w, h, &self.view, Some(self.bounds), depth, None);
+        (w, h, rgb8)
+    }
 }
 
 /// Tuning of [`Progressive`].
@@ -361,6 +389,8 @@ fn run_job(
     let state = &job.state;
     let vol = job.dataset.volume();
     let (w, h) = (state.width.max(1), state.height.max(1));
+    let view = Arc::new(state.clone());
+    let bounds = crate::overlay::data_bounds(vol);
     let since = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
 
     // Preview: a fraction of the resolution, one sample per pixel.
@@ -416,6 +446,9 @@ fn run_job(
             counts,
             ms,
             complete: false,
+            view: Arc::clone(&view),
+            bounds,
+            surface: None,
         });
         if superseded {
             // A newer view is waiting: its preview matters more than this full frame.
@@ -433,12 +466,15 @@ fn run_job(
         counts: Counts,
         display: Vec<[f32; 3]>,
         last_publish: Instant,
+        /// The film's surface buffers once the first wave is in.
+        surface: Option<Arc<(Vec<f32>, Vec<f32>)>>,
     }
     let acc = Mutex::new(Acc {
         film: Film::new(w, h),
         counts: Counts::default(),
         display: backdrop.unwrap_or_else(|| vec![state.background; w as usize * h as usize]),
         last_publish: Instant::now(),
+        surface: None,
     });
     for s in 0..spp {
         let sink = |r: TileResult| {
@@ -467,6 +503,9 @@ fn run_job(
                     counts: g.counts,
                     ms: since(t),
                     complete: false,
+                    view: Arc::clone(&view),
+                    bounds,
+                    surface: g.surface.clone(),
                 };
                 drop(g);
                 shared.publish(u);
@@ -477,6 +516,12 @@ fn run_job(
         }
         let mut g = acc.lock().unwrap_or_else(|e| e.into_inner());
         g.last_publish = Instant::now();
+        if s == 0 {
+            g.surface = Some(Arc::new((
+                g.film.depth().to_vec(),
+                g.film.surface_values().to_vec(),
+            )));
+        }
         let complete = s + 1 == spp;
         let rgb = if complete {
             g.film.resolve()
@@ -494,6 +539,9 @@ fn run_job(
             counts: g.counts,
             ms: since(t),
             complete,
+            view: Arc::clone(&view),
+            bounds,
+            surface: g.surface.clone(),
         };
         drop(g);
         if !shared.publish(u) {

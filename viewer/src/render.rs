@@ -35,7 +35,7 @@ pub use crate::tiles::{tiles, Tile, TileResult};
 const GROUP: u32 = 4;
 
 /// A rendered image (linear RGB in 0..=1 per pixel, row-major from the top-left).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub struct Frame {
     pub width: u32,
     pub height: u32,
@@ -54,6 +54,25 @@ pub struct Frame {
     /// Per pixel, the colour field's value on the iso-surface the first sample met (NaN
     /// where it met none): the colour range of what is visible.
     pub surface_values: Vec<f32>,
+}
+
+/// Frames are equal when every pixel and counter is, NaN surface values included (a
+/// pixel without a surface is the same in both).
+impl PartialEq for Frame {
+    fn eq(&self, o: &Frame) -> bool {
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        (
+            self.width,
+            self.height,
+            &self.rgb,
+            self.stats,
+            self.rays,
+            self.hits,
+        ) == (o.width, o.height, &o.rgb, o.stats, o.rays, o.hits)
+            && self.pixel_hits == o.pixel_hits
+            && bits(&self.depth) == bits(&o.depth)
+            && bits(&self.surface_values) == bits(&o.surface_values)
+    }
 }
 
 /// Tells a frame in flight to stop. Clones share the flag. It also counts the pixel rows

@@ -183,7 +183,16 @@ fn field_overrides_change_the_picture_and_unknown_names_fail() {
         let o = qbricks_view(
             &[
                 &[
-                    "render", "one.qbk", "-o", out, "--width", "64", "--height", "48",
+                    "render",
+                    "one.qbk",
+                    "-o",
+                    out,
+                    "--width",
+                    "64",
+                    "--height",
+                    "48",
+                    "--overlays",
+                    "none",
                 ][..],
                 extra,
             ]

@@ -13,6 +13,9 @@ pub(crate) enum AppCommand {
     View(ViewCommand),
     /// Frame the whole data set (and put the lights back for the new camera).
     FrameData,
+    /// Spread the colour map (the panel's preset) over the colour field's values on the
+    /// surfaces of the finished picture (`--colour-range visible`).
+    FitColoursToVisible,
     /// Put the lights where the rig says for the current camera.
     Relight,
     /// Open the file dialog for this purpose.

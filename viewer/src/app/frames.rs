@@ -6,7 +6,6 @@ use std::sync::{Arc, OnceLock};
 use eframe::egui::{self, ColorImage, TextureHandle, TextureOptions};
 
 use crate::dataset::Dataset;
-use crate::film;
 use crate::mesh::{MeshInstance, Meshes};
 use crate::progressive::{Job, Level, Progressive, ProgressiveOptions, Update};
 use crate::view_state::ViewState;
@@ -121,8 +120,10 @@ impl Frames {
         let Some(u) = self.renderer.latest() else {
             return false;
         };
-        let rgb8 = film::to_rgb8(&u.rgb);
-        let image = ColorImage::from_rgb([u.width as usize, u.height as usize], &rgb8);
+        // The picture with its overlays, at the view's size (a preview scaled up, so the
+        // overlays stay sharp while the view moves).
+        let (w, h, rgb8) = u.picture();
+        let image = ColorImage::from_rgb([w as usize, h as usize], &rgb8);
         let options = match u.level {
             Level::Preview { .. } => TextureOptions::LINEAR,
             Level::Full => TextureOptions::NEAREST,

@@ -14,6 +14,7 @@ use super::player::Player;
 use super::view::ViewControls;
 use super::widgets;
 use crate::camera::Projection;
+use crate::palette::Palette;
 use crate::sampling::Strategy;
 use crate::transfer::Mode;
 use crate::view_state::{ViewCommand, ViewState, MAX_SPP};
@@ -51,7 +52,9 @@ pub(crate) fn show(p: Panel<'_>, ui: &mut egui::Ui) -> Vec<AppCommand> {
     ui.separator();
     volume(doc, p.state, &mut out, ui);
     ui.separator();
-    colours(doc, p.state, &mut out, ui);
+    colours(doc, p.state, p.controls, &mut out, ui);
+    ui.separator();
+    overlays(p.state, ui);
     ui.separator();
     scene(p.state, p.controls, &mut out, ui);
     ui.separator();
@@ -217,11 +220,46 @@ fn field_box(ui: &mut egui::Ui, label: &str, doc: &Doc, current: &str) -> Option
     (chosen != current).then_some(chosen)
 }
 
-fn colours(doc: &Doc, st: &mut ViewState, out: &mut Vec<AppCommand>, ui: &mut egui::Ui) {
+fn colours(
+    doc: &Doc,
+    st: &mut ViewState,
+    controls: &mut ViewControls,
+    out: &mut Vec<AppCommand>,
+    ui: &mut egui::Ui,
+) {
     ui.label(RichText::new("Colour map").strong());
     // A new field gets a map over its own range.
     if let Some(name) = field_box(ui, "colour field", doc, &st.colormap.field) {
         out.push(AppCommand::View(ViewCommand::ColourField { name }));
+    }
+    // A preset rebuilds the map over its current range, as `--colormap` does.
+    let before = (controls.palette, controls.log);
+    ui.horizontal(|ui| {
+        egui::ComboBox::from_id_salt("palette")
+            .selected_text(controls.palette.palette.name())
+            .show_ui(ui, |ui| {
+                for p in Palette::ALL {
+                    ui.selectable_value(&mut controls.palette.palette, p, p.name());
+                }
+            });
+        ui.checkbox(&mut controls.palette.reversed, "reverse");
+        ui.checkbox(&mut controls.log, "log")
+            .on_hover_text("colours spaced evenly in log10 of the value (positive ranges)");
+    });
+    if (controls.palette, controls.log) != before {
+        out.push(AppCommand::View(ViewCommand::ColourScale {
+            palette: controls.palette,
+            range: None,
+            centre: None,
+            log: controls.log,
+        }));
+    }
+    if ui
+        .button("Fit to visible")
+        .on_hover_text("spread the map over the colour field's values on the surfaces shown")
+        .clicked()
+    {
+        out.push(AppCommand::FitColoursToVisible);
     }
     if let Some(f) = doc.field(&st.colormap.field) {
         widgets::colormap_editor(ui, &mut st.colormap, &f.histogram, f.min, f.max);
@@ -267,6 +305,18 @@ fn colours(doc: &Doc, st: &mut ViewState, out: &mut Vec<AppCommand>, ui: &mut eg
             .range(0.0..=f32::MAX)
             .prefix("band ±"),
     );
+}
+
+/// What the picture carries besides the data (the view state's `overlays`).
+fn overlays(st: &mut ViewState, ui: &mut egui::Ui) {
+    ui.label(RichText::new("Overlays").strong());
+    let o = &mut st.overlays;
+    ui.horizontal_wrapped(|ui| {
+        ui.checkbox(&mut o.legend, "legend");
+        ui.checkbox(&mut o.axes, "axes");
+        ui.checkbox(&mut o.outline, "box");
+        ui.checkbox(&mut o.scale, "scale bar");
+    });
 }
 
 fn scene(

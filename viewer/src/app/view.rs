@@ -3,6 +3,7 @@
 //! window makes on its own (put the lights back, frame the data).
 
 use crate::mesh::MeshInstance;
+use crate::palette::{Palette, PaletteSpec};
 use crate::shading::{default_lights, Light};
 use crate::view_state::ViewState;
 
@@ -18,6 +19,10 @@ pub(crate) struct ViewControls {
     pub hidden_meshes: Vec<MeshInstance>,
     /// The `--mesh`-style spec typed into the panel.
     pub mesh_spec: String,
+    /// The colour-map preset the panel builds maps from (`--colormap`), and whether it
+    /// spaces them in log10 (`--log`).
+    pub palette: PaletteSpec,
+    pub log: bool,
 }
 
 impl Default for ViewControls {
@@ -27,6 +32,11 @@ impl Default for ViewControls {
             light_dir: [-31.0, 34.4],
             hidden_meshes: Vec::new(),
             mesh_spec: String::new(),
+            palette: PaletteSpec {
+                palette: Palette::Speed,
+                reversed: false,
+            },
+            log: false,
         }
     }
 }

@@ -24,7 +24,7 @@ use super::view::{self, ViewControls};
 use crate::film;
 use crate::mesh::MeshInstance;
 use crate::progressive::Progressive;
-use crate::view_state::{FieldRange, ViewState};
+use crate::view_state::{FieldRange, ViewCommand, ViewState};
 
 /// Samples per pixel the window refines to when the view state does not say.
 const WINDOW_SPP: u32 = 4;
@@ -284,7 +284,8 @@ impl ViewerApp {
     pub fn save_png(&mut self, path: &Path) {
         let result = match &self.frames.finished {
             Some(u) => self.check_output("Save image", path).and_then(|()| {
-                film::save_png(path, u.width, u.height, &u.rgb).map_err(|e| e.to_string())
+                let (w, h, rgb8) = u.picture();
+                film::save_png_rgb8(path, w, h, rgb8).map_err(|e| e.to_string())
             }),
             None => Err(format!(
                 "{}: the image is still rendering; save it once it is finished",
@@ -304,6 +305,31 @@ impl ViewerApp {
             AppCommand::View(c) => {
                 if let Err(e) = self.state.apply(&c, &self.document.ranges) {
                     self.error = Some(e.to_string());
+                }
+            }
+            AppCommand::FitColoursToVisible => {
+                let range = self
+                    .frames
+                    .finished
+                    .as_ref()
+                    .and_then(|u| u.surface.as_ref())
+                    .and_then(|s| crate::colormap::visible_range(&s.1));
+                match range {
+                    Some(r) => {
+                        let command = ViewCommand::ColourScale {
+                            palette: self.controls.palette,
+                            range: Some(r),
+                            centre: None,
+                            log: self.controls.log,
+                        };
+                        if let Err(e) = self.state.apply(&command, &self.document.ranges) {
+                            self.error = Some(e.to_string());
+                        }
+                    }
+                    None => {
+                        self.error =
+                            Some("Fit to visible: no surface in the finished picture".to_string())
+                    }
                 }
             }
             AppCommand::FrameData => {
