@@ -18,6 +18,8 @@ pub(crate) struct ViewControls {
     pub hidden_meshes: Vec<MeshInstance>,
     /// The `--mesh`-style spec typed into the panel.
     pub mesh_spec: String,
+    /// The iso slider is symmetric-log (decades on both sides of zero).
+    pub iso_log: bool,
 }
 
 impl Default for ViewControls {
@@ -27,6 +29,7 @@ impl Default for ViewControls {
             light_dir: [-31.0, 34.4],
             hidden_meshes: Vec::new(),
             mesh_spec: String::new(),
+            iso_log: true,
         }
     }
 }
