@@ -3,7 +3,7 @@
 
 use eframe::egui::{self, RichText};
 
-use super::keys::{KEYS, MOUSE};
+use super::keys::{self, KEYS, MOUSE};
 
 /// Title of the overlay (and of the Help menu's entry that opens it).
 pub(crate) const TITLE: &str = "Keys and mouse";
@@ -21,7 +21,7 @@ pub(crate) fn show(ctx: &egui::Context, open: &mut bool) {
                 .striped(true)
                 .show(ui, |ui| {
                     for b in KEYS {
-                        ui.label(RichText::new(ctx.format_shortcut(&b.shortcut)).monospace());
+                        ui.label(RichText::new(keys::shortcut_name(ctx, &b.shortcut)).monospace());
                         ui.label(b.what);
                         ui.end_row();
                     }

@@ -116,11 +116,21 @@ pub(crate) fn pressed(ctx: &egui::Context, help_open: bool) -> Vec<KeyAction> {
     })
 }
 
-/// The keys of `action`, as the platform writes them ("Ctrl+Shift+Z"), joined.
+/// A shortcut as the platform writes it ("Ctrl+Shift+Z"); a key without modifiers by its
+/// symbol (`?`, where egui would write "Questionmark").
+pub(crate) fn shortcut_name(ctx: &egui::Context, shortcut: &KeyboardShortcut) -> String {
+    if shortcut.modifiers.is_none() {
+        shortcut.logical_key.symbol_or_name().to_string()
+    } else {
+        ctx.format_shortcut(shortcut)
+    }
+}
+
+/// The keys of `action`, as [`shortcut_name`] writes them, joined.
 pub(crate) fn shortcut_text(ctx: &egui::Context, action: KeyAction) -> String {
     KEYS.iter()
         .filter(|b| b.action == action)
-        .map(|b| ctx.format_shortcut(&b.shortcut))
+        .map(|b| shortcut_name(ctx, &b.shortcut))
         .collect::<Vec<_>>()
         .join(", ")
 }

@@ -32,6 +32,8 @@ mod picking;
 mod player;
 mod script;
 mod status;
+#[cfg(test)]
+mod tests;
 mod view;
 mod viewer;
 mod widgets;
