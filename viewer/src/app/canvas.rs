@@ -59,7 +59,10 @@ pub(crate) fn show(c: Canvas<'_>, ui: &mut egui::Ui) -> bool {
         painter.text(
             rect.center(),
             egui::Align2::CENTER_CENTER,
-            "Open a .qbk file (File > Open, or drop it here)",
+            format!(
+                "Open a .qbk file (File > {}, or drop it here)",
+                super::menu::OPEN
+            ),
             egui::FontId::proportional(18.0),
             Color32::LIGHT_GRAY,
         );

@@ -29,4 +29,10 @@ pub(crate) enum AppCommand {
     RemoveMesh(usize),
     HideMesh(usize),
     ShowMesh(usize),
+    /// Go back to the view before the last change, or forward again to one undone
+    /// (see [`super::history`]).
+    Undo,
+    Redo,
+    /// Show or hide the list of keys and mouse bindings.
+    Help,
 }

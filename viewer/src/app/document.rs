@@ -62,6 +62,39 @@ impl Doc {
     }
 }
 
+/// The message for an OpenVDB file the window was asked to open: the window reads baked
+/// `.qbk` files only (the VDB reader is not linked into it), so say how to bake it.
+/// `None` for any other file.
+pub(crate) fn bake_hint(path: &Path) -> Option<String> {
+    let ext = path.extension()?.to_str()?;
+    if !ext.eq_ignore_ascii_case("vdb") {
+        return None;
+    }
+    let out = path.with_extension("qbk");
+    Some(format!(
+        "{}: an OpenVDB file; the window opens baked .qbk files. Bake it first with \
+         `qbricks-bake bake {} -o {}`, then open {}",
+        path.display(),
+        shell_word(path),
+        shell_word(&out),
+        out.display()
+    ))
+}
+
+/// `path` as one word of a shell command line: quoted when it holds anything but
+/// letters, digits and `_./-+,=:@`.
+fn shell_word(path: &Path) -> String {
+    let s = path.to_string_lossy();
+    let plain = !s.is_empty()
+        && s.chars()
+            .all(|c| c.is_ascii_alphanumeric() || "_./-+,=:@".contains(c));
+    if plain {
+        s.into_owned()
+    } else {
+        format!("'{}'", s.replace('\'', r"'\''"))
+    }
+}
+
 /// What the window has open.
 #[derive(Default)]
 pub(crate) struct Document {
@@ -103,5 +136,28 @@ impl Document {
         }
         guard.output(role, path);
         guard.check().map_err(|e| e.to_string())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_vdb_file_gets_the_command_that_bakes_it() {
+        let hint = bake_hint(Path::new("data/wake_small.vdb")).expect("a hint");
+        assert!(
+            hint.contains("`qbricks-bake bake data/wake_small.vdb -o data/wake_small.qbk`"),
+            "{hint}"
+        );
+        let hint = bake_hint(Path::new("my runs/frame_####.VDB")).expect("a hint");
+        assert!(
+            hint.contains(
+                "`qbricks-bake bake 'my runs/frame_####.VDB' -o 'my runs/frame_####.qbk'`"
+            ),
+            "{hint}"
+        );
+        assert!(bake_hint(Path::new("a.qbk")).is_none());
+        assert_eq!(shell_word(Path::new("it's")), r"'it'\''s'");
     }
 }

@@ -10,16 +10,21 @@
 //!
 //! One file per concern: `viewer` is the window and the one place that handles what the
 //! panel asks for (`command`); `document` the open data, `view` the window's own view
-//! settings, `frames` the renderer and its images, `dialogs` the file dialog, `picking`
-//! the values under the cursor; `panel`, `canvas`, `status` and `widgets` draw; the rest
-//! (`navigation`, `player`, `script`, `options`) is state and rules without egui where it
-//! can be.
+//! settings, `frames` the renderer and its images, `dialogs` the file dialogs, `picking`
+//! the values under the cursor, `history` undo and redo of the view, `keys` the table of
+//! key and mouse bindings; `menu`, `panel`, `canvas`, `status`, `help` and `widgets`
+//! draw; the rest (`navigation`, `player`, `script`, `options`) is state and rules without
+//! egui where it can be.
 
 mod canvas;
 mod command;
 mod dialogs;
 mod document;
 mod frames;
+mod help;
+mod history;
+mod keys;
+mod menu;
 mod navigation;
 mod options;
 mod panel;
@@ -27,6 +32,8 @@ mod picking;
 mod player;
 mod script;
 mod status;
+#[cfg(test)]
+mod tests;
 mod view;
 mod viewer;
 mod widgets;

@@ -19,6 +19,21 @@ use crate::sampling::Strategy;
 use crate::transfer::Mode;
 use crate::view_state::{ViewCommand, ViewState, MAX_SPP};
 
+/// Tooltips of the settings whose names do not say what they do.
+pub(crate) const STRATEGY_TIP: &str = "How a ray samples the field. uniform: fixed steps \
+    (fastest, can step over thin features); paper: ExaBricks' adaptive steps at interval \
+    midpoints; bisect: adaptive steps, then bisection into the band; exact: the root of \
+    each cell's trilinear cubic, no surface missed (iso mode; dvr samples it as uniform \
+    or bisect).";
+pub(crate) const STEP_TIP: &str = "Distance between samples along a ray, in cells of the \
+    finest level there. Smaller: thin sheets are not stepped over, slower.";
+pub(crate) const SIGMA_TIP: &str = "Width σ of the dvr shell's opacity, a Gaussian around \
+    the iso value, in field units: wider shows more of the field around the surface.";
+pub(crate) const HALF_WIDTH_TIP: &str = "Where the shell ends, in σ from the iso value: \
+    beyond iso ± this·σ the field is transparent.";
+pub(crate) const BAND_TIP: &str = "Values within ± this of a control point take its colour \
+    flat; between the bands the colours blend (0: a smooth ramp between points).";
+
 /// What the panel shows and edits: the view state and the window's own settings.
 pub(crate) struct Panel<'a> {
     /// The message at the top (bad file, failed save, …).
@@ -50,7 +65,7 @@ pub(crate) fn show(p: Panel<'_>, ui: &mut egui::Ui) -> Vec<AppCommand> {
     ui.separator();
     summary(doc, ui);
     ui.separator();
-    volume(doc, p.state, &mut out, ui);
+    volume(doc, p.state, p.controls, &mut out, ui);
     ui.separator();
     colours(doc, p.state, p.controls, &mut out, ui);
     ui.separator();
@@ -145,7 +160,13 @@ fn summary(doc: &Doc, ui: &mut egui::Ui) {
     }
 }
 
-fn volume(doc: &Doc, st: &mut ViewState, out: &mut Vec<AppCommand>, ui: &mut egui::Ui) {
+fn volume(
+    doc: &Doc,
+    st: &mut ViewState,
+    controls: &mut ViewControls,
+    out: &mut Vec<AppCommand>,
+    ui: &mut egui::Ui,
+) {
     ui.horizontal(|ui| {
         ui.label("Mode");
         ui.radio_value(&mut st.mode, Mode::Iso, "iso-surface");
@@ -162,9 +183,23 @@ fn volume(doc: &Doc, st: &mut ViewState, out: &mut Vec<AppCommand>, ui: &mut egu
         let mut iso = st.iso;
         let mut changed = widgets::iso_histogram(ui, &f.histogram, f.min, f.max, &mut iso);
         let (lo, hi) = (f64::from(f.min), f64::from(f.max));
-        changed |= ui
-            .add(egui::Slider::new(&mut iso, lo.min(hi)..=hi.max(lo)).text("iso value"))
-            .changed();
+        let slider = egui::Slider::new(&mut iso, lo.min(hi)..=hi.max(lo)).text("iso value");
+        // Q spans decades: on a linear slider the small positive values that show the
+        // vortex cores' edges sit within a pixel of zero. The symmetric-log slider gives
+        // each decade down to 1e-4 of the range the same room, on both sides of zero.
+        let slider = if controls.iso_log {
+            let smallest = 1e-4 * lo.abs().max(hi.abs());
+            slider
+                .logarithmic(true)
+                .smallest_positive(if smallest > 0.0 { smallest } else { 1e-6 })
+        } else {
+            slider
+        };
+        changed |= ui.add(slider).changed();
+        ui.checkbox(&mut controls.iso_log, "log scale")
+            .on_hover_text(
+                "iso slider in decades on both sides of zero, so small values are in reach",
+            );
         if changed {
             // The dvr band follows the iso value, as for a new view on the command line.
             out.push(AppCommand::View(ViewCommand::Iso {
@@ -179,7 +214,9 @@ fn volume(doc: &Doc, st: &mut ViewState, out: &mut Vec<AppCommand>, ui: &mut egu
             for s in Strategy::ALL {
                 ui.selectable_value(&mut st.strategy, s, s.as_str());
             }
-        });
+        })
+        .response
+        .on_hover_text(STRATEGY_TIP);
     if st.effective_strategy() != st.strategy {
         let used = st.effective_strategy();
         ui.label(RichText::new(format!("dvr samples `exact` as `{used}`")).weak());
@@ -188,7 +225,8 @@ fn volume(doc: &Doc, st: &mut ViewState, out: &mut Vec<AppCommand>, ui: &mut egu
         egui::Slider::new(&mut st.step, 0.01..=4.0)
             .logarithmic(true)
             .text("step (cells)"),
-    );
+    )
+    .on_hover_text(STEP_TIP);
     ui.add(
         egui::Slider::new(&mut st.spp, 1..=MAX_SPP.min(256))
             .logarithmic(true)
@@ -200,9 +238,11 @@ fn volume(doc: &Doc, st: &mut ViewState, out: &mut Vec<AppCommand>, ui: &mut egu
             egui::Slider::new(&mut st.transfer.sigma, 1e-6..=sigma_max)
                 .logarithmic(true)
                 .text("band σ"),
-        );
+        )
+        .on_hover_text(SIGMA_TIP);
         ui.add(egui::Slider::new(&mut st.transfer.peak, 0.01..=4.0).text("peak opacity"));
-        ui.add(egui::Slider::new(&mut st.transfer.k, 0.5..=4.0).text("band half-width (σ)"));
+        ui.add(egui::Slider::new(&mut st.transfer.k, 0.5..=4.0).text("band half-width (σ)"))
+            .on_hover_text(HALF_WIDTH_TIP);
     }
 }
 
@@ -304,7 +344,8 @@ fn colours(
             .speed(1e-4)
             .range(0.0..=f32::MAX)
             .prefix("band ±"),
-    );
+    )
+    .on_hover_text(BAND_TIP);
 }
 
 /// What the picture carries besides the data (the view state's `overlays`).
@@ -427,10 +468,5 @@ fn camera(
         ui.checkbox(picking, "pick values under the cursor");
     });
     ui.add(egui::Slider::new(resolution_scale, 0.25..=2.0).text("resolution scale"));
-    ui.label(
-        RichText::new(
-            "drag: orbit · right/middle or shift-drag: pan · wheel: zoom · double-click: pivot",
-        )
-        .weak(),
-    );
+    ui.label(RichText::new(super::keys::mouse_hint()).weak());
 }

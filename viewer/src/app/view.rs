@@ -23,6 +23,8 @@ pub(crate) struct ViewControls {
     /// spaces them in log10 (`--log`).
     pub palette: PaletteSpec,
     pub log: bool,
+    /// The iso slider is symmetric-log (decades on both sides of zero).
+    pub iso_log: bool,
 }
 
 impl Default for ViewControls {
@@ -37,6 +39,7 @@ impl Default for ViewControls {
                 reversed: false,
             },
             log: false,
+            iso_log: true,
         }
     }
 }

@@ -5,14 +5,18 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Instant;
 
-use eframe::egui::{self, Key};
+use eframe::egui;
 use format::sequence::FramePattern;
 
 use super::canvas::{self, Canvas};
 use super::command::AppCommand;
-use super::dialogs::{DialogPurpose, Dialogs};
-use super::document::{Doc, Document, DEFAULT_FILE};
+use super::dialogs::{self, DialogPurpose, Dialogs};
+use super::document::{self, Doc, Document, DEFAULT_FILE};
 use super::frames::Frames;
+use super::help;
+use super::history::{History, Snapshot};
+use super::keys::{self, KeyAction};
+use super::menu::{self, MenuState};
 use super::navigation;
 use super::options::WindowOptions;
 use super::panel::{self, Panel};
@@ -55,6 +59,10 @@ pub struct ViewerApp {
     pub(crate) frames: Frames,
     pub(crate) dialogs: Dialogs,
     pub(crate) picking: Picking,
+    /// The views before and after the one shown (undo, redo).
+    pub(crate) history: History,
+    /// The list of keys and mouse bindings is shown.
+    pub(crate) help_open: bool,
     /// Generation of the first job of the sequence frame shown, so playback knows when
     /// that frame is on screen (`None`: not submitted yet).
     frame_job: Option<u64>,
@@ -92,6 +100,8 @@ impl ViewerApp {
             frames: Frames::new(options.threads, ctx)?,
             dialogs: Dialogs::new(),
             picking: Picking::default(),
+            history: History::default(),
+            help_open: false,
             frame_job: None,
             viewport_px: [0, 0],
             script: options.script.map(ScriptRunner::new),
@@ -108,6 +118,8 @@ impl ViewerApp {
             app.load_state(s);
         }
         app.startup_error = app.error.clone();
+        // The view the window starts with is the oldest step.
+        app.history.reset(app.snapshot());
         Ok(app)
     }
 
@@ -137,6 +149,10 @@ impl ViewerApp {
     /// Opens `path`, or the sequence when it is a frame pattern (`frame_####.qbk`) that is
     /// not itself a file; on failure the error is shown and the current file stays open.
     pub(crate) fn open_file(&mut self, path: &Path) {
+        if let Some(hint) = document::bake_hint(path) {
+            self.error = Some(hint);
+            return;
+        }
         if !path.exists() {
             match FramePattern::parse(path) {
                 Ok(Some(pattern)) => return self.open_sequence(path, &pattern),
@@ -157,6 +173,7 @@ impl ViewerApp {
                 self.frames.finished = None;
                 self.picking.forget();
                 self.sequence = None;
+                self.history.reset(self.snapshot());
             }
             Err(e) => self.error = Some(e),
         }
@@ -181,6 +198,7 @@ impl ViewerApp {
         self.sequence = Some(Player::new(shown, frames));
         self.document.doc = None;
         self.show_frame();
+        self.history.reset(self.snapshot());
     }
 
     /// Shows `state` (the defaults of newly opened data) at the window's size and
@@ -258,6 +276,8 @@ impl ViewerApp {
                 self.state = s;
                 self.document.state_file = Some(path.to_path_buf());
                 self.error = None;
+                // The values picked belong to the old view's surface.
+                self.picking.pick = None;
             }
             Err(m) => self.error = Some(m),
         }
@@ -270,8 +290,10 @@ impl ViewerApp {
             .check_output(self.sequence.as_ref(), meshes, role, path)
     }
 
-    /// Writes the view state (the same JSON `render --state` reads).
+    /// Writes the view state (the same JSON `render --state` reads), adding `.json` to a
+    /// name without it.
     pub fn save_state(&mut self, path: &Path) {
+        let path = &dialogs::with_extension(path, "json");
         let result = self
             .check_output("Save view", path)
             .and_then(|()| self.state.save(path).map_err(|e| e.to_string()));
@@ -280,8 +302,10 @@ impl ViewerApp {
         }
     }
 
-    /// Writes the finished full-resolution image as a PNG.
+    /// Writes the finished full-resolution image as a PNG, adding `.png` to a name
+    /// without it.
     pub fn save_png(&mut self, path: &Path) {
+        let path = &dialogs::with_extension(path, "png");
         let result = match &self.frames.finished {
             Some(u) => self.check_output("Save image", path).and_then(|()| {
                 let (w, h, rgb8) = u.picture();
@@ -341,7 +365,10 @@ impl ViewerApp {
                 self.controls.relight(&mut self.state);
             }
             AppCommand::Relight => self.controls.relight(&mut self.state),
-            AppCommand::Dialog(purpose) => self.dialogs.open(purpose),
+            AppCommand::Dialog(purpose) => {
+                let open = self.document.doc.as_ref().map(|d| d.path.clone());
+                self.dialogs.open(purpose, open.as_deref());
+            }
             AppCommand::ShowFrame => self.show_frame(),
             AppCommand::AddMesh => match MeshInstance::parse(self.controls.mesh_spec.trim()) {
                 Ok(m) => {
@@ -362,6 +389,62 @@ impl ViewerApp {
                 self.state.meshes.push(m);
             }
             AppCommand::RemoveMesh(_) | AppCommand::HideMesh(_) | AppCommand::ShowMesh(_) => {}
+            AppCommand::Undo => {
+                let back = self.history.undo(&self.snapshot());
+                self.restore(back);
+            }
+            AppCommand::Redo => {
+                let forward = self.history.redo(&self.snapshot());
+                self.restore(forward);
+            }
+            AppCommand::Help => self.help_open = !self.help_open,
+        }
+    }
+
+    /// The view as the history records it.
+    fn snapshot(&self) -> Snapshot {
+        Snapshot {
+            state: self.state.clone(),
+            pivot: self.pivot,
+            hidden_meshes: self.controls.hidden_meshes.clone(),
+        }
+    }
+
+    /// Shows a view of the history, at the window's current image size.
+    fn restore(&mut self, snapshot: Option<Snapshot>) {
+        let Some(s) = snapshot else {
+            return;
+        };
+        let (width, height) = (self.state.width, self.state.height);
+        self.state = s.state;
+        self.state.width = width;
+        self.state.height = height;
+        self.pivot = s.pivot;
+        self.controls.hidden_meshes = s.hidden_meshes;
+    }
+
+    /// Does what this frame's keys ask for ([`keys::KEYS`]).
+    fn take_keys(&mut self, ctx: &egui::Context) {
+        for action in keys::pressed(ctx, self.help_open) {
+            match action {
+                KeyAction::FrameData => self.handle(AppCommand::FrameData),
+                KeyAction::Undo => self.handle(AppCommand::Undo),
+                KeyAction::Redo => self.handle(AppCommand::Redo),
+                KeyAction::Help => self.handle(AppCommand::Help),
+                KeyAction::CloseHelp => self.help_open = false,
+            }
+        }
+    }
+
+    /// The menu bar; what was chosen in it is handled once it is drawn.
+    fn menu(&mut self, ui: &mut egui::Ui) {
+        let m = MenuState {
+            can_undo: self.history.can_undo(),
+            can_redo: self.history.can_redo(),
+            has_data: self.document.doc.is_some(),
+        };
+        for c in menu::show(&m, ui) {
+            self.handle(c);
         }
     }
 
@@ -487,12 +570,9 @@ impl ViewerApp {
             }
         }
         self.take_dropped(&ctx);
-        if ctx.input(|i| i.key_pressed(Key::F) || i.key_pressed(Key::Home))
-            && !ctx.egui_wants_keyboard_input()
-        {
-            self.handle(AppCommand::FrameData);
-        }
+        self.take_keys(&ctx);
 
+        egui::Panel::top("menu").show(ui, |ui| self.menu(ui));
         egui::Panel::left("controls")
             .resizable(true)
             .default_size(300.0)
@@ -513,9 +593,15 @@ impl ViewerApp {
         egui::CentralPanel::default()
             .frame(egui::Frame::NONE)
             .show(ui, |ui| self.central(ui));
+        help::show(&ctx, &mut self.help_open);
         self.handle_dialog(&ctx);
 
         self.submit_if_changed();
+        // A button held down (a slider, the image) or the wheel turning: the change goes
+        // on, and becomes one step when it ends.
+        let changing =
+            ctx.input(|i| i.pointer.any_down() || i.smooth_scroll_delta != egui::Vec2::ZERO);
+        self.history.observe(&self.snapshot(), changing);
         if self.sequence.is_some() && self.frame_job.is_none() && self.frames.has_job() {
             self.frame_job = Some(self.generation);
         }
