@@ -198,7 +198,7 @@ fn volume(doc: &Doc, st: &mut ViewState, out: &mut Vec<AppCommand>, ui: &mut egu
                 .logarithmic(true)
                 .text("band σ"),
         );
-        ui.add(egui::Slider::new(&mut st.transfer.peak, 0.01..=4.0).text("peak opacity"));
+        ui.add(egui::Slider::new(&mut st.transfer.peak_opacity, 0.01..=4.0).text("peak opacity"));
         ui.add(egui::Slider::new(&mut st.transfer.k, 0.5..=4.0).text("band half-width (σ)"));
     }
 }
