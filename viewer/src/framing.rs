@@ -215,7 +215,7 @@ pub fn fit_boxes(
         let shift = 0.5 * (u0 + u1) * b.right + 0.5 * (w0 + w1) * b.up;
         let width = ((u1 - u0).max((w1 - w0) * aspect) / fill).max(f64::MIN_POSITIVE);
         let look = centre + shift;
-        let dist = (v(cam.eye) - v(cam.look_at)).length();
+        let dist = scaled_length(v(cam.eye) - v(cam.look_at));
         cam.look_at = look.to_array();
         cam.eye = (look - dist * b.forward).to_array();
         cam.projection = Projection::Orthographic { width };
@@ -225,14 +225,15 @@ pub fn fit_boxes(
     let tan_h = tan_v * aspect;
     // Look-at relative to the centre, and distance from it to the eye.
     let mut look = DVec3::ZERO;
-    let mut dist = (v(cam.eye) - v(cam.look_at)).length();
+    let mut dist = scaled_length(v(cam.eye) - v(cam.look_at));
     for _ in 0..8 {
         // The eye must stay in front of every corner (depth > 5 % of the box's size).
         let nearest = corners
             .iter()
             .map(|c| (*c - look).dot(b.forward))
             .fold(f64::NEG_INFINITY, f64::max);
-        let min_dist = nearest + 0.05 * half.length().max(f64::MIN_POSITIVE);
+        // The largest half-side, not the diagonal: its square overflows for boxes far out.
+        let min_dist = nearest + 0.05 * half.abs().max_element().max(f64::MIN_POSITIVE);
         dist = dist.max(min_dist);
         let eye = look - dist * b.forward;
         let proj = |c: &DVec3, axis: DVec3, t: f64| {
@@ -251,10 +252,24 @@ pub fn fit_boxes(
         dist = (dist * size / fill).max(min_dist);
     }
     let look = centre + look;
-    cam.look_at = look.to_array();
-    cam.eye = (look - dist * b.forward).to_array();
+    let eye = look - dist * b.forward;
     cam.projection = Projection::Perspective { fov_deg };
+    // Boxes so far out that the refinement overflows keep [`Camera::frame`]'s pose.
+    if look.is_finite() && eye.is_finite() {
+        cam.look_at = look.to_array();
+        cam.eye = eye.to_array();
+    }
     cam
+}
+
+/// Length of `d` without squaring its components (they overflow for boxes far out).
+fn scaled_length(d: DVec3) -> f64 {
+    let m = d.abs().max_element();
+    if m > 0.0 && m.is_finite() {
+        m * (d / m).length()
+    } else {
+        d.length()
+    }
 }
 
 /// Smallest and largest of `f` over the corners.
