@@ -254,8 +254,9 @@ pub fn fit_boxes(
     let look = centre + look;
     let eye = look - dist * b.forward;
     cam.projection = Projection::Perspective { fov_deg };
-    // Boxes so far out that the refinement overflows keep [`Camera::frame`]'s pose.
-    if look.is_finite() && eye.is_finite() {
+    // Boxes so far out that squares overflow (the refinement, or validation's check of
+    // the view direction) keep [`Camera::frame`]'s pose, which is built for them.
+    if look.is_finite() && eye.is_finite() && centre.abs().max_element() < 1e150 {
         cam.look_at = look.to_array();
         cam.eye = eye.to_array();
     }
