@@ -18,6 +18,7 @@ pub mod dataset;
 mod dual_mask;
 pub mod fields;
 pub mod film;
+pub mod framing;
 pub mod info;
 pub mod integrate;
 mod lattice;

@@ -1,8 +1,10 @@
 //! Lights, Phong shading, and where shading normals come from.
 //!
 //! Energy: with `ambient + diffuse + specular ≤ 1`, base colours and light colours in
-//! 0..=1 and light intensities summing to at most 1, [`phong`] stays in 0..=1 per channel
-//! (the defaults satisfy this), so nothing needs clamping before the film.
+//! 0..=1 and light intensities summing to at most 1, [`phong`] stays in 0..=1 per channel.
+//! The defaults of new views ([`default_lights`], [`Material::new_view`]) go past 1 on
+//! purpose, as an exposure: a surface facing the camera in a saturated base colour then
+//! reaches about 1.1 times that colour, and the film clamps highlights to white.
 
 use glam::{DVec3, Vec3};
 use serde::{Deserialize, Serialize};
@@ -46,7 +48,24 @@ pub struct Material {
     pub shininess: f32,
 }
 
+impl Material {
+    /// The material of new views ([`crate::view_state::ViewState::default_for`]): more
+    /// diffuse and ambient light than [`Material::default`], so that with
+    /// [`default_lights`] the median lit surface reaches a luma of about 100 on the
+    /// default colour map (issue 26). `Default` stays what state files without a
+    /// `material` read, so they render as before.
+    pub fn new_view() -> Material {
+        Material {
+            ambient: 0.2,
+            diffuse: 0.8,
+            specular: 0.25,
+            shininess: 32.0,
+        }
+    }
+}
+
 impl Default for Material {
+    /// The coefficients of states saved before issue 26 (and without a `material`).
     fn default() -> Self {
         Material {
             ambient: 0.15,
@@ -160,34 +179,45 @@ impl Light {
     }
 }
 
-/// Three white directional lights fixed to the camera's pose: a key light from above-left
-/// behind the viewer (intensity 0.55), a fill light from the right (0.15) and a headlight
-/// along the view direction (0.3), together 1, so every surface the camera sees gets some direct
-/// light and none renders near-black with the ambient term alone. Stored in world
-/// coordinates, so they stay put when the camera later moves.
+/// Key light of [`default_lights`]: the camera's own direction (a headlight).
+pub const KEY_INTENSITY: f32 = 0.85;
+/// Fill light of [`default_lights`], and its azimuth and elevation in degrees relative
+/// to the camera (azimuth from behind the viewer towards the right, elevation up).
+pub const FILL_INTENSITY: f32 = 0.35;
+pub const FILL_DIR_DEG: [f64; 2] = [40.0, 35.0];
+
+/// Two white directional lights fixed to the camera's pose: a key light at the camera
+/// (a headlight, [`KEY_INTENSITY`]) and a fill from above-right behind the viewer
+/// ([`FILL_INTENSITY`], at [`FILL_DIR_DEG`]) that models the shape. Issue 26: the earlier
+/// rig put its key light over the shoulder, so undersides and surfaces turned away from
+/// it got ambient light only and the median lit surface came out at a luma of 53–65;
+/// with the key at the camera every surface the camera sees faces it. Together with
+/// [`Material::new_view`] they make surfaces bright on dark and light backgrounds.
+/// Stored in world coordinates, so they stay put when the camera later moves.
 pub fn default_lights(camera: &Camera) -> Vec<Light> {
     let b = camera.basis();
-    // Directions *towards* the lights, in the camera frame.
-    let key = (-b.forward + 0.8 * b.up - 0.6 * b.right).normalize();
-    let fill = (-b.forward + 0.9 * b.right - 0.2 * b.up).normalize();
+    let fill = towards(&b, FILL_DIR_DEG);
     let white = [1.0, 1.0, 1.0];
     vec![
         Light::Directional {
-            direction: (-key).to_array(),
+            direction: b.forward.to_array(),
             colour: white,
-            intensity: 0.55,
+            intensity: KEY_INTENSITY,
         },
         Light::Directional {
             direction: (-fill).to_array(),
             colour: white,
-            intensity: 0.15,
-        },
-        Light::Directional {
-            direction: b.forward.to_array(),
-            colour: white,
-            intensity: 0.3,
+            intensity: FILL_INTENSITY,
         },
     ]
+}
+
+/// Unit direction towards a light at `[azimuth, elevation]` degrees in the camera frame
+/// of `b`: azimuth 0 is the camera's own direction (behind the viewer), positive to the
+/// right; elevation positive up.
+pub(crate) fn towards(b: &crate::camera::Basis, dir_deg: [f64; 2]) -> DVec3 {
+    let [az, el] = dir_deg.map(f64::to_radians);
+    el.cos() * (az.cos() * -b.forward + az.sin() * b.right) + el.sin() * b.up
 }
 
 /// Phong shading of a surface point with unit `normal` (flipped to face the viewer),
@@ -321,11 +351,14 @@ mod tests {
     fn default_lights_light_what_the_camera_sees() {
         let cam = Camera::frame([0.0; 3], [1.0; 3]);
         let lights = default_lights(&cam);
-        let total: f32 = lights.iter().map(|l| l.radiance().x).sum();
-        assert!((total - 1.0).abs() < 1e-6);
+        // Issue 26: the key light is a headlight, so a surface facing the camera gets
+        // its full intensity.
+        let b = cam.basis();
+        let key = lights[0];
+        assert!(key.towards(DVec3::ZERO).0.dot(-b.forward) > 0.999);
+        assert!(key.radiance().x >= 0.8);
         // Every surface the camera sees, however it is turned, gets direct light (the
         // headlight), so nothing visible is lit by the ambient term alone.
-        let b = cam.basis();
         for i in 0..200 {
             let a = f64::from(i) * 0.731;
             let tilt = 1.4 * (f64::from(i) / 200.0); // up to 80° away from the viewer
@@ -338,7 +371,7 @@ mod tests {
                     f64::from(l.radiance().x) * n.dot(to_light).max(0.0)
                 })
                 .sum();
-            assert!(direct > 0.05, "normal {n} gets only {direct} direct light");
+            assert!(direct > 0.14, "normal {n} gets only {direct} direct light");
         }
         // A surface facing the camera is lit by both lights.
         let n = -cam.basis().forward;
@@ -347,6 +380,7 @@ mod tests {
             assert!(l.validate().is_ok());
         }
         assert!(Material::default().validate().is_ok());
+        assert!(Material::new_view().validate().is_ok());
     }
 
     fn unit() -> impl Strategy<Value = DVec3> {

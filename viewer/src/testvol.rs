@@ -405,7 +405,7 @@ pub fn params(
             iso,
             band: crate::transfer::Band {
                 sigma: 0.1,
-                peak: 1.6,
+                peak_opacity: 1.6,
                 k: 2.0,
             },
         },

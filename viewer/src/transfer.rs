@@ -49,17 +49,28 @@ impl FromStr for Mode {
 #[serde(deny_unknown_fields)]
 pub struct Band {
     pub sigma: f64,
-    pub peak: f64,
+    /// Opacity (per reference length) at the iso value, in 0..1 for a translucent shell
+    /// ([`Band::SHELL_PEAK_OPACITY`] in new views). Read from `peak` too, its name before
+    /// issue 26, so old state files render as before: their 1.6 (the seed report's) is
+    /// above 1, which makes the middle of the band opaque, as it always did.
+    #[serde(alias = "peak")]
+    pub peak_opacity: f64,
     /// Half-width of the band in units of sigma.
     pub k: f64,
 }
 
 impl Band {
+    /// Peak opacity of new views' bands: the seed report's 1.6 saturated the middle of
+    /// the band, so the dvr shell looked like the iso-surface (44 dB PSNR between the two
+    /// pictures of the bundled sample, issue 26); at this value the shell is translucent
+    /// and the structure behind it shows through.
+    pub const SHELL_PEAK_OPACITY: f64 = 0.7;
+
     /// The seed report's shape for iso 0.05: sigma = 0.004 (8 % of iso), peak 1.6, k = 2
     /// (band 0.042–0.058).
     pub const SEED_REPORT: Band = Band {
         sigma: 0.004,
-        peak: 1.6,
+        peak_opacity: 1.6,
         k: 2.0,
     };
 }
@@ -113,7 +124,7 @@ impl Transfer {
             return 0.0;
         }
         let z = (v - self.iso) / self.band.sigma;
-        (self.band.peak * (-0.5 * z * z).exp()).min(1.0)
+        (self.band.peak_opacity * (-0.5 * z * z).exp()).min(1.0)
     }
 
     #[inline]

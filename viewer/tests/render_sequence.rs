@@ -60,7 +60,20 @@ fn distinct_colours(img: &image::RgbImage) -> usize {
     c.len()
 }
 
-const SMALL: [&str; 6] = ["--width", "64", "--height", "48", "--aov", "value"];
+/// One explicit camera: a frame alone frames its own surface and a sequence the frames'
+/// common box (issue 26), and these tests compare the two pictures pixel for pixel.
+const SMALL: [&str; 10] = [
+    "--width",
+    "64",
+    "--height",
+    "48",
+    "--aov",
+    "value",
+    "--eye",
+    "2.1,-1.9,1.8",
+    "--look-at",
+    "0.5,0.5,0.5",
+];
 
 #[test]
 fn one_colour_map_for_the_whole_sequence() {
@@ -194,6 +207,8 @@ fn field_overrides_change_the_picture_and_unknown_names_fail() {
                     "--overlays",
                     "none",
                 ][..],
+                // One camera for all: without it each iso field frames its own surface.
+                &SMALL[6..],
                 extra,
             ]
             .concat(),

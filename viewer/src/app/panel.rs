@@ -240,7 +240,7 @@ fn volume(
                 .text("band σ"),
         )
         .on_hover_text(SIGMA_TIP);
-        ui.add(egui::Slider::new(&mut st.transfer.peak, 0.01..=4.0).text("peak opacity"));
+        ui.add(egui::Slider::new(&mut st.transfer.peak_opacity, 0.01..=4.0).text("peak opacity"));
         ui.add(egui::Slider::new(&mut st.transfer.k, 0.5..=4.0).text("band half-width (σ)"))
             .on_hover_text(HALF_WIDTH_TIP);
     }

@@ -44,7 +44,7 @@ pub(crate) const MIN_STEP: f64 = 1e-3;
 pub(crate) const MAX_MESHES: usize = 64;
 /// Most `lights` entries: every shaded sample loops over them, with a shadow ray each
 /// when `shadows` is on (100,000 lights in a 14 MB state took 24 s for 64×48 pixels on one
-/// thread, about an hour at the default 800×600). The defaults have three.
+/// thread, about an hour at the default 800×600). The defaults have two.
 pub(crate) const MAX_LIGHTS: usize = 64;
 
 /// Camera and all render settings. JSON field names are the Rust field names.
@@ -132,31 +132,50 @@ pub(crate) fn default_iso(f: &FieldRange) -> (f64, f64) {
 
 impl ViewState {
     /// [`ViewState::default_for`] the field ranges of an opened volume, with the camera
-    /// framing the regions where the iso field can cross the iso value (the interesting
-    /// part, often much smaller than the domain), or the whole data when none can.
+    /// framing the iso surface ([`ViewState::frame_surface`]).
     pub fn default_for_volume(vol: &crate::volume::Volume) -> ViewState {
         let mut s = ViewState::default_for(
             vol.to_world(vol.bounds_min),
             vol.to_world(vol.bounds_max),
             &vol.fields,
         );
-        if let Ok(f) = vol.field_index(&s.iso_field) {
-            let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-            for (r, reg) in vol.regions().enumerate() {
-                let [mn, mx] = vol.range(r, f);
-                if f64::from(mn) <= s.iso && s.iso <= f64::from(mx) {
-                    for a in 0..3 {
-                        lo[a] = lo[a].min(reg.min[a]);
-                        hi[a] = hi[a].max(reg.max[a]);
-                    }
-                }
-            }
-            if (0..3).all(|a| lo[a] <= hi[a]) {
-                s.camera = Camera::frame(vol.to_world(lo), vol.to_world(hi));
-                s.lights_follow_camera();
-            }
-        }
+        s.frame_surface(vol);
         s
+    }
+
+    /// World boxes whose union holds the surface of the view's iso field and value
+    /// ([`crate::framing::surface_boxes`]); empty when the field is missing or no cell
+    /// lies on both sides of the iso value (an empty picture).
+    pub fn surface_bounds(&self, vol: &crate::volume::Volume) -> Vec<([f64; 3], [f64; 3])> {
+        let Ok(f) = vol.field_index(&self.iso_field) else {
+            return Vec::new();
+        };
+        crate::framing::surface_boxes(vol, f, self.iso)
+            .into_iter()
+            .map(|(lo, hi)| (vol.to_world(lo), vol.to_world(hi)))
+            .collect()
+    }
+
+    /// Points the camera at the visible structure, the iso surface's bounds (not the
+    /// regions that may hold the value, which reach far past it), centred and filling
+    /// [`crate::framing::DEFAULT_FILL`] of the image; at the whole data when there is no
+    /// surface. Keeps the projection kind; the default lights follow.
+    pub fn frame_surface(&mut self, vol: &crate::volume::Volume) {
+        let mut boxes = self.surface_bounds(vol);
+        if boxes.is_empty() {
+            boxes.push((vol.to_world(vol.bounds_min), vol.to_world(vol.bounds_max)));
+        }
+        self.frame_boxes(&boxes);
+    }
+
+    /// Points the camera at the union of the world boxes as
+    /// [`crate::framing::fit_boxes`] does for this state's image size, keeping the
+    /// projection kind; the default lights follow.
+    pub fn frame_boxes(&mut self, boxes: &[([f64; 3], [f64; 3])]) {
+        let aspect = f64::from(self.width.max(1)) / f64::from(self.height.max(1));
+        let fill = crate::framing::DEFAULT_FILL;
+        self.camera = crate::framing::fit_boxes(boxes, aspect, fill, self.camera.projection);
+        self.lights_follow_camera();
     }
 
     /// A state that shows any data set reasonably on first open: the camera frames the
@@ -164,7 +183,11 @@ impl ViewState {
     /// 10 % of its positive maximum (else the middle of its range), colour by `speed`
     /// (else the second field, else the iso field) over that field's range.
     pub(crate) fn default_for(min: [f64; 3], max: [f64; 3], fields: &[FieldRange]) -> ViewState {
-        let camera = Camera::frame(min, max);
+        let projection = crate::camera::Projection::Perspective {
+            fov_deg: crate::camera::DEFAULT_FOV_DEG,
+        };
+        let fill = crate::framing::DEFAULT_FILL;
+        let camera = crate::framing::fit(min, max, 800.0 / 600.0, fill, projection);
         let iso_range = fields
             .iter()
             .find(|f| f.name == "q")
@@ -192,11 +215,11 @@ impl ViewState {
             seed: 0,
             transfer: Band {
                 sigma,
-                peak: 1.6,
+                peak_opacity: Band::SHELL_PEAK_OPACITY,
                 k: 2.0,
             },
             colormap,
-            material: Material::default(),
+            material: Material::new_view(),
             meshes: Vec::new(),
             overlays: Overlays::default(),
             shadows: false,
@@ -218,6 +241,33 @@ impl ViewState {
     /// (used whenever the camera moves and the lights were not chosen by hand).
     pub(crate) fn lights_follow_camera(&mut self) {
         self.lights = default_lights(&self.camera);
+    }
+
+    /// A warning when nothing can be drawn because the iso value (in dvr mode: the band
+    /// around it) lies outside the range of the iso field in `fields`, naming the value,
+    /// the field and its range; `None` otherwise, also when the field is missing (that is
+    /// an error elsewhere). Issue 26: such a view used to give an empty picture silently.
+    pub fn iso_outside_range(&self, fields: &[FieldRange]) -> Option<String> {
+        let f = fields.iter().find(|f| f.name == self.iso_field)?;
+        let (lo, hi) = crate::transfer::Transfer {
+            mode: self.mode,
+            iso: self.iso,
+            band: self.transfer,
+        }
+        .band();
+        let (min, max) = (f64::from(f.min), f64::from(f.max));
+        // NaN compares false both ways: a non-finite range warns of nothing.
+        let outside = hi < min || lo > max;
+        let what = match self.mode {
+            Mode::Iso => format!("iso value {}", self.iso),
+            Mode::Dvr => format!("dvr band {lo}…{hi}"),
+        };
+        outside.then(|| {
+            format!(
+                "the {what} is outside the range of {} ({min} … {max}): nothing to draw",
+                f.name
+            )
+        })
     }
 
     /// Sets the iso value and keeps the dvr band's width at 8 % of it, as in the seed
@@ -336,6 +386,23 @@ mod tests {
             s.validate(),
             Err(InvalidViewState::UpAlongView { .. })
         ));
+    }
+
+    #[test]
+    fn an_iso_value_outside_the_range_is_named() {
+        let mut s = ViewState::default_for([0.0; 3], [1.0; 3], &fields());
+        assert_eq!(s.iso_outside_range(&fields()), None);
+        s.set_iso(0.7);
+        let w = s.iso_outside_range(&fields()).expect("warning");
+        assert!(w.contains("0.7") && w.contains("q (-2 … 0.5)"), "{w}");
+        s.set_iso(-2.5);
+        assert!(s.iso_outside_range(&fields()).is_some());
+        // A band that reaches into the range still draws something.
+        s.mode = Mode::Dvr;
+        s.transfer.sigma = 0.3;
+        assert_eq!(s.iso_outside_range(&fields()), None);
+        s.iso_field = "nope".into();
+        assert_eq!(s.iso_outside_range(&fields()), None);
     }
 
     #[test]

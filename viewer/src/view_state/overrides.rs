@@ -250,6 +250,13 @@ impl Overrides {
 }
 
 impl Overrides {
+    /// Whether the flags place the camera (`--eye`, `--look-at`, `--up`, `--ortho`):
+    /// without them and without a state file, a new view frames the iso surface the
+    /// flags chose ([`ViewState::frame_surface`]) for the image size they chose.
+    pub fn places_camera(&self) -> bool {
+        self.eye.is_some() || self.look_at.is_some() || self.up.is_some() || self.ortho.is_some()
+    }
+
     /// Applies `--iso-field` and `--colour-field` against the fields the data has
     /// (`fields`: their ranges, a sequence's ranges for a sequence), after
     /// [`Overrides::apply`], as [`ViewCommand::IsoField`] and [`ViewCommand::ColourField`]:

@@ -31,7 +31,7 @@ pub enum InvalidViewState {
     Step { step: f64 },
     #[error("spp: expected 1..={MAX_SPP}, found {spp}")]
     Spp { spp: u32 },
-    /// `transfer.sigma`, `transfer.peak` or `transfer.k`.
+    /// `transfer.sigma`, `transfer.peak_opacity` or `transfer.k`.
     #[error("{name}: expected a finite number > 0, found {value}")]
     Transfer { name: &'static str, value: f64 },
     #[error("colormap.{0}")]
@@ -110,7 +110,7 @@ impl ViewState {
         }
         for (name, value) in [
             ("transfer.sigma", self.transfer.sigma),
-            ("transfer.peak", self.transfer.peak),
+            ("transfer.peak_opacity", self.transfer.peak_opacity),
             ("transfer.k", self.transfer.k),
         ] {
             if !(value.is_finite() && value > 0.0) {

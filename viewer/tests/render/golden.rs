@@ -46,10 +46,16 @@ fn state_for(vol: &Volume, mode: Mode, strategy: Strategy) -> ViewState {
     // Point-sampled opacity: `dvr_bisect` is the golden of bisect's search for the band;
     // the default dvr (uniform, pre-integrated) has its golden in render_golden_sample.rs.
     s.preintegrated = false;
-    // Move in: the ring fills the middle of the data box.
+    // Move in from the whole data box's framing: the ring fills its middle. (Issue 26:
+    // the default camera now frames the surface itself, which this move-in would overshoot.)
+    s.camera = qbricks_viewer::camera::Camera::frame(
+        vol.to_world(vol.bounds_min),
+        vol.to_world(vol.bounds_max),
+    );
     let eye: [f64; 3] = std::array::from_fn(|a| C[a] + 0.36 * (s.camera.eye[a] - C[a]));
     s.camera.eye = eye;
     s.camera.look_at = C;
+    s.lights = qbricks_viewer::shading::default_lights(&s.camera);
     s.meshes = vec![MeshInstance {
         path: common::root().join("data/sphere.obj"),
         translation: C,

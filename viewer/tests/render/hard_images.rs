@@ -152,7 +152,7 @@ fn volume_shadows_through_opacity() {
         for s in [Strategy::Paper, Strategy::Bisect] {
             let mut st = state(vol, Mode::Dvr, s, 8.0, cam);
             st.transfer.sigma = 0.5;
-            st.transfer.peak = 0.3;
+            st.transfer.peak_opacity = 0.3;
             st.lights = vec![Light::Directional {
                 direction: [0.0, 0.3, -1.0],
                 colour: [1.0; 3],
@@ -351,7 +351,7 @@ fn dvr_opacity_across_level_boundaries_matches_the_reference() {
             let mut rp = params(&vol, Strategy::Uniform, REF_STEP, Mode::Dvr, iso);
             rp.tf.band.sigma = 0.2;
             rp.tf.band.k = 4.0;
-            rp.tf.band.peak = 0.05;
+            rp.tf.band.peak_opacity = 0.05;
             let want = dvr_alpha(&vol, rp, o, d, 0.5);
             assert!(want > 0.05, "reference sees no band at x={x_band}");
             for (s, bound) in [

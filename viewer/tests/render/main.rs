@@ -11,6 +11,7 @@
 #[path = "../common/mod.rs"]
 mod common;
 
+mod defaults;
 mod golden;
 mod golden_sample;
 mod hard_images;

@@ -129,9 +129,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     args.view
         .apply_fields(&mut state, &vol.fields)
         .with_context(|| path.display().to_string())?;
+    if args.state.is_none() && !args.view.places_camera() {
+        // The flags may have chosen another iso value, field or image size than the
+        // defaults were framed for.
+        state.frame_surface(&vol);
+    }
     state
         .validate()
         .map_err(|m| anyhow::anyhow!("view state: {m}"))?;
+    if let Some(w) = state.iso_outside_range(&vol.fields) {
+        eprintln!("qbricks-view: warning: {}: {w}", path.display());
+    }
     check_files(
         &args,
         &state,

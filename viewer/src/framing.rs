@@ -1,0 +1,387 @@
+//! What a view without a given camera looks at, and from how far.
+//!
+//! Issue 26: the default camera framed the regions whose value *range* holds the iso
+//! value, fitted as a bounding sphere into a square: the structure then filled 28–50 % of
+//! the image width, and a file whose regions reach far past the surface came out
+//! off-centre. Here the box is the iso surface's own bound (from the cells, not the
+//! regions), and the camera is placed so that this box's projection is centred in the
+//! image and fills a set fraction of it.
+
+use glam::DVec3;
+
+use crate::camera::{Camera, Projection};
+use crate::volume::Volume;
+
+/// Fraction of the image's width or height (whichever binds) the framed box fills.
+pub const DEFAULT_FILL: f64 = 0.8;
+
+/// Boxes (local frame of `vol`, one per block of a brick at most) whose union holds every point
+/// where the reconstruction of field `f` equals `iso`; empty when no cell lies on both
+/// sides of it (nothing to see).
+///
+/// The reconstruction is a convex combination of the cells whose tents reach a point
+/// (each cell's support is its centre ± one cell width), so a point on the surface is
+/// reached by a cell with value ≥ iso *and* one with value ≤ iso: the surface lies in the
+/// supports of the first set, within the bounding box of the supports of the second.
+/// Per block of [`BLOCK`]³ cells of a brick, the box of its cells of the first set cut
+/// by that bounding box is one entry. For Q iso-surfaces around vortex cores these boxes follow the cores closely,
+/// while regions' ranges (which cover whole bricks and their neighbours) do not, and the
+/// list's corners give the camera the structure's silhouette far better than one box
+/// (a ring's box has empty corners). One pass over the cells, split over the bricks on
+/// all cores: it runs when a file is opened.
+pub fn surface_boxes(vol: &Volume, f: usize, iso: f64) -> Vec<([f64; 3], [f64; 3])> {
+    use rayon::prelude::*;
+    if f >= vol.fields.len() || !iso.is_finite() {
+        return Vec::new();
+    }
+    let per_brick: Vec<(Vec<Aabb>, Aabb)> = (0..vol.brick_count() as u32)
+        .into_par_iter()
+        .map(|b| {
+            let br = vol.brick(b);
+            let [nx, ny, nz] = br.dims;
+            let nb = br.dims.map(|n| (n + BLOCK - 1) / BLOCK);
+            let mut above = vec![Aabb::default(); (nb[0] * nb[1] * nb[2]) as usize];
+            let mut below = Aabb::default();
+            let mut idx = br.first;
+            for k in 0..nz {
+                for j in 0..ny {
+                    for i in 0..nx {
+                        let v = f64::from(vol.value(f, idx));
+                        idx += 1;
+                        if v.is_nan() {
+                            continue;
+                        }
+                        let c = [i, j, k].map(|n| n as f64);
+                        let centre: [f64; 3] = std::array::from_fn(|a| br.origin[a] + c[a] * br.w);
+                        if v >= iso {
+                            let block = (i / BLOCK) + nb[0] * ((j / BLOCK) + nb[1] * (k / BLOCK));
+                            above[block as usize].grow(centre, br.w);
+                        }
+                        if v <= iso {
+                            below.grow(centre, br.w);
+                        }
+                    }
+                }
+            }
+            above.retain(|a| a.min[0] <= a.max[0]);
+            (above, below)
+        })
+        .collect();
+    let below = per_brick
+        .iter()
+        .fold(Aabb::default(), |u, (_, b)| u.union(*b));
+    per_brick
+        .iter()
+        .flat_map(|(above, _)| above)
+        .filter_map(|b| {
+            // Clip to the data too: a support reaches half a cell past the bounds.
+            let lo: [f64; 3] =
+                std::array::from_fn(|a| b.min[a].max(below.min[a]).max(vol.bounds_min[a]));
+            let hi: [f64; 3] =
+                std::array::from_fn(|a| b.max[a].min(below.max[a]).min(vol.bounds_max[a]));
+            (0..3).all(|a| lo[a] <= hi[a]).then_some((lo, hi))
+        })
+        .collect()
+}
+
+/// Side, in cells, of the blocks of a brick that [`surface_boxes`] bounds separately:
+/// small enough to follow a ring's curve inside a brick (whole 8³ bricks made a ring in
+/// a 32³ grid fill 55 % of the image width where its blocks fill more), large enough
+/// that the list stays a small fraction of the cells.
+const BLOCK: i64 = 2;
+
+/// The bounding box of `boxes`, `None` for none.
+pub fn union(boxes: &[([f64; 3], [f64; 3])]) -> Option<([f64; 3], [f64; 3])> {
+    let u = boxes.iter().fold(Aabb::default(), |u, (lo, hi)| {
+        u.union(Aabb { min: *lo, max: *hi })
+    });
+    (0..3)
+        .all(|a| u.min[a] <= u.max[a])
+        .then_some((u.min, u.max))
+}
+
+/// An axis-aligned box, empty (`min > max`) until grown.
+#[derive(Clone, Copy)]
+struct Aabb {
+    min: [f64; 3],
+    max: [f64; 3],
+}
+
+impl Default for Aabb {
+    fn default() -> Self {
+        Aabb {
+            min: [f64::INFINITY; 3],
+            max: [f64::NEG_INFINITY; 3],
+        }
+    }
+}
+
+impl Aabb {
+    fn grow(&mut self, centre: [f64; 3], half: f64) {
+        for a in 0..3 {
+            self.min[a] = self.min[a].min(centre[a] - half);
+            self.max[a] = self.max[a].max(centre[a] + half);
+        }
+    }
+
+    fn union(self, o: Aabb) -> Aabb {
+        Aabb {
+            min: std::array::from_fn(|a| self.min[a].min(o.min[a])),
+            max: std::array::from_fn(|a| self.max[a].max(o.max[a])),
+        }
+    }
+}
+
+/// A camera looking at the box `min..max` (world) from [`Camera::frame`]'s direction, with
+/// the box's projection centred in an image of `aspect` = width / height and filling
+/// `fill` of its width or height, whichever binds. `projection` picks the kind: a
+/// perspective one keeps its field of view, an orthographic one gets the width that fits.
+///
+/// [`Camera::frame`] fits the corners into a square with a margin, which leaves a wide
+/// image a third empty; here the look-at point moves so the projected box is centred
+/// (a perspective projection of a box is not symmetric about its centre), and the
+/// distance is refined a few times since the projected size goes as one over the depth.
+/// The eye stays in front of every corner, so a very flat view fills less rather than
+/// cutting the box.
+pub fn fit(min: [f64; 3], max: [f64; 3], aspect: f64, fill: f64, projection: Projection) -> Camera {
+    fit_boxes(&[(min, max)], aspect, fill, projection)
+}
+
+/// [`fit`] for the union of `boxes` (such as [`surface_boxes`]): the camera looks from
+/// the direction [`Camera::frame`] takes for their bounding box, and every corner of every
+/// box counts for centring and filling, so a structure whose bounding box has empty
+/// corners (a ring, a tilted row of rings) still fills the image. No boxes, or
+/// non-finite ones, frame the unit box.
+pub fn fit_boxes(
+    boxes: &[([f64; 3], [f64; 3])],
+    aspect: f64,
+    fill: f64,
+    projection: Projection,
+) -> Camera {
+    let v = DVec3::from_array;
+    let boxes: Vec<(DVec3, DVec3)> = boxes
+        .iter()
+        .map(|(a, b)| (v(*a).min(v(*b)), v(*a).max(v(*b))))
+        .filter(|(a, b)| a.is_finite() && b.is_finite())
+        .collect();
+    let (min, max) = boxes
+        .iter()
+        .fold(None, |u: Option<(DVec3, DVec3)>, &(a, b)| {
+            Some(u.map_or((a, b), |(lo, hi)| (lo.min(a), hi.max(b))))
+        })
+        .map_or(([f64::NAN; 3], [f64::NAN; 3]), |(a, b)| {
+            (a.to_array(), b.to_array())
+        });
+    let mut cam = Camera::frame(min, max);
+    let (fov_deg, ortho) = match projection {
+        Projection::Perspective { fov_deg } if fov_deg > 0.0 && fov_deg < 180.0 => (fov_deg, false),
+        Projection::Perspective { .. } => (crate::camera::DEFAULT_FOV_DEG, false),
+        Projection::Orthographic { .. } => (crate::camera::DEFAULT_FOV_DEG, true),
+    };
+    let aspect = if aspect.is_finite() && aspect > 0.0 {
+        aspect
+    } else {
+        1.0
+    };
+    let fill = if fill.is_finite() && fill > 0.0 {
+        fill.min(1.0)
+    } else {
+        DEFAULT_FILL
+    };
+    let (lo, hi) = (v(min), v(max));
+    if !(lo.is_finite() && hi.is_finite()) {
+        return cam;
+    }
+    let centre = 0.5 * lo + 0.5 * hi;
+    let half = 0.5 * hi - 0.5 * lo;
+    // Corners relative to the centre, so boxes far from the origin keep their precision.
+    let corners: Vec<DVec3> = boxes
+        .iter()
+        .flat_map(|&(a, b)| {
+            (0..8).map(move |i| {
+                DVec3::new(
+                    if i & 1 == 0 { a.x } else { b.x },
+                    if i & 2 == 0 { a.y } else { b.y },
+                    if i & 4 == 0 { a.z } else { b.z },
+                ) - centre
+            })
+        })
+        .collect();
+    let b = cam.basis();
+    if ortho {
+        // Parallel rays: centre the projected extents, width from the binding axis.
+        let (u0, u1) = extent(&corners, |c| c.dot(b.right));
+        let (w0, w1) = extent(&corners, |c| c.dot(b.up));
+        let shift = 0.5 * (u0 + u1) * b.right + 0.5 * (w0 + w1) * b.up;
+        let width = ((u1 - u0).max((w1 - w0) * aspect) / fill).max(f64::MIN_POSITIVE);
+        let look = centre + shift;
+        let dist = scaled_length(v(cam.eye) - v(cam.look_at));
+        cam.look_at = look.to_array();
+        cam.eye = (look - dist * b.forward).to_array();
+        cam.projection = Projection::Orthographic { width };
+        return cam;
+    }
+    let tan_v = (0.5 * fov_deg.to_radians()).tan();
+    let tan_h = tan_v * aspect;
+    // Look-at relative to the centre, and distance from it to the eye.
+    let mut look = DVec3::ZERO;
+    let mut dist = scaled_length(v(cam.eye) - v(cam.look_at));
+    for _ in 0..8 {
+        // The eye must stay in front of every corner (depth > 5 % of the box's size).
+        let nearest = corners
+            .iter()
+            .map(|c| (*c - look).dot(b.forward))
+            .fold(f64::NEG_INFINITY, f64::max);
+        // The largest half-side, not the diagonal: its square overflows for boxes far out.
+        let min_dist = nearest + 0.05 * half.abs().max_element().max(f64::MIN_POSITIVE);
+        dist = dist.max(min_dist);
+        let eye = look - dist * b.forward;
+        let proj = |c: &DVec3, axis: DVec3, t: f64| {
+            let d = *c - eye;
+            d.dot(axis) / (d.dot(b.forward) * t)
+        };
+        let (u0, u1) = extent(&corners, |c| proj(c, b.right, tan_h));
+        let (w0, w1) = extent(&corners, |c| proj(c, b.up, tan_v));
+        let size = (u1 - u0).max(w1 - w0) * 0.5;
+        if !(size.is_finite() && size > 0.0) {
+            break;
+        }
+        // Move sideways so the middle of the projection lands on the image centre, then
+        // scale the distance towards the wanted size.
+        look += dist * (0.5 * (u0 + u1) * tan_h * b.right + 0.5 * (w0 + w1) * tan_v * b.up);
+        dist = (dist * size / fill).max(min_dist);
+    }
+    let look = centre + look;
+    let eye = look - dist * b.forward;
+    cam.projection = Projection::Perspective { fov_deg };
+    // Boxes so far out that squares overflow (the refinement, or validation's check of
+    // the view direction) keep [`Camera::frame`]'s pose, which is built for them.
+    if look.is_finite() && eye.is_finite() && centre.abs().max_element() < 1e150 {
+        cam.look_at = look.to_array();
+        cam.eye = eye.to_array();
+    }
+    cam
+}
+
+/// Length of `d` without squaring its components (they overflow for boxes far out).
+fn scaled_length(d: DVec3) -> f64 {
+    let m = d.abs().max_element();
+    if m > 0.0 && m.is_finite() {
+        m * (d / m).length()
+    } else {
+        d.length()
+    }
+}
+
+/// Smallest and largest of `f` over the corners.
+fn extent(corners: &[DVec3], f: impl Fn(&DVec3) -> f64) -> (f64, f64) {
+    corners
+        .iter()
+        .map(f)
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| {
+            (lo.min(x), hi.max(x))
+        })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Projected extents of the box's corners in the image, in pixels.
+    fn projected(cam: &Camera, min: [f64; 3], max: [f64; 3], w: u32, h: u32) -> [f64; 4] {
+        let b = cam.basis();
+        let eye = DVec3::from_array(cam.eye);
+        let Projection::Perspective { fov_deg } = cam.projection else {
+            unreachable!()
+        };
+        let tan_v = (0.5 * fov_deg.to_radians()).tan();
+        let aspect = f64::from(w) / f64::from(h);
+        let mut e = [
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ];
+        for i in 0..8 {
+            let c = DVec3::new(
+                if i & 1 == 0 { min[0] } else { max[0] },
+                if i & 2 == 0 { min[1] } else { max[1] },
+                if i & 4 == 0 { min[2] } else { max[2] },
+            );
+            let d = c - eye;
+            let z = d.dot(b.forward);
+            let x = (d.dot(b.right) / (z * tan_v * aspect) + 1.0) * 0.5 * f64::from(w);
+            let y = (1.0 - d.dot(b.up) / (z * tan_v)) * 0.5 * f64::from(h);
+            e = [e[0].min(x), e[1].max(x), e[2].min(y), e[3].max(y)];
+        }
+        e
+    }
+
+    fn persp(fov_deg: f64) -> Projection {
+        Projection::Perspective { fov_deg }
+    }
+
+    #[test]
+    fn the_fitted_box_is_centred_and_fills_the_binding_axis() {
+        for (min, max) in [
+            ([0.0, 0.0, 0.0], [1.0, 1.0, 1.0]),
+            ([-1.0, -0.2, -0.2], [4.0, 0.2, 0.3]),
+            ([1e6, 1e6, 1e6], [1e6 + 0.1, 1e6 + 3.0, 1e6 + 0.2]),
+        ] {
+            let (w, h) = (800, 600);
+            let cam = fit(min, max, 800.0 / 600.0, 0.8, persp(35.0));
+            let [x0, x1, y0, y1] = projected(&cam, min, max, w, h);
+            let fw = (x1 - x0) / f64::from(w);
+            let fh = (y1 - y0) / f64::from(h);
+            assert!(
+                (fw.max(fh) - 0.8).abs() < 0.02,
+                "{min:?}: fills {fw:.3} × {fh:.3}"
+            );
+            assert!(
+                ((x0 + x1) / 2.0 - 400.0).abs() < 4.0,
+                "{min:?}: x {x0}..{x1}"
+            );
+            assert!(
+                ((y0 + y1) / 2.0 - 300.0).abs() < 3.0,
+                "{min:?}: y {y0}..{y1}"
+            );
+        }
+    }
+
+    #[test]
+    fn an_orthographic_fit_spans_the_box() {
+        let ortho = Projection::Orthographic { width: 1.0 };
+        let cam = fit([0.0; 3], [2.0, 1.0, 1.0], 1.0, 0.5, ortho);
+        let Projection::Orthographic { width } = cam.projection else {
+            panic!("not orthographic")
+        };
+        assert!(width > 2.0 && width < 8.0, "{width}");
+        // Degenerate input still gives a usable camera.
+        let c = fit([f64::NAN; 3], [1.0; 3], 0.0, f64::NAN, persp(f64::NAN));
+        assert!(c.eye.iter().all(|x| x.is_finite()));
+    }
+
+    #[test]
+    fn the_surface_box_holds_the_surface_and_not_the_domain() {
+        use crate::testvol;
+        // A ball of radius 3 around (16, 16, 16) in a 32³ domain.
+        let ball = |p: [f64; 3]| {
+            let r2: f64 = (0..3).map(|a| (p[a] - 16.0) * (p[a] - 16.0)).sum();
+            1.0 - r2 / 9.0
+        };
+        let file = testvol::nested(16, [0.0; 3], &[("q", &ball)], 8);
+        let view = testvol::open(&file).expect("open");
+        let vol = Volume::new(&view).expect("volume");
+        let boxes = surface_boxes(&vol, 0, 0.0);
+        assert!(boxes.len() > 1, "{boxes:?}");
+        let (lo, hi) = union(&boxes).expect("a surface");
+        for a in 0..3 {
+            let (l, h) = (vol.to_world(lo)[a], vol.to_world(hi)[a]);
+            assert!(l <= 13.0 && h >= 19.0, "axis {a}: {l}..{h} misses the ball");
+            assert!(l >= 11.0 && h <= 21.0, "axis {a}: {l}..{h} is loose");
+        }
+        assert!(surface_boxes(&vol, 0, 2.0).is_empty(), "above the maximum");
+        assert!(surface_boxes(&vol, 0, -1e9).is_empty(), "below the minimum");
+        assert!(surface_boxes(&vol, 5, 0.0).is_empty(), "no such field");
+    }
+}
