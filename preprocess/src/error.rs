@@ -96,9 +96,9 @@ fn ordinal(k: usize) -> String {
 /// the scalar grids are listed, or their absence said.
 pub(crate) fn field_grid_not_found(
     name: &str,
-    grids: &[(&str, crate::bake::GridKind)],
+    grids: &[(&str, crate::grid::GridKind)],
 ) -> BakeError {
-    use crate::bake::GridKind;
+    use crate::grid::GridKind;
     if grids
         .iter()
         .any(|(g, k)| *g == name && *k == GridKind::Vector)
@@ -217,7 +217,7 @@ pub enum BakeError {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bake::GridKind;
+    use crate::grid::GridKind;
 
     #[test]
     fn grids_sharing_a_name_are_told_apart() {

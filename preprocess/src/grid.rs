@@ -156,3 +156,24 @@ impl AnyGrid {
         })
     }
 }
+
+/// Kind of an input grid, for selection and for messages about it (which the errors
+/// name, so it lives here, below both).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GridKind {
+    Vector,
+    Scalar,
+    /// A grid type the baker cannot read (listed, never selected by default).
+    Other,
+}
+
+impl GridKind {
+    /// The kind of a decoded grid.
+    pub(crate) fn of(grid: &AnyGrid) -> GridKind {
+        if grid.is_vector() {
+            GridKind::Vector
+        } else {
+            GridKind::Scalar
+        }
+    }
+}

@@ -6,7 +6,6 @@ use crate::cells::CellSet;
 use crate::error::BakeError;
 use crate::grid::AnyGrid;
 
-use super::derived::FieldValues;
 use super::{fix_nonfinite, Cells};
 
 /// A scalar grid baked as an extra field: its cells, values and background, finest first
@@ -128,7 +127,7 @@ pub(super) fn extra_fields(
 }
 
 /// How much of the velocity an extra field covers: `covered` of the `leaf_cells` leaf cells
-/// (per field, `None` for fields derived from the velocity) have an active voxel of the
+/// (per field of `names`, `None` for fields derived from the velocity) have an active voxel of the
 /// field's grid among the 8 around their centre. A field that covers some of them but not
 /// all is baked, with a warning giving the share (the rest read its background, as OpenVDB
 /// reads a sparse grid: right for a fog volume that is only active where there is smoke,
@@ -137,12 +136,12 @@ pub(super) fn extra_fields(
 /// another transform than meant).
 pub(super) fn extra_coverage(
     cells: &Cells,
-    fields: &FieldValues,
+    (names, covered): (&[String], &[Option<u64>]),
     sets: &[CellSet],
     leaf_cells: u64,
     warnings: &mut Vec<String>,
 ) -> Result<(), BakeError> {
-    for (name, covered) in fields.names.iter().zip(&fields.covered) {
+    for (name, covered) in names.iter().zip(covered) {
         let (Some(covered), Some(extra)) = (covered, cells.extras.iter().find(|e| &e.name == name))
         else {
             continue;

@@ -260,7 +260,13 @@ fn run(
 
     stage("deriving fields");
     let mut fields = derive_fields(&cells, &bricks, opts)?;
-    extra_coverage(&cells, &fields, sets, leaf_cells, &mut warnings)?;
+    extra_coverage(
+        &cells,
+        (&fields.names, &fields.covered),
+        sets,
+        leaf_cells,
+        &mut warnings,
+    )?;
     let nonfinite_derived = clamp_fields(&mut fields, &bricks, sets, opts.strict, &mut warnings)?;
 
     stage("building regions");

@@ -4,26 +4,7 @@
 
 use crate::error::BakeError;
 use crate::grid::AnyGrid;
-
-/// Kind of an input grid, for selection.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum GridKind {
-    Vector,
-    Scalar,
-    /// A grid type the baker cannot read (listed, never selected by default).
-    Other,
-}
-
-impl GridKind {
-    /// The kind of a decoded grid.
-    pub(crate) fn of(grid: &AnyGrid) -> GridKind {
-        if grid.is_vector() {
-            GridKind::Vector
-        } else {
-            GridKind::Scalar
-        }
-    }
-}
+pub use crate::grid::GridKind;
 
 /// Indices (file order) of the grids to bake among `grids` (name, kind): every grid named
 /// in `names`, or by default all vec3 grids, or the scalar grid(s) of the one scalar name
