@@ -6,7 +6,7 @@ use crate::common::root;
 use qbricks_preprocess::synth::{write_scene, SynthOptions};
 use qbricks_preprocess::vdb::write::Compression;
 
-/// The command in the README's synth section, and the options it stands for.
+/// The command in the README's *Bundled data* section, and the options it stands for.
 const COMMAND: &str =
     "qbricks-bake synth wake -o data/wake_small.vdb --n0 48 --levels 3 --compression zip";
 
