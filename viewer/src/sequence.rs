@@ -278,7 +278,7 @@ pub struct SequenceInfo {
     pub fields: Vec<FieldRange>,
     pub source: RangeSource,
     /// What each frame that opened holds on its own, in frame order: the per-frame
-    /// defaults ([`crate::sequence_defaults`]) compare the sequence's iso value with it.
+    /// defaults (`sequence_defaults`) compare the sequence's iso value with it.
     pub frames: Vec<FrameSummary>,
 }
 
@@ -302,7 +302,7 @@ impl SequenceInfo {
     /// frames the union of the frames' boxes (the flow moves, so one frame's box or
     /// iso-surface would lose it later), iso value and colour map from the sequence's
     /// ranges. `render` then narrows the camera to the union of the frames' iso surfaces
-    /// ([`crate::sequence_defaults::frame_surfaces`]), which needs a pass over the cells.
+    /// (`sequence_defaults::frame_surfaces`), which needs a pass over the cells.
     pub fn default_state(&self) -> ViewState {
         // No frame opened: every frame fails with its own error anyway.
         let (lo, hi) = self.bounds.unwrap_or(([0.0; 3], [1.0; 3]));

@@ -118,6 +118,10 @@ impl std::fmt::Display for OwnIso {
         let pct = NEARLY_EMPTY * 100.0;
         match *self {
             OwnIso::Asked => write!(f, "--iso-per-frame"),
+            // Four digits may not tell the two apart (a frame whose peak is the value).
+            OwnIso::Above { shared, max } if short(shared) == short(max) => {
+                write!(f, "the sequence's {} is its maximum", short(shared))
+            }
             OwnIso::Above { shared, max } => write!(
                 f,
                 "the sequence's {} is above its maximum {}",
