@@ -240,16 +240,17 @@ pub enum Framed {
 }
 
 /// Points the one camera of a sequence at the union of the frames' iso surfaces, each at
-/// the value the frame is drawn with (`own`, else the shared one): the whole path of the
-/// structure stays in view and the camera does not jump between frames, as a movie needs,
-/// while the structure fills the picture far better than the data's box (the iso surface
-/// of a wake is a fraction of its domain). One pass over every frame's cells before the
-/// first is drawn, a fraction of a render. Frames that do not open are left out (their
-/// render names the error).
+/// the value `rule` gives that frame: the whole path of the structure stays in view and
+/// the camera does not jump between frames, as a movie needs, while the structure fills
+/// the picture far better than the data's box (the iso surface of a wake is a fraction of
+/// its domain). `frames` should be every frame of the sequence, not only those rendered,
+/// so that a movie rendered in parts (`--frames`) has one camera. One pass over every
+/// frame's cells before the first is drawn, a fraction of a render. Frames that do not
+/// open are left out (their render names the error).
 pub fn frame_surfaces(
     state: &mut ViewState,
     frames: &[(u64, PathBuf)],
-    own: &[FrameIso],
+    rule: IsoRule,
     info: &SequenceInfo,
 ) -> Framed {
     let options = format::OpenOptions {
@@ -264,7 +265,12 @@ pub fn frame_surfaces(
             continue;
         };
         let mut s = state.clone();
-        if let Some(o) = own.iter().find(|o| o.frame == *frame) {
+        let summary = FrameSummary {
+            frame: *frame,
+            bounds: (vol.to_world(vol.bounds_min), vol.to_world(vol.bounds_max)),
+            fields: vol.fields.clone(),
+        };
+        if let Some(o) = frame_iso(rule, state, &summary) {
             o.apply(&mut s, false);
         }
         let boxes = s.surface_bounds(&vol);

@@ -64,9 +64,17 @@ pub fn run(args: &Args, path: &Path, pattern: FramePattern) -> anyhow::Result<()
     // Each frame's iso value: the shared one unless the rule gives the frame its own.
     let rule = IsoRule::new(args.view.iso.is_some(), from_file, args.iso_per_frame)?;
     let own = defaults::frame_isos(rule, &state, &info);
-    // One camera for every frame, on the union of the iso surfaces the frames show.
-    let framed = (!from_file && !args.view.places_camera())
-        .then(|| defaults::frame_surfaces(&mut state, &frames, &own, &info));
+    // One camera for every frame, on the union of the iso surfaces of every frame of the
+    // sequence (not only the rendered ones: a movie rendered in parts keeps one camera).
+    let framed = (!from_file && !args.view.places_camera()).then(|| {
+        let every: Vec<(u64, PathBuf)> = pattern
+            .scan()
+            .unwrap_or_default()
+            .into_iter()
+            .filter(|(f, _)| !plan.skipped.iter().any(|s| s.frame == *f))
+            .collect();
+        defaults::frame_surfaces(&mut state, &every, rule, &info)
+    });
     state
         .validate()
         .map_err(|m| anyhow::anyhow!("view state: {m}"))?;
