@@ -589,6 +589,35 @@ mod tests {
         assert!(frame.depth[0].is_infinite() && frame.surface_values[0].is_nan());
         let (lo, hi) = crate::colormap::visible_range(&frame.surface_values).expect("range");
         assert!(lo > 15.9 && hi < 22.1 && hi - lo > 3.0, "{lo}..{hi}");
+        // `--colour-range visible`: the map is spread over that range (found with the
+        // pixel centres' rays, where this frame's first samples were jittered).
+        drop(scene);
+        let renderer = Renderer::new(Some(1)).expect("pool");
+        let scale = |r: Option<(f32, f32)>| {
+            Some(ViewCommand::ColourScale {
+                palette: "viridis".parse().expect("palette"),
+                range: r,
+                centre: None,
+                log: false,
+            })
+        };
+        let fitted = renderer
+            .fit_colours_to_visible(&vol, &mut st, &meshes, scale)
+            .expect("fit");
+        let (flo, fhi) = fitted.expect("a range");
+        assert!(
+            (flo - lo).abs() < 0.2 && (fhi - hi).abs() < 0.2,
+            "{flo}..{fhi}"
+        );
+        assert_eq!(st.colormap.range(), (flo, fhi));
+        assert_eq!(st.colormap.field, "z");
+        // Nothing in view: the map stays.
+        st.iso = 100.0;
+        let before = st.colormap.clone();
+        let none = renderer
+            .fit_colours_to_visible(&vol, &mut st, &meshes, scale)
+            .expect("fit");
+        assert_eq!((none, &st.colormap), (None, &before));
     }
 
     #[test]

@@ -13,6 +13,9 @@ pub(crate) enum AppCommand {
     View(ViewCommand),
     /// Frame the whole data set (and put the lights back for the new camera).
     FrameData,
+    /// Frame the iso surface of the view, as a new view is framed (the whole data when
+    /// there is none).
+    FrameSurface,
     /// Spread the colour map (the panel's preset) over the colour field's values on the
     /// surfaces of the finished picture (`--colour-range visible`).
     FitColoursToVisible,

@@ -8,6 +8,7 @@ use eframe::egui::{self, Key, KeyboardShortcut, Modifiers};
 /// What a key asks for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum KeyAction {
+    FrameSurface,
     FrameData,
     Undo,
     Redo,
@@ -59,8 +60,8 @@ pub(crate) const KEYS: &[KeyBinding] = &[
     key(
         Modifiers::NONE,
         Key::F,
-        KeyAction::FrameData,
-        "frame the whole data set",
+        KeyAction::FrameSurface,
+        "frame the iso surface (what the picture shows)",
     ),
     key(
         Modifiers::NONE,

@@ -208,6 +208,10 @@ fn volume(
             }));
         }
     }
+    // The same warning `render` prints: an empty picture should say why.
+    if let Some(w) = st.iso_outside_range(&doc.dataset.volume().fields) {
+        ui.label(RichText::new(w).color(Color32::from_rgb(255, 190, 90)));
+    }
     egui::ComboBox::from_label("strategy")
         .selected_text(st.strategy.as_str())
         .show_ui(ui, |ui| {
@@ -462,11 +466,22 @@ fn camera(
         }
     }
     ui.horizontal(|ui| {
-        if ui.button("Frame data (F)").clicked() {
+        if ui
+            .button("Frame surface (F)")
+            .on_hover_text("fill the picture with the iso surface")
+            .clicked()
+        {
+            out.push(AppCommand::FrameSurface);
+        }
+        if ui
+            .button("Frame all data (Home)")
+            .on_hover_text("show the whole data set")
+            .clicked()
+        {
             out.push(AppCommand::FrameData);
         }
-        ui.checkbox(picking, "pick values under the cursor");
     });
+    ui.checkbox(picking, "pick values under the cursor");
     ui.add(egui::Slider::new(resolution_scale, 0.25..=2.0).text("resolution scale"));
     ui.label(RichText::new(super::keys::mouse_hint()).weak());
 }

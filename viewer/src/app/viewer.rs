@@ -364,6 +364,13 @@ impl ViewerApp {
                 }
                 self.controls.relight(&mut self.state);
             }
+            AppCommand::FrameSurface => {
+                if let Some(doc) = &self.document.doc {
+                    self.state.frame_surface(doc.dataset.volume());
+                    self.pivot = self.state.camera.look_at;
+                }
+                self.controls.relight(&mut self.state);
+            }
             AppCommand::Relight => self.controls.relight(&mut self.state),
             AppCommand::Dialog(purpose) => {
                 let open = self.document.doc.as_ref().map(|d| d.path.clone());
@@ -428,6 +435,7 @@ impl ViewerApp {
         for action in keys::pressed(ctx, self.help_open) {
             match action {
                 KeyAction::FrameData => self.handle(AppCommand::FrameData),
+                KeyAction::FrameSurface => self.handle(AppCommand::FrameSurface),
                 KeyAction::Undo => self.handle(AppCommand::Undo),
                 KeyAction::Redo => self.handle(AppCommand::Redo),
                 KeyAction::Help => self.handle(AppCommand::Help),

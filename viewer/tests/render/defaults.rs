@@ -4,7 +4,8 @@
 
 use crate::common::{self, qbricks_view};
 
-/// Renders `data/wake_small.qbk` with only `extra` given; returns (width, height, rgb).
+/// Renders `data/wake_small.qbk` bare (no overlays) with only `extra` given; returns
+/// (width, height, rgb).
 fn render_bare(extra: &[&str]) -> (u32, u32, Vec<u8>) {
     let dir = tempfile::tempdir().expect("tempdir");
     let png = dir.path().join("bare.png");
@@ -12,6 +13,8 @@ fn render_bare(extra: &[&str]) -> (u32, u32, Vec<u8>) {
         .current_dir(common::root())
         .args(["render", "data/wake_small.qbk", "-o"])
         .arg(&png)
+        // The bare image: the structure's pixels, not the overlays'.
+        .args(["--overlays", "none"])
         .args(extra)
         .output()
         .expect("run qbricks-view");
