@@ -367,7 +367,7 @@ const CASES: &[Case] = &[
     // 1. A run that fails writes nothing: every frame fails, so no --save-state.
     case(VIEW, &["render", "bad_####.qbk", "-o", "p_####.png", "--width", "8", "--height", "6",
         "--save-state", "st.json"], 2, "qbricks-view: bad_####.qbk: no manifest")
-        .lines(3, &["qbricks-view: bad_0001.qbk: ", "1 of 1 frames failed"])
+        .lines(5, &["qbricks-view: bad_0001.qbk: ", "1 of 1 frames failed"])
         .same(&["st.json"])
         .absent(&["p_0001.png"]),
     // 2. Sizes bounded before allocating.
@@ -405,13 +405,13 @@ const CASES: &[Case] = &[
         "qbricks-bake: ff: is a FIFO (named pipe) and no program wrote to it"),
     case(VIEW, &["render", "g_####.qbk", "--frames", "1..2", "-o", "p_####.png",
         "--width", "8", "--height", "6"], 2, "qbricks-view: g_####.qbk: no manifest")
-        .lines(3, &["qbricks-view: g_0002.qbk: is a FIFO (named pipe) and no program wrote to it"])
+        .lines(5, &["qbricks-view: g_0002.qbk: is a FIFO (named pipe) and no program wrote to it"])
         .made(&[("p_0001.png", "")])
         .absent(&["p_0002.png"]),
     // 6. No silently wrong answers: the manifest says which files are frames of the bake.
     case(VIEW, &["render", "m_####.qbk", "-o", "p_####.png", "--width", "8", "--height", "6"], 0,
         "qbricks-view: m_####.qbk: field ranges of the whole sequence from m_sequence.json")
-        .lines(3, &[
+        .lines(5, &[
             "qbricks-view: warning: m_0002.qbk: skipped, its bake failed (in_0002.vdb: truncated)",
             "qbricks-view: warning: m_0004.qbk: skipped, the manifest of the bake does not list it",
         ])

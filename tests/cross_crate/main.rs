@@ -4,6 +4,8 @@
 //! * `hostile_inputs`: the small VDB and `.qbk` inputs of issue 32, written at test time;
 //! * `interrupt`: SIGINT/SIGTERM in the middle of writing an output;
 //! * `render_sequence`: bake the bundled cache, then render the frames;
+//! * `framing_layouts`: the default camera on a baked cache frame, a single grid and the
+//!   cache as a sequence;
 //! * `docs_exist`: the documents and the README against the code and `--help`;
 //! * `shading_wake` (ignored): a measurement of shading normals on a baked wake.
 //!
@@ -19,6 +21,7 @@ mod common;
 
 mod cli_cases;
 mod docs_exist;
+mod framing_layouts;
 mod hostile_inputs;
 mod interrupt;
 mod render_sequence;

@@ -34,6 +34,7 @@ pub mod render;
 pub mod sampling;
 pub mod scene;
 pub mod sequence;
+pub mod sequence_defaults;
 pub mod shading;
 #[cfg(any(test, feature = "testkit"))]
 pub mod testvol;

@@ -277,13 +277,32 @@ pub struct SequenceInfo {
     /// frames have).
     pub fields: Vec<FieldRange>,
     pub source: RangeSource,
+    /// What each frame that opened holds on its own, in frame order: the per-frame
+    /// defaults (`sequence_defaults`) compare the sequence's iso value with it.
+    pub frames: Vec<FrameSummary>,
+}
+
+/// One frame's own data box (world) and field ranges, as its file's header gives them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrameSummary {
+    pub frame: u64,
+    pub bounds: ([f64; 3], [f64; 3]),
+    pub fields: Vec<FieldRange>,
+}
+
+impl SequenceInfo {
+    /// The summary of `frame`, `None` when it did not open in the survey.
+    pub fn frame(&self, frame: u64) -> Option<&FrameSummary> {
+        self.frames.iter().find(|f| f.frame == frame)
+    }
 }
 
 impl SequenceInfo {
     /// The view a sequence starts with when no state file says otherwise: the camera
     /// frames the union of the frames' boxes (the flow moves, so one frame's box or
     /// iso-surface would lose it later), iso value and colour map from the sequence's
-    /// ranges.
+    /// ranges. `render` then narrows the camera to the union of the frames' iso surfaces
+    /// (`sequence_defaults::frame_surfaces`), which needs a pass over the cells.
     pub fn default_state(&self) -> ViewState {
         // No frame opened: every frame fails with its own error anyway.
         let (lo, hi) = self.bounds.unwrap_or(([0.0; 3], [1.0; 3]));
@@ -309,17 +328,29 @@ fn survey_with(
 ) -> Result<SequenceInfo, ManifestError> {
     let mut bounds: Option<([f64; 3], [f64; 3])> = None;
     let mut own: Vec<FieldRange> = Vec::new();
-    let mut opened = 0;
+    let mut summaries = Vec::new();
     let options = OpenOptions {
         verify_checksum: false,
     };
-    for (_, path) in frames {
+    for (frame, path) in frames {
         let Ok(view) = format::BrickFileView::open_with(path, &options) else {
             continue;
         };
-        opened += 1;
         let file = view.file();
         let b = format::query::bounds(file);
+        summaries.push(FrameSummary {
+            frame: *frame,
+            bounds: (b.min, b.max),
+            fields: file
+                .fields
+                .iter()
+                .map(|f| FieldRange {
+                    name: f.name.as_str().to_string(),
+                    min: f.min.to_native(),
+                    max: f.max.to_native(),
+                })
+                .collect(),
+        });
         bounds = Some(match bounds {
             None => (b.min, b.max),
             Some((lo, hi)) => (
@@ -352,12 +383,13 @@ fn survey_with(
             }
             (fields, RangeSource::Manifest(path))
         }
-        None => (own, RangeSource::Frames(opened)),
+        None => (own, RangeSource::Frames(summaries.len())),
     };
     Ok(SequenceInfo {
         bounds,
         fields,
         source,
+        frames: summaries,
     })
 }
 

@@ -25,9 +25,15 @@ fn stderr(out: &Output) -> String {
 /// a narrow bump of height 3 at the corner (1, 1, 1), far from the sphere: the pictures
 /// are the same but the frame's own speed range is three times wider.
 fn write_frame(path: &Path, hot_corner: bool) {
-    let q = |p: [f64; 3]| {
+    write_frame_scaled(path, hot_corner, 1.0);
+}
+
+/// [`write_frame`] with `q` multiplied by `q_scale`: the same sphere at a frame's own
+/// default iso value (a fraction of its maximum), and a shrinking flow's frame.
+fn write_frame_scaled(path: &Path, hot_corner: bool, q_scale: f64) {
+    let q = move |p: [f64; 3]| {
         let d: f64 = p.iter().map(|x| (x - 0.5) * (x - 0.5)).sum::<f64>().sqrt();
-        1.0 - 2.0 * d
+        q_scale * (1.0 - 2.0 * d)
     };
     let speed = move |p: [f64; 3]| {
         let c: f64 = p.iter().map(|x| (x - 1.0) * (x - 1.0)).sum();
@@ -283,7 +289,23 @@ fn sequence_argument_errors() {
     let dir = tempfile::tempdir().expect("tempdir");
     let d = dir.path();
     write_frame(&d.join("f_0001.qbk"), false);
-    let cases: [(&[&str], &str); 5] = [
+    let cases: [(&[&str], &str); 7] = [
+        (
+            &[
+                "render",
+                "f_####.qbk",
+                "-o",
+                "f_####.png",
+                "--iso-per-frame",
+                "--iso",
+                "0.1",
+            ],
+            "--iso-per-frame takes each frame's own default iso value, --iso gives one",
+        ),
+        (
+            &["render", "f_0001.qbk", "-o", "a.png", "--iso-per-frame"],
+            "--iso-per-frame chooses the iso value of each frame of a sequence",
+        ),
         (
             &["render", "f_####.qbk", "-o", "one.png"],
             "must be a pattern",
@@ -319,4 +341,104 @@ fn sequence_argument_errors() {
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("would overwrite"), "{}", stderr(&o));
     assert!(format::BrickFileView::open(&d.join("f_0001.qbk")).is_ok());
+}
+
+/// Issue 26: a frame whose Q is ten times smaller than the others' lies below the
+/// sequence's default iso value (10 % of the sequence's maximum, its own maximum); it
+/// takes its own default, said on stderr, and shows the same sphere as the others.
+/// `--iso-per-frame` gives every frame its own; a given `--iso` is kept everywhere.
+#[test]
+fn a_frame_the_sequence_iso_leaves_empty_takes_its_own() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    write_frame_scaled(&d.join("f_0001.qbk"), false, 1.0);
+    write_frame_scaled(&d.join("f_0002.qbk"), false, 0.1);
+    write_frame_scaled(&d.join("f_0003.qbk"), false, 1.0);
+    let run = |extra: &[&str], out: &str| {
+        let pattern = format!("{out}/f_####.png");
+        let args = [
+            &[
+                "render",
+                "f_####.qbk",
+                "-o",
+                &pattern,
+                "--width",
+                "64",
+                "--height",
+                "48",
+                "--overlays",
+                "none",
+            ][..],
+            extra,
+        ]
+        .concat();
+        let o = qbricks_view(&args, d);
+        assert!(o.status.success(), "{extra:?}: {}", stderr(&o));
+        let imgs: Vec<image::RgbImage> = (1..=3)
+            .map(|f| png(&d.join(format!("{out}/f_{f:04}.png"))))
+            .collect();
+        (stderr(&o), imgs)
+    };
+    let covered = |img: &image::RgbImage| {
+        let bg = img.get_pixel(0, 0).0;
+        img.pixels()
+            .filter(|p| (0..3).any(|c| p.0[c].abs_diff(bg[c]) > 6))
+            .count()
+    };
+
+    let (err, imgs) = run(&[], "auto");
+    assert!(
+        err.contains("except a frame it leaves nearly empty"),
+        "{err}"
+    );
+    let line = err
+        .lines()
+        .find(|l| l.contains("frame 2: iso q = "))
+        .unwrap_or_else(|| panic!("no line for frame 2: {err}"));
+    assert!(
+        line.contains("(the frame's own default; the sequence's "),
+        "{line}"
+    );
+    assert!(
+        !err.contains("frame 1: iso") && !err.contains("frame 3: iso"),
+        "{err}"
+    );
+    // One camera on the union of the spheres: frame 2 draws the same sphere.
+    assert!(
+        err.contains("union of the iso surfaces of 3 frame(s)"),
+        "{err}"
+    );
+    let (c1, c2) = (covered(&imgs[0]), covered(&imgs[1]));
+    assert!(c1 > 300, "frame 1 covers {c1} of 3072 pixels");
+    assert!(
+        c2.abs_diff(c1) * 20 <= c1,
+        "frame 2 covers {c2} pixels, frame 1 {c1}"
+    );
+
+    let (err, imgs) = run(&["--iso-per-frame"], "per");
+    assert!(
+        err.contains("each frame's own default (--iso-per-frame)"),
+        "{err}"
+    );
+    for f in 1..=3 {
+        assert!(
+            err.contains(&format!("frame {f}: iso q = ")),
+            "frame {f}: {err}"
+        );
+    }
+    assert!(imgs.iter().all(|i| covered(i) > 300));
+
+    // A given value stays, even where it leaves frame 2 empty: a warning, no switch.
+    let (err, imgs) = run(&["--iso", "0.5"], "given");
+    assert!(
+        err.contains("iso q = 0.5 in every frame, as given"),
+        "{err}"
+    );
+    assert!(!err.contains("own default"), "{err}");
+    assert!(
+        err.contains("frame 2: the iso value 0.5 is outside the range of q"),
+        "{err}"
+    );
+    assert!(covered(&imgs[0]) > 100);
+    assert_eq!(covered(&imgs[1]), 0, "frame 2 at iso 0.5 should be empty");
 }

@@ -32,6 +32,11 @@ pub struct Args {
     /// the range is expected: a missing file counts as a failed frame.
     #[arg(long)]
     pub frames: Option<qbricks_viewer::sequence::FrameRange>,
+    /// Sequence: every frame takes its own default iso value (as if rendered alone: 10 %
+    /// of its own maximum of the iso field) instead of the sequence's. Without it only a
+    /// frame the sequence's value leaves nearly empty does; either way stderr says which.
+    #[arg(long = "iso-per-frame")]
+    pub iso_per_frame: bool,
     /// View state JSON to start from (flags override it).
     #[arg(long)]
     pub state: Option<PathBuf>,
@@ -104,6 +109,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.frames.is_some() {
         bail!(
             "{}: --frames needs a frame sequence ('frame_####.qbk' or 'frame_%04d.qbk')",
+            path.display()
+        );
+    }
+    if args.iso_per_frame {
+        bail!(
+            "{}: --iso-per-frame chooses the iso value of each frame of a sequence \
+             ('frame_####.qbk'); a single file already takes its own default",
             path.display()
         );
     }

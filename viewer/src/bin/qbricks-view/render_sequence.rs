@@ -1,6 +1,8 @@
 //! `qbricks-view render 'out/frame_####.qbk' -o 'png/frame_####.png' [--frames A..B]`: every
 //! frame with one view state and the sequence's fixed field ranges, one progress bar; a
-//! frame that fails is named and the others go on.
+//! frame that fails is named and the others go on. Which frames take their own iso value,
+//! and where the one camera looks, is `qbricks_viewer::sequence_defaults`'s rule: this
+//! file only says on stderr what it chose.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -13,6 +15,7 @@ use qbricks_viewer::film;
 use qbricks_viewer::mesh::Meshes;
 use qbricks_viewer::render::{FrameReport, Renderer, Scene};
 use qbricks_viewer::sequence::{self, output_pattern, RangeSource};
+use qbricks_viewer::sequence_defaults::{self as defaults, FrameIso, Framed, IsoRule};
 use qbricks_viewer::view_state::ViewState;
 use serde::Serialize;
 
@@ -44,7 +47,8 @@ pub fn run(args: &Args, path: &Path, pattern: FramePattern) -> anyhow::Result<()
     let plan = sequence::plan(&pattern, &shown, args.frames)?;
     let (frames, info) = (plan.frames, plan.info);
     // One view state for every frame: from --state, or from what the frames share (the
-    // camera frames the union of their boxes, since the flow moves), then the flags.
+    // sequence's ranges), then the flags; the camera then frames the union of the frames'
+    // iso surfaces (below), since the flow moves.
     let from_file = args.state.is_some();
     let mut state = match &args.state {
         Some(s) => ViewState::load(s)?,
@@ -57,6 +61,20 @@ pub fn run(args: &Args, path: &Path, pattern: FramePattern) -> anyhow::Result<()
     args.view
         .apply_fields(&mut state, &info.fields)
         .with_context(|| shown.clone())?;
+    // Each frame's iso value: the shared one unless the rule gives the frame its own.
+    let rule = IsoRule::new(args.view.iso.is_some(), from_file, args.iso_per_frame)?;
+    let own = defaults::frame_isos(rule, &state, &info);
+    // One camera for every frame, on the union of the iso surfaces of every frame of the
+    // sequence (not only the rendered ones: a movie rendered in parts keeps one camera).
+    let framed = (!from_file && !args.view.places_camera()).then(|| {
+        let every: Vec<(u64, PathBuf)> = pattern
+            .scan()
+            .unwrap_or_default()
+            .into_iter()
+            .filter(|(f, _)| !plan.skipped.iter().any(|s| s.frame == *f))
+            .collect();
+        defaults::frame_surfaces(&mut state, &every, rule, &info)
+    });
     state
         .validate()
         .map_err(|m| anyhow::anyhow!("view state: {m}"))?;
@@ -96,6 +114,28 @@ pub fn run(args: &Args, path: &Path, pattern: FramePattern) -> anyhow::Result<()
              frame(s)' own ranges",
             pattern.manifest_path().display()
         ),
+    }
+    eprintln!("qbricks-view: {shown}: {}", rule.describe(&state));
+    match framed {
+        Some(Framed::Surfaces(n)) => eprintln!(
+            "qbricks-view: {shown}: one camera for every frame, on the union of the iso \
+             surfaces of {n} frame(s)"
+        ),
+        Some(Framed::Data) => eprintln!(
+            "qbricks-view: {shown}: no frame has an iso surface at its value; the camera \
+             frames the union of the frames' data"
+        ),
+        None => {}
+    }
+    for (frame, _) in &frames {
+        if let Some(o) = own.iter().find(|o| o.frame == *frame) {
+            eprintln!("qbricks-view: {o}");
+        } else if let Some(w) = info
+            .frame(*frame)
+            .and_then(|f| state.iso_outside_range(&f.fields))
+        {
+            eprintln!("qbricks-view: warning: frame {frame}: {w}");
+        }
     }
     for s in &plan.skipped {
         eprintln!("qbricks-view: warning: {s}");
@@ -152,7 +192,15 @@ pub fn run(args: &Args, path: &Path, pattern: FramePattern) -> anyhow::Result<()
     for (frame, input) in &frames {
         bar.set_message(format!("frame {frame}"));
         let out = out_pattern.path(*frame);
-        let result = render_one(args, (*frame, input), &out, &state, &meshes, &renderer);
+        let mine = own.iter().find(|o| o.frame == *frame);
+        let result = render_one(
+            args,
+            (*frame, input),
+            &out,
+            (&state, mine),
+            &meshes,
+            &renderer,
+        );
         let line = FrameLine {
             frame: *frame,
             file: input.display().to_string(),
@@ -192,12 +240,13 @@ pub fn run(args: &Args, path: &Path, pattern: FramePattern) -> anyhow::Result<()
     Ok(())
 }
 
-/// Opens, renders and writes one frame (the image atomically, as a single render does).
+/// Opens, renders and writes one frame (the image atomically, as a single render does),
+/// with its own iso value when it has one.
 fn render_one(
     args: &Args,
     (number, input): (u64, &Path),
     out: &Path,
-    state: &ViewState,
+    (state, own): (&ViewState, Option<&FrameIso>),
     meshes: &Meshes,
     renderer: &Renderer,
 ) -> anyhow::Result<FrameReport> {
@@ -210,12 +259,18 @@ fn render_one(
     let data = Dataset::open_with(input, &options)?;
     let vol = data.volume();
     // `--colour-range visible` fits each frame's map to what that frame shows.
-    let mut fitted;
-    let state = if args.view.wants_visible_range() {
-        fitted = state.clone();
-        fit_visible(renderer, vol, &mut fitted, meshes, &args.view)
-            .with_context(|| input.display().to_string())?;
-        &fitted
+    let mut mine;
+    let state = if args.view.wants_visible_range() || own.is_some() {
+        mine = state.clone();
+        if let Some(o) = own {
+            // A state file's band is the user's.
+            o.apply(&mut mine, args.state.is_none());
+        }
+        if args.view.wants_visible_range() {
+            fit_visible(renderer, vol, &mut mine, meshes, &args.view)
+                .with_context(|| input.display().to_string())?;
+        }
+        &mine
     } else {
         state
     };
