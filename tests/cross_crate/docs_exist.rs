@@ -166,14 +166,14 @@ fn readme_names_every_flag_of_every_command() {
     let readme = std::fs::read_to_string(common::root().join("README.md")).expect("README.md");
     let commands: [(&str, &[&str]); 9] = [
         ("qbricks-bake", &["bake"]),
-        ("qbricks-bake", &["synth"]),
         ("qbricks-bake", &["inspect"]),
-        ("qbricks-bake", &["accuracy"]),
         ("qbricks-view", &[]),
         ("qbricks-view", &["render"]),
         ("qbricks-view", &["probe"]),
         ("qbricks-view", &["info"]),
-        ("qbricks-view", &["bench"]),
+        ("qbricks-lab", &["synth"]),
+        ("qbricks-lab", &["accuracy"]),
+        ("qbricks-lab", &["bench"]),
     ];
     let mut missing = Vec::new();
     let mut checked = 0;
