@@ -39,7 +39,7 @@ pub enum Stencil {
 }
 
 /// `Q = ½(‖Ω‖² − ‖S‖²) = −½ Σᵢⱼ gᵢⱼ gⱼᵢ` for `g[i][j] = ∂uᵢ/∂xⱼ`.
-pub(crate) fn q_from_gradient(g: &[[f64; 3]; 3]) -> f64 {
+pub fn q_from_gradient(g: &[[f64; 3]; 3]) -> f64 {
     let mut s = 0.0;
     for (i, row) in g.iter().enumerate() {
         for (j, gij) in row.iter().enumerate() {

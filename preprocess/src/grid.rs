@@ -96,7 +96,7 @@ impl<V: Copy> Grid<V> {
 }
 
 /// Vector value of a vec3 grid (single precision on disk or widened from double).
-pub(crate) type Vec3 = [f32; 3];
+pub type Vec3 = [f32; 3];
 
 /// A grid of any supported value type, as read from a file.
 #[derive(Debug, Clone, PartialEq)]

@@ -2,8 +2,6 @@
 //!
 //! Data flows one way: VDB → grids → cells → bricks → regions → kd-tree → file.
 
-pub mod accuracy;
-pub mod analytic;
 pub mod bake;
 pub mod bricks;
 pub mod cells;
@@ -15,7 +13,7 @@ pub mod inputs;
 pub mod kdtree;
 pub mod levels;
 pub mod nonfinite;
+pub mod reconstruct;
 pub mod regions;
 pub mod sequence;
-pub mod synth;
 pub mod vdb;

@@ -60,6 +60,7 @@ struct Case {
 
 const BAKE: &str = "qbricks-bake";
 const VIEW: &str = "qbricks-view";
+const LAB: &str = "qbricks-lab";
 
 const fn case(
     program: &'static str,
@@ -143,7 +144,7 @@ const CASES: &[Case] = &[
         .same(&["w.vdb"]),
     // 1. Non-regular outputs are written into, not replaced (checked after the table).
     case(BAKE, &["bake", "w.vdb", "-o", "/dev/null"], 0, ""),
-    case(BAKE, &["synth", "wake", "--n0", "8", "--levels", "1", "-o", "/dev/null"], 0, ""),
+    case(LAB, &["synth", "wake", "--n0", "8", "--levels", "1", "-o", "/dev/null"], 0, ""),
     case(VIEW, &["render", "w.qbk", "-o", "/dev/null", "--width", "8", "--height", "6",
         "--save-state", "/dev/null"], 0, ""),
     // 2. A closed stdout ends quietly, with the output file complete.
@@ -156,7 +157,7 @@ const CASES: &[Case] = &[
     case(BAKE, &["bake", "wake_small.vdb", "-o", "o.qbk", "--json"], 0, "")
         .closed()
         .made(&[("o.qbk", "w.qbk")]),
-    case(BAKE, &["synth", "wake", "--n0", "8", "--levels", "2", "-o", "s.vdb"], 0, "")
+    case(LAB, &["synth", "wake", "--n0", "8", "--levels", "2", "-o", "s.vdb"], 0, "")
         .closed()
         .made(&[("s.vdb", "")]),
     case(VIEW, &["info", "--json", "w.qbk"], 0, "").closed(),
@@ -186,14 +187,14 @@ const CASES: &[Case] = &[
         .absent(&["x.png"]),
     case(VIEW, &["info", "/dev/zero"], 2,
         "qbricks-view: /dev/zero: is not a regular file and is longer than 1073741824 bytes"),
-    case(BAKE, &["synth", "abc", "--n0", "1024", "-o", "a.vdb"], 2,
-        "qbricks-bake: synth abc: scene \"abc\" with n0 1024 in 1 grid(s) needs 2097152 leaves (12464 MiB of grid memory), more than the limit of 4096 MiB")
+    case(LAB, &["synth", "abc", "--n0", "1024", "-o", "a.vdb"], 2,
+        "qbricks-lab: synth abc: scene \"abc\" with n0 1024 in 1 grid(s) needs 2097152 leaves (12464 MiB of grid memory), more than the limit of 4096 MiB")
         .absent(&["a.vdb"]),
-    case(BAKE, &["synth", "abc", "--n0", "656", "--float", "-o", "a.vdb"], 2,
-        "qbricks-bake: synth abc: scene \"abc\" with n0 656 in 1 grid(s) needs 551368 leaves")
+    case(LAB, &["synth", "abc", "--n0", "656", "--float", "-o", "a.vdb"], 2,
+        "qbricks-lab: synth abc: scene \"abc\" with n0 656 in 1 grid(s) needs 551368 leaves")
         .absent(&["a.vdb"]),
-    case(BAKE, &["synth", "wake", "--n0", "65536", "--levels", "10", "-o", "a.vdb"], 2,
-        "qbricks-bake: synth wake: scene \"wake\" with n0 65536 in 10 grid(s) needs")
+    case(LAB, &["synth", "wake", "--n0", "65536", "--levels", "10", "-o", "a.vdb"], 2,
+        "qbricks-lab: synth wake: scene \"wake\" with n0 65536 in 10 grid(s) needs")
         .absent(&["a.vdb"]),
     // 4. Clear messages naming the file.
     case(BAKE, &["bake", "dir", "-o", "d.qbk"], 2, "qbricks-bake: dir: is a directory, not a file")
@@ -334,11 +335,11 @@ const CASES: &[Case] = &[
         .links(&["ln_w.qbk"])
         .absent(&["x.png"]),
     // 1. Every command's outputs against its inputs.
-    case(VIEW, &["bench", "w.qbk", "--plot", "w.qbk", "--size", "8x6"], 2,
-        "qbricks-view: w.qbk: --plot would overwrite the brick file w.qbk, an input of this run")
+    case(LAB, &["bench", "w.qbk", "--plot", "w.qbk", "--size", "8x6"], 2,
+        "qbricks-lab: w.qbk: --plot would overwrite the brick file w.qbk, an input of this run")
         .same(&["w.qbk"]),
-    case(VIEW, &["bench", "w.qbk", "--state", "st.json", "--plot", "st.json"], 2,
-        "qbricks-view: st.json: --plot would overwrite the --state file st.json")
+    case(LAB, &["bench", "w.qbk", "--state", "st.json", "--plot", "st.json"], 2,
+        "qbricks-lab: st.json: --plot would overwrite the --state file st.json")
         .same(&["st.json"]),
     case(VIEW, &["open", "w.qbk", "--screenshot", "w.qbk"], 2,
         "qbricks-view: w.qbk: --screenshot would overwrite the brick file w.qbk")
@@ -371,22 +372,22 @@ const CASES: &[Case] = &[
         .same(&["st.json"])
         .absent(&["p_0001.png"]),
     // 2. Sizes bounded before allocating.
-    case(VIEW, &["bench", "w.qbk", "--size", "16384x16384"], 2,
-        "qbricks-view: a 16384x16384 image (2 copies) needs about 32768 MiB, more than the limit of"),
+    case(LAB, &["bench", "w.qbk", "--size", "16384x16384"], 2,
+        "qbricks-lab: a 16384x16384 image (2 copies) needs about 32768 MiB, more than the limit of"),
     case(VIEW, &["probe", "w.qbk", "--points", "big.csv", "--json"], 0, "")
         .closed()
         .limit_kib(1 << 20),
     // 3. Counts bounded the same way in every command.
-    case(VIEW, &["bench", "w.qbk", "--repeat", "100000"], 2,
-        "qbricks-view: --repeat: expected 1..=1000, found 100000"),
-    case(VIEW, &["bench", "w.qbk", "--threads", "100000"], 2,
-        "qbricks-view: --threads: expected 1..=256, found 100000"),
+    case(LAB, &["bench", "w.qbk", "--repeat", "100000"], 2,
+        "qbricks-lab: --repeat: expected 1..=1000, found 100000"),
+    case(LAB, &["bench", "w.qbk", "--threads", "100000"], 2,
+        "qbricks-lab: --threads: expected 1..=256, found 100000"),
     case(VIEW, &["open", "w.qbk", "--threads", "100000"], 2,
         "qbricks-view: --threads: expected 1..=256, found 100000"),
     case(VIEW, &["open", "w.qbk", "--orbit-frames", "1000000000"], 2,
         "qbricks-view: --orbit-frames: expected 1..=108000, found 1000000000"),
-    case(BAKE, &["synth", "ring-plume", "-o", "r_####.vdb", "--frames", "1000000"], 2,
-        "qbricks-bake: --frames: expected 1..=100000, found 1000000"),
+    case(LAB, &["synth", "ring-plume", "-o", "r_####.vdb", "--frames", "1000000"], 2,
+        "qbricks-lab: --frames: expected 1..=100000, found 1000000"),
     // 4. No blocking opens: a FIFO nobody writes to is reported at once.
     case(VIEW, &["info", "ff"], 2,
         "qbricks-view: ff: is a FIFO (named pipe) and no program wrote to it"),
@@ -417,18 +418,27 @@ const CASES: &[Case] = &[
         ])
         .made(&[("p_0001.png", ""), ("p_0003.png", "")])
         .absent(&["p_0002.png", "p_0004.png"]),
-    case(VIEW, &["bench", "w.qbk", "--reference-step", "1e-30", "--size", "8x6"], 2,
-        "qbricks-view: w.qbk: --reference-step: step: expected a finite number ≥ 0.001 (cell widths), found 1e-30"),
+    case(LAB, &["bench", "w.qbk", "--reference-step", "1e-30", "--size", "8x6"], 2,
+        "qbricks-lab: w.qbk: --reference-step: step: expected a finite number ≥ 0.001 (cell widths), found 1e-30"),
     // Issue 32, 2. A 9 kB file holding one active 640³ tile: refused by the bake's memory
     // estimate (it aborted with SIGABRT at 6.5 GB).
     case(BAKE, &["bake", "tile640.vdb", "-o", "t.qbk"], 2,
         "qbricks-bake: tile640.vdb: the bake of 262144000 input cells (grid \"vel\") needs about 10076 MiB, more than the limit of")
         .absent(&["t.qbk"]),
+    // Issue 31: the commands that moved to `qbricks-lab` say so, whatever their arguments.
+    case(BAKE, &["synth", "wake", "-o", "a.vdb"], 2,
+        "qbricks-bake: synth: moved: run `qbricks-lab synth …` (same arguments)")
+        .absent(&["a.vdb"]).exact(),
+    case(BAKE, &["accuracy", "wake", "--json"], 2,
+        "qbricks-bake: accuracy: moved: run `qbricks-lab accuracy …` (same arguments)").exact(),
+    case(VIEW, &["bench", "w.qbk", "--plot", "b.png"], 2,
+        "qbricks-view: bench: moved: run `qbricks-lab bench …` (same arguments)")
+        .absent(&["b.png"]).exact(),
     // 2. Estimated from n0 and the levels before anything is sampled.
-    case(BAKE, &["accuracy", "lamb-oseen", "--n0", "512"], 2,
-        "qbricks-bake: n0 512: measuring scene \"lamb-oseen\" (sampled, baked and compared in memory) needs about 10774 MiB, more than the limit of"),
-    case(BAKE, &["synth", "lamb-oseen", "--n0", "512", "-o", "a.vdb"], 2,
-        "qbricks-bake: synth lamb-oseen: scene \"lamb-oseen\" with n0 512 in 1 grid(s) (262144 leaves, sampled and written) needs about 3895 MiB, more than the limit of")
+    case(LAB, &["accuracy", "lamb-oseen", "--n0", "512"], 2,
+        "qbricks-lab: n0 512: measuring scene \"lamb-oseen\" (sampled, baked and compared in memory) needs about 10774 MiB, more than the limit of"),
+    case(LAB, &["synth", "lamb-oseen", "--n0", "512", "-o", "a.vdb"], 2,
+        "qbricks-lab: synth lamb-oseen: scene \"lamb-oseen\" with n0 512 in 1 grid(s) (262144 leaves, sampled and written) needs about 3895 MiB, more than the limit of")
         .absent(&["a.vdb"]),
     // 3. Coordinates beyond double precision: refused by the baker, and by the viewer for
     // a file made by hand (it said "camera.up is parallel to the view direction").

@@ -167,14 +167,14 @@ const FLAG_DOCUMENTS: [&str; 3] = ["README.md", "docs/cli.md", "docs/window.md"]
 /// The `(binary, subcommand)` pairs whose `--help` the flag check reads.
 const COMMANDS: [(&str, &[&str]); 9] = [
     ("qbricks-bake", &["bake"]),
-    ("qbricks-bake", &["synth"]),
     ("qbricks-bake", &["inspect"]),
-    ("qbricks-bake", &["accuracy"]),
     ("qbricks-view", &[]),
     ("qbricks-view", &["render"]),
     ("qbricks-view", &["probe"]),
     ("qbricks-view", &["info"]),
-    ("qbricks-view", &["bench"]),
+    ("qbricks-lab", &["synth"]),
+    ("qbricks-lab", &["accuracy"]),
+    ("qbricks-lab", &["bench"]),
 ];
 
 /// The flags of `COMMANDS` that `docs` (the documents' text) does not name, as

@@ -94,7 +94,7 @@ fn sigint_during_bake_removes_the_temporary_file() {
 #[test]
 fn sigterm_during_synth_removes_the_temporary_file() {
     interrupt(
-        "qbricks-bake",
+        "qbricks-lab",
         &[
             "synth", "wake", "--n0", "16", "--levels", "2", "-o", "out.fifo",
         ],

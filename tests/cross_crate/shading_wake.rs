@@ -53,7 +53,7 @@ fn measure_shading_normals_on_the_wake() {
     let vdb = dir.path().join("wake64.vdb");
     let qbk = dir.path().join("wake64.qbk");
     let bake = common::bin("qbricks-bake");
-    let ok = std::process::Command::new(&bake)
+    let ok = std::process::Command::new(common::bin("qbricks-lab"))
         .args(["synth", "wake", "--n0", "64", "-o"])
         .arg(&vdb)
         .status()
@@ -72,7 +72,7 @@ fn measure_shading_normals_on_the_wake() {
     assert!(ok);
     let ds = Dataset::open(&qbk).expect("open");
     let vol = ds.volume();
-    let flow = preprocess::analytic::scene("wake").expect("wake flow");
+    let flow = lab::analytic::scene("wake").expect("wake flow");
     let mut st = ViewState::default_for_volume(vol);
     Overrides {
         iso: Some(0.05),

@@ -4,7 +4,7 @@
 //!
 //! ```sh
 //! cargo run --release -p qbricks-viewer --example bench_volume [-- OUT.qbk [N]]
-//! qbricks-view bench OUT.qbk
+//! qbricks-lab bench OUT.qbk
 //! ```
 //!
 //! `OUT.qbk` defaults to `/tmp/qbricks_bench.qbk`, `N` to 128. (Formerly the ignored test

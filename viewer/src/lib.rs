@@ -9,10 +9,8 @@ pub mod accel;
 mod active;
 #[cfg(feature = "gui")]
 pub mod app;
-pub mod bench;
 pub mod bvh;
 pub mod camera;
-pub mod chart;
 pub mod colormap;
 pub mod dataset;
 mod dual_mask;

@@ -47,7 +47,7 @@ pub struct Frame {
     /// Per pixel (row-major), how many of its samples hit: what `bench` compares against
     /// a reference to count missed and false surfaces, which the colours alone cannot tell
     /// (a surface may be shaded like the background).
-    pub(crate) pixel_hits: Vec<u32>,
+    pub pixel_hits: Vec<u32>,
     /// Per pixel, the distance along the first sample's ray to the first surface it met
     /// (iso-surface or mesh; infinite where none): the outline box hides behind it.
     pub depth: Vec<f32>,

@@ -18,7 +18,8 @@ pub enum Mode {
 
 impl Mode {
     pub(crate) const ALL: [Mode; 2] = [Mode::Iso, Mode::Dvr];
-    pub(crate) fn as_str(self) -> &'static str {
+    /// The name in view-state files and reports (`iso`, `dvr`).
+    pub fn as_str(self) -> &'static str {
         match self {
             Mode::Iso => "iso",
             Mode::Dvr => "dvr",

@@ -27,23 +27,23 @@ use super::BakeOptions;
 /// Bytes per active cell besides the values and fields (bricks, supports, regions and
 /// their value ranges, the KD-tree, allocator rounding): the measured residual (about 7
 /// bytes on a 384³ tile) with some headroom.
-pub(crate) const CELL_BYTES: u64 = 8;
+pub const CELL_BYTES: u64 = 8;
 /// Bytes of one baked field per cell (an `f32`).
-pub(crate) const FIELD_BYTES: u64 = 4;
+pub const FIELD_BYTES: u64 = 4;
 /// Bytes per block besides its values: active and leaf masks, origin, index entry.
 const BLOCK_BYTES: u64 = 2 * 64 + 12 + 16;
 
 /// Bytes per cell-set slot of a cell-centred velocity (`[f64; 3]`).
-pub(crate) const VELOCITY_SLOT_BYTES: u64 = 24;
+pub const VELOCITY_SLOT_BYTES: u64 = 24;
 /// A staggered velocity keeps its face values beside the centred ones, and makes the
 /// centred ones from them while both exist.
-pub(crate) const STAGGERED_SLOT_BYTES: u64 = 3 * VELOCITY_SLOT_BYTES;
+pub const STAGGERED_SLOT_BYTES: u64 = 3 * VELOCITY_SLOT_BYTES;
 /// Bytes per slot of a scalar grid (`f64`), baked on its own or as an extra field.
-pub(crate) const SCALAR_SLOT_BYTES: u64 = 8;
+pub const SCALAR_SLOT_BYTES: u64 = 8;
 
 /// What one grid brings into a bake.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub(crate) struct GridFootprint {
+pub struct GridFootprint {
     /// Bytes of its decoded leaves (tiles take next to nothing).
     pub decoded: u64,
     /// 8³ blocks its cell set will take: at most this many (a block a leaf and a tile
@@ -54,7 +54,7 @@ pub(crate) struct GridFootprint {
 }
 
 impl GridFootprint {
-    pub(crate) fn of(grid: &AnyGrid) -> GridFootprint {
+    pub fn of(grid: &AnyGrid) -> GridFootprint {
         match grid {
             AnyGrid::Float(g) => Self::of_grid(g),
             AnyGrid::Double(g) => Self::of_grid(g),
@@ -63,7 +63,7 @@ impl GridFootprint {
         }
     }
 
-    pub(crate) fn of_grid<V: Copy>(g: &Grid<V>) -> GridFootprint {
+    pub fn of_grid<V: Copy>(g: &Grid<V>) -> GridFootprint {
         let mut blocks = 0u64;
         for t in &g.tiles {
             let per_axis = |a: usize| {
@@ -94,7 +94,7 @@ impl GridFootprint {
     }
 
     /// The footprint of `n` full leaves of `V` (no tiles), as `synth` samples a box.
-    pub(crate) fn leaves<V>(n: u64, cells: u64) -> GridFootprint {
+    pub fn leaves<V>(n: u64, cells: u64) -> GridFootprint {
         GridFootprint {
             decoded: n.saturating_mul(leaf_bytes::<V>()),
             blocks: n,
@@ -105,18 +105,14 @@ impl GridFootprint {
 
 /// Bytes one decoded leaf of `V` takes: the entry in the grid's leaf list and its boxed
 /// values.
-pub(crate) fn leaf_bytes<V>() -> u64 {
+pub fn leaf_bytes<V>() -> u64 {
     (std::mem::size_of::<Leaf<V>>() + std::mem::size_of::<[V; LEAF_VOXELS]>()) as u64
 }
 
 /// The estimated peak of a bake: `grids` with `slot_bytes` per slot of their cell sets
 /// (see the module docs), baked into `fields` fields, with the scalar grids `extras`
 /// resampled as extra fields.
-pub(crate) fn bake_bytes(
-    grids: &[(GridFootprint, u64)],
-    extras: &[GridFootprint],
-    fields: u64,
-) -> u64 {
+pub fn bake_bytes(grids: &[(GridFootprint, u64)], extras: &[GridFootprint], fields: u64) -> u64 {
     let slots = |f: &GridFootprint| f.blocks.saturating_mul(BLOCK_CELLS as u64);
     let mut total = 0u64;
     for (f, slot_bytes) in grids {

@@ -30,7 +30,8 @@ pub use select::{select_grids, GridKind};
 
 mod derived;
 mod extra;
-pub(crate) mod memory;
+/// Memory estimates of a bake (also used by `qbricks-lab`'s `synth` and `accuracy` limits).
+pub mod memory;
 mod overlap;
 mod reach;
 mod select;

@@ -1,5 +1,6 @@
 //! Baking, one test binary: the library's `bake` and the `qbricks-bake bake` command on
-//! analytic flows, the bundled sample and OpenVDB-written caches.
+//! the bundled sample, OpenVDB-written caches and hostile grids. (Bakes of the analytic
+//! flows are `qbricks-lab`'s `flows` tests.)
 
 // As in `#[test]` functions (clippy.toml), `unwrap` is fine in their helpers too.
 #![allow(clippy::unwrap_used)]
@@ -8,12 +9,7 @@
 mod common;
 
 mod cache_fixtures;
-mod fields;
 mod hostile;
 mod pipeline;
 mod sample;
 mod select_grids;
-mod sequence;
-mod split;
-mod staggered;
-mod wake;

@@ -59,7 +59,7 @@ pub fn region_boxes(file: &BrickFile) -> Vec<format::Aabb> {
 /// Reconstruction over the given bricks: `Σ H v / Σ H` with tents
 /// `H = Π max(0, 1 − |p − c| / w)`; `None` where no tent reaches `p`.
 pub fn reconstruct(file: &BrickFile, bricks: &[u32], f: usize, p: [f64; 3]) -> Option<f64> {
-    qbricks_preprocess::accuracy::reconstruct_over(file, bricks, f, p)
+    qbricks_preprocess::reconstruct::reconstruct_over(file, bricks, f, p)
 }
 
 /// Reconstruction at `p` through the KD-tree (None outside the data).

@@ -71,7 +71,8 @@ pub enum Strategy {
 }
 
 impl Strategy {
-    pub(crate) const ALL: [Strategy; 4] = [
+    /// Every strategy, in the order `qbricks-lab bench` runs them.
+    pub const ALL: [Strategy; 4] = [
         Strategy::Uniform,
         Strategy::Paper,
         Strategy::Bisect,
@@ -92,7 +93,8 @@ impl Strategy {
         }
     }
 
-    pub(crate) fn as_str(self) -> &'static str {
+    /// The name in view-state files and reports (`uniform`, `paper`, `bisect`, `exact`).
+    pub fn as_str(self) -> &'static str {
         match self {
             Strategy::Uniform => "uniform",
             Strategy::Paper => "paper",

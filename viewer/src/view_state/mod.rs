@@ -233,7 +233,7 @@ impl ViewState {
     /// The strategy the rays use: `exact` finds iso-surface roots; a dvr band has no
     /// single root, so in dvr mode it samples as [`Strategy::in_mode`] says: `uniform`
     /// with pre-integration, `bisect` without.
-    pub(crate) fn effective_strategy(&self) -> Strategy {
+    pub fn effective_strategy(&self) -> Strategy {
         self.strategy.in_mode(self.mode, self.preintegrated)
     }
 

@@ -1,12 +1,11 @@
 //! The `qbricks-view` commands from the command line, one test binary: `--help` here,
-//! `render` and `probe` (`render_probe`), `info` (`info`), `bench` (`bench`). The hostile
+//! `render` and `probe` (`render_probe`), `info` (`info`); `bench` moved to `qbricks-lab`. The hostile
 //! cases shared with `qbricks-bake` are the table in the root
 //! `tests/cross_crate/cli_cases.rs`.
 
 #[path = "../common/mod.rs"]
 mod common;
 
-mod bench;
 mod info;
 mod render_probe;
 
@@ -21,4 +20,16 @@ fn help_lists_every_subcommand() {
     for sub in ["info", "render", "probe"] {
         assert!(text.contains(sub), "--help lacks {sub}:\n{text}");
     }
+}
+
+#[test]
+fn bench_moved_to_qbricks_lab_exits_2() {
+    let out = common::qbricks_view()
+        .args(["bench", "data/wake_small.qbk", "--json"])
+        .output()
+        .expect("run qbricks-view");
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(err.contains("moved: run `qbricks-lab bench"), "{err}");
 }

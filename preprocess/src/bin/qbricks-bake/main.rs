@@ -4,11 +4,9 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
-mod accuracy;
 mod bake;
 mod inspect;
 mod sequence;
-mod synth;
 
 #[derive(Parser)]
 #[command(
@@ -25,21 +23,37 @@ struct Cli {
 enum Command {
     /// Describe the grids of a VDB file.
     Inspect(inspect::Args),
-    /// Write an analytic test flow as a multi-grid VDB file.
-    Synth(synth::Args),
     /// Bake a VDB file into a .qbk brick file.
     Bake(bake::Args),
-    /// Bake an analytic flow at several resolutions and compare Q and speed with the exact values.
-    Accuracy(accuracy::Args),
+    /// Moved to `qbricks-lab synth`.
+    #[command(hide = true)]
+    Synth(Moved),
+    /// Moved to `qbricks-lab accuracy`.
+    #[command(hide = true)]
+    Accuracy(Moved),
+}
+
+/// The arguments of a command that moved to `qbricks-lab`, taken whole so that the message
+/// says where it went whatever they were.
+#[derive(clap::Args)]
+struct Moved {
+    #[arg(trailing_var_arg = true, allow_hyphen_values = true, hide = true)]
+    args: Vec<String>,
+}
+
+/// Exit code 2 with where a command went: `qbricks-lab` runs it with the same arguments.
+fn moved(prog: &str, sub: &str) -> ExitCode {
+    eprintln!("{prog}: {sub}: moved: run `qbricks-lab {sub} …` (same arguments)");
+    ExitCode::from(2)
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Inspect(args) => inspect::run(args),
-        Command::Synth(args) => synth::run(args),
         Command::Bake(args) => bake::run(args),
-        Command::Accuracy(args) => accuracy::run(args),
+        Command::Synth(_) => return moved("qbricks-bake", "synth"),
+        Command::Accuracy(_) => return moved("qbricks-bake", "accuracy"),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -4,7 +4,6 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
-mod bench;
 mod info;
 mod probe;
 mod render;
@@ -36,8 +35,23 @@ enum Command {
     Render(Box<render::Args>),
     /// Print field values and gradients at points.
     Probe(probe::Args),
-    /// Time and error of every sampling strategy at several steps against a fine reference.
-    Bench(Box<bench::Args>),
+    /// Moved to `qbricks-lab bench`.
+    #[command(hide = true)]
+    Bench(Moved),
+}
+
+/// The arguments of a command that moved to `qbricks-lab`, taken whole so that the message
+/// says where it went whatever they were.
+#[derive(clap::Args)]
+struct Moved {
+    #[arg(trailing_var_arg = true, allow_hyphen_values = true, hide = true)]
+    args: Vec<String>,
+}
+
+/// Exit code 2 with where a command went: `qbricks-lab` runs it with the same arguments.
+fn moved(prog: &str, sub: &str) -> ExitCode {
+    eprintln!("{prog}: {sub}: moved: run `qbricks-lab {sub} …` (same arguments)");
+    ExitCode::from(2)
 }
 
 fn main() -> ExitCode {
@@ -48,7 +62,7 @@ fn main() -> ExitCode {
         Some(Command::Info(args)) => info::run(args),
         Some(Command::Render(args)) => render::run(*args),
         Some(Command::Probe(args)) => probe::run(args),
-        Some(Command::Bench(args)) => bench::run(*args),
+        Some(Command::Bench(_)) => return moved("qbricks-view", "bench"),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

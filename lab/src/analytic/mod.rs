@@ -1,7 +1,7 @@
 //! Closed-form flows with exact velocity gradients (and so exact Q).
 //!
 //! These are the ground truth for accuracy tests and the source of the synthetic VDB scenes
-//! written by `qbricks-bake synth` (see [`crate::synth`]). Every flow gives its velocity and
+//! written by `qbricks-lab synth` (see [`crate::synth`]). Every flow gives its velocity and
 //! its velocity gradient in closed form at any point; Q follows from the gradient.
 //!
 //! | scene name | flow | what it is for |
@@ -47,10 +47,10 @@ pub trait Flow: Send + Sync {
     }
 }
 
-use crate::derive::q_from_gradient;
+use preprocess::derive::q_from_gradient;
 /// The exact Q and speed of a flow use the same formulas as the baked fields, so a
 /// difference between them is the discretisation's, never a second formula's.
-pub use crate::derive::speed;
+pub use preprocess::derive::speed;
 
 /// Names accepted by [`scene`], in documentation order.
 pub(crate) const SCENE_NAMES: [&str; 6] = [

@@ -1,17 +1,17 @@
 //! Q accuracy of the bake on the synthetic sphere wake (nested boxes, exact Q known), and
 //! the measurements reported for the bake issue (`--ignored`).
 //!
-//! Measure: `cargo test --release -p qbricks-preprocess --test bake wake:: -- --ignored --nocapture`
+//! Measure: `cargo test --release -p qbricks-lab --test flows wake:: -- --ignored --nocapture`
 
 use std::collections::HashMap;
 
 use crate::common::bake::{cells, field, sample, Cell};
 use format::BrickFile;
-use qbricks_preprocess::analytic::{Flow, Wake};
+use lab::analytic::{Flow, Wake};
+use lab::synth::scene_grids;
 use qbricks_preprocess::bake::{bake, BakeOptions};
 use qbricks_preprocess::derive::Stencil;
 use qbricks_preprocess::grid::AnyGrid;
-use qbricks_preprocess::synth::scene_grids;
 
 fn baked(n0: u32, levels: u32, stencil: Stencil) -> BrickFile {
     let grids: Vec<AnyGrid> = scene_grids("wake", n0, levels)

@@ -16,12 +16,12 @@ use std::time::Instant;
 use serde::Serialize;
 
 use crate::chart::{Line, LogLogChart, PlotError};
-use crate::mesh::Meshes;
-use crate::render::{Frame, Renderer, Scene};
-use crate::sampling::Strategy;
-use crate::transfer::Mode;
-use crate::view_state::ViewState;
-use crate::volume::{Volume, VolumeError};
+use viewer::mesh::Meshes;
+use viewer::render::{Frame, Renderer, Scene};
+use viewer::sampling::Strategy;
+use viewer::transfer::Mode;
+use viewer::view_state::ViewState;
+use viewer::volume::{Volume, VolumeError};
 
 /// Step sizes (in local cell widths) every strategy is run at.
 pub(crate) const STEPS: [f64; 5] = [2.0, 1.0, 0.5, 0.25, 0.1];
@@ -59,11 +59,11 @@ pub enum BenchError {
     #[error(transparent)]
     Volume(#[from] VolumeError),
     #[error(transparent)]
-    Field(#[from] crate::fields::UnknownField),
+    Field(#[from] viewer::fields::UnknownField),
     /// The reference step breaks the bounds every view's step has (the same rule as
     /// `render --step`).
     #[error("--reference-step: {0}")]
-    ReferenceStep(crate::view_state::InvalidViewState),
+    ReferenceStep(viewer::view_state::InvalidViewState),
     /// Some reference rays stopped before their end (a step too small for the length of
     /// a ray's segments): every error measured against it would be wrong.
     #[error(
@@ -391,7 +391,7 @@ pub fn save_plot(path: &Path, runs: &[Run], title: &str) -> Result<(), BenchErro
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sampling::Stats;
+    use viewer::sampling::Stats;
 
     fn frame(rgb: Vec<[f32; 3]>, hits: Vec<u32>) -> Frame {
         Frame {

@@ -1,4 +1,4 @@
-//! `qbricks-bake accuracy`: the analytic flows baked at several resolutions against their
+//! `qbricks-lab accuracy`: the analytic flows baked at several resolutions against their
 //! exact Q and speed.
 
 use std::io::Write;
@@ -7,10 +7,18 @@ use std::path::PathBuf;
 use anyhow::bail;
 use files::output::QuietStdout;
 use indicatif::{ProgressBar, ProgressStyle};
-use qbricks_preprocess::accuracy::{accuracy, AccuracyOptions, AccuracyReport, ErrorStats};
-use qbricks_preprocess::derive::Stencil;
+use lab::accuracy::{accuracy, AccuracyOptions, AccuracyReport, ErrorStats};
+use preprocess::derive::Stencil;
 
-use crate::bake::StencilArg;
+/// `--stencil`, as `qbricks-bake bake` spells it.
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub enum StencilArg {
+    /// Central differences; one-sided at grid edges and next to missing cells.
+    Central,
+    /// Central differences; at grid edges the neighbour velocity comes from the
+    /// reconstructed multi-level field.
+    CrossLevel,
+}
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -87,7 +95,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     bar.finish_and_clear();
     let report = report?;
     if let Some(p) = &args.plot {
-        qbricks_preprocess::accuracy::save_plot(p, &report)?;
+        lab::accuracy::save_plot(p, &report)?;
     }
     let mut out = QuietStdout::new();
     if args.json {

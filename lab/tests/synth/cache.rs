@@ -3,15 +3,15 @@
 //! its staggered velocity read as a MAC grid.
 
 use crate::common::bake::{cells, field};
-use crate::common::{qbricks_bake, root};
+use crate::common::{qbricks_bake, qbricks_lab, root};
 use format::BrickFile;
-use qbricks_preprocess::analytic::{Flow, RingPlume};
+use lab::analytic::{Flow, RingPlume};
 use qbricks_preprocess::bake::{bake, BakeOptions};
 use qbricks_preprocess::vdb::VdbFile;
 
 /// The command in the README, run from the repository root.
 const COMMAND: &str =
-    "qbricks-bake synth ring-plume -o 'data/cache/fluid_data_####.vdb' --n0 32 --frames 4 --staggered";
+    "qbricks-lab synth ring-plume -o 'data/cache/fluid_data_####.vdb' --n0 32 --frames 4 --staggered";
 const FRAMES: [&str; 4] = ["0001", "0002", "0003", "0004"];
 
 #[test]
@@ -26,7 +26,7 @@ fn bundled_cache_matches_what_synth_writes_today() {
         .skip(1)
         .map(|a| a.trim_matches('\''))
         .collect();
-    let out = qbricks_bake()
+    let out = qbricks_lab()
         .current_dir(dir.path())
         .args(&args)
         .output()

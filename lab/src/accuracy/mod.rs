@@ -16,10 +16,10 @@
 //! `|Q_exact(p) − iso| / |∇Q_exact(p)|`, and the angle between the shading normal and the
 //! exact `∇Q`.
 
+use crate::chart::{Line, LogLogChart, PlotError};
 use format::BrickFile;
 use glam::DVec3;
 use serde::Serialize;
-use viewer::chart::{Line, LogLogChart, PlotError};
 use viewer::mesh::Meshes;
 use viewer::ray::RayCaster;
 use viewer::render::Scene;
@@ -31,11 +31,20 @@ use viewer::volume::Volume;
 use files::limits::{check_memory, with_capacity, LimitError};
 
 use crate::analytic::{self, Flow};
-use crate::bake::memory::{bake_bytes, GridFootprint, CELL_BYTES, VELOCITY_SLOT_BYTES};
-use crate::bake::{bake, BakeError, BakeOptions};
-use crate::derive::Stencil;
-use crate::grid::{AnyGrid, Vec3};
 use crate::synth::{scene_grids, scene_layout, SynthError};
+use preprocess::bake::memory::{bake_bytes, GridFootprint, CELL_BYTES, VELOCITY_SLOT_BYTES};
+use preprocess::bake::{bake, BakeError, BakeOptions};
+use preprocess::derive::Stencil;
+use preprocess::grid::{AnyGrid, Vec3};
+use preprocess::reconstruct::reconstruct_over;
+
+mod plot;
+mod surface;
+#[cfg(test)]
+mod tests;
+
+pub use plot::save_plot;
+use surface::{default_iso, surface_errors};
 
 /// What to measure.
 #[derive(Debug, Clone)]
@@ -109,7 +118,7 @@ struct CellVal {
 }
 
 /// The estimated peak of measuring `scene` at `n0`: the larger of its bake (the one
-/// estimate every bake is checked with, [`crate::bake::memory`]) and what the comparison
+/// estimate every bake is checked with, [`preprocess::bake::memory`]) and what the comparison
 /// holds afterwards, both with the sampled grids' leaves. From the layout alone, so it is
 /// known before anything is sampled.
 pub fn memory_needed(scene: &str, n0: u32, levels: u32) -> Result<u64, SynthError> {
@@ -270,43 +279,6 @@ fn reconstruct(file: &BrickFile, f: usize, p: [f64; 3]) -> Option<f64> {
     reconstruct_over(file, file.bricks_of(r), f, p)
 }
 
-/// The basis-method reconstruction at `p` over the bricks `ids` (`Σ H v / Σ H`, tents of
-/// the cell width around every leaf-cell centre), the formula the viewer evaluates, written
-/// over the in-memory file so a bake can be checked before it is written; `None` where no
-/// tent reaches `p`. The bake tests use it too, to compare a region's bricks with all bricks.
-pub fn reconstruct_over(file: &BrickFile, ids: &[u32], f: usize, p: [f64; 3]) -> Option<f64> {
-    let (mut s, mut ws) = (0.0, 0.0);
-    for &bi in ids {
-        let b = &file.bricks[bi as usize];
-        let d = b.dims.map(i64::from);
-        let mut lo = [0i64; 3];
-        let mut hi = [0i64; 3];
-        for a in 0..3 {
-            let x = (p[a] - b.origin[a]) / b.cell_width;
-            lo[a] = ((x.floor() - 1.0).max(0.0)) as i64;
-            hi[a] = ((x.ceil() + 1.0) as i64).min(d[a] - 1);
-        }
-        for z in lo[2]..=hi[2] {
-            for y in lo[1]..=hi[1] {
-                for x in lo[0]..=hi[0] {
-                    let c = [x, y, z];
-                    let mut h = 1.0;
-                    for a in 0..3 {
-                        let ca = b.origin[a] + c[a] as f64 * b.cell_width;
-                        h *= (1.0 - (p[a] - ca).abs() / b.cell_width).max(0.0);
-                    }
-                    if h > 0.0 {
-                        let i = b.first_value as usize + (x + d[0] * (y + d[1] * z)) as usize;
-                        s += h * f64::from(file.fields[f].values[i]);
-                        ws += h;
-                    }
-                }
-            }
-        }
-    }
-    (ws > 1e-12).then(|| s / ws)
-}
-
 fn percentile_99(mut v: Vec<f64>) -> f64 {
     if v.is_empty() {
         return 0.0;
@@ -329,106 +301,6 @@ fn level_boundaries(scene: &str, n0: u32, levels: u32) -> Result<Vec<([f64; 6], 
             ([lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]], w[1].voxel_size)
         })
         .collect())
-}
-
-/// The iso value of the surface checks when none is given (see [`AccuracyOptions::iso`]).
-fn default_iso(flow: &dyn Flow, opts: &AccuracyOptions) -> Result<f64, AccuracyError> {
-    if opts.scene.starts_with("wake") {
-        return Ok(0.05);
-    }
-    // The coarsest grid spans the domain; 33 points per axis find the peak of these
-    // smooth flows to well within the fifth taken of it.
-    let layout = scene_layout(&opts.scene, 8, 1)?;
-    let Some(g) = layout.first() else {
-        return Ok(0.05);
-    };
-    let (lo, hi) = (
-        g.lo.map(|i| i as f64 * g.voxel_size),
-        g.hi.map(|i| i as f64 * g.voxel_size),
-    );
-    let n = 32;
-    let mut max = 0.0f64;
-    for i in 0..=n {
-        for j in 0..=n {
-            for k in 0..=n {
-                let t = [i, j, k].map(|c| f64::from(c) / f64::from(n));
-                max = max.max(flow.q(std::array::from_fn(|a| lo[a] + t[a] * (hi[a] - lo[a]))));
-            }
-        }
-    }
-    Ok(if max > 0.0 { 0.2 * max } else { 0.05 })
-}
-
-/// Central-difference gradient of the exact Q. The flows give the velocity gradient in
-/// closed form but not its derivatives; a step of 10⁻⁴ cell leaves a truncation error far
-/// below the reconstruction's and a rounding error ≈ 10⁻¹² relative.
-fn exact_q_gradient(flow: &dyn Flow, p: [f64; 3], width: f64) -> DVec3 {
-    let d = 1e-4 * width;
-    DVec3::from_array(std::array::from_fn(|a| {
-        let (mut hi, mut lo) = (p, p);
-        hi[a] += d;
-        lo[a] -= d;
-        (flow.q(hi) - flow.q(lo)) / (2.0 * d)
-    }))
-}
-
-/// Casts `opts.rays`² camera rays through `file` with the viewer's `exact` strategy and
-/// compares each hit with the exact flow.
-fn surface_errors(
-    flow: &dyn Flow,
-    file: &BrickFile,
-    opts: &AccuracyOptions,
-    iso: f64,
-    n0: u32,
-) -> Result<SurfaceReport, AccuracyError> {
-    let view_err = |e: &dyn std::fmt::Display| AccuracyError::View(n0, e.to_string());
-    let path = std::path::Path::new("accuracy.qbk");
-    let bytes = format::writer::to_bytes(file).map_err(|e| view_err(&e))?;
-    let view = format::BrickFileView::from_bytes(path, &bytes).map_err(|e| view_err(&e))?;
-    let vol = Volume::new(&view).map_err(|e| view_err(&e))?;
-    let mut st = ViewState::default_for_volume(&vol);
-    st.iso_field = "q".into();
-    st.set_iso(iso);
-    st.mode = Mode::Iso;
-    st.strategy = Strategy::Exact;
-    st.spp = 1;
-    st.width = opts.rays.max(1);
-    st.height = opts.rays.max(1);
-    let meshes = Meshes::empty();
-    let scene = Scene::new(&vol, &st, &meshes).map_err(|e| view_err(&e))?;
-    let mut caster = RayCaster::new(&scene);
-    let (mut pos, mut ang) = (Acc::default(), Acc::default());
-    for y in 0..st.height {
-        for x in 0..st.width {
-            let (ray, jit) = caster.camera_ray(x, y, 0);
-            let Some(hit) = caster.surface(&ray, jit) else {
-                continue;
-            };
-            // The local cell width (of the finest brick at the hit).
-            let w = vol
-                .region_at(hit.local)
-                .map_or(vol.finest_w, |r| vol.step_width(r));
-            let p = hit.world.to_array();
-            if !flow.is_smooth_near(p, 2.0 * w) {
-                continue;
-            }
-            let g = exact_q_gradient(flow, p, w);
-            let gl = g.length();
-            if gl.is_nan() || gl <= 0.0 {
-                continue;
-            }
-            pos.add((flow.q(p) - iso).abs() / gl);
-            let cos = (hit.normal.dot(g) / gl).abs().min(1.0);
-            ang.add(cos.acos().to_degrees());
-        }
-    }
-    Ok(SurfaceReport {
-        iso,
-        rays: u64::from(st.width) * u64::from(st.height),
-        hits: pos.n,
-        position: pos.stats(vol.finest_w),
-        normal_deg: ang.stats(1.0),
-    })
 }
 
 fn measure(
@@ -622,135 +494,4 @@ pub fn accuracy(
         resolutions,
         orders,
     })
-}
-
-/// The relative RMS errors (stored Q, stored speed, reconstructed Q, Q near level
-/// boundaries, and the iso-surface position of `exact` hits in finest cells) against the
-/// finest cell width, both axes logarithmic.
-pub(crate) fn chart(report: &AccuracyReport) -> LogLogChart {
-    type Pick = fn(&ResolutionReport) -> &ErrorStats;
-    let series: [(&str, Pick, [u8; 3]); 5] = [
-        ("stored Q", |r| &r.stored_q, [31, 119, 180]),
-        ("stored speed", |r| &r.stored_speed, [255, 127, 14]),
-        ("reconstructed Q", |r| &r.reconstructed_q, [44, 160, 44]),
-        ("Q near level boundaries", |r| &r.boundary_q, [214, 39, 40]),
-        (
-            "iso-surface position (finest cells)",
-            |r| &r.surface.position,
-            [148, 103, 189],
-        ),
-    ];
-    let mut res: Vec<&ResolutionReport> = report.resolutions.iter().collect();
-    res.sort_by(|a, b| a.finest_width.total_cmp(&b.finest_width));
-    let lines = series
-        .into_iter()
-        .map(|(name, pick, colour)| Line {
-            name: name.to_string(),
-            colour,
-            points: res
-                .iter()
-                .filter(|r| pick(r).points > 0)
-                .map(|r| (r.finest_width, pick(r).rms_rel))
-                .collect(),
-        })
-        .collect();
-    LogLogChart {
-        title: format!("{} ({} stencil)", report.scene, report.stencil),
-        x_desc: "finest cell width",
-        y_desc: "RMS error / p99 |exact| (position: in finest cells)",
-        x_label: |v| format!("{v:.3}"),
-        lines,
-        rings: Vec::new(),
-        empty_range: [(0.01, 0.1), (1e-3, 1e-1)],
-        pad: 1.5,
-    }
-}
-
-/// Writes [`chart`] to `path` atomically, 800×560 pixels.
-pub fn save_plot(path: &std::path::Path, report: &AccuracyReport) -> Result<(), PlotError> {
-    chart(report).save(path, (800, 560))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn lamb_oseen_stored_q_converges_at_second_order() {
-        let opts = AccuracyOptions {
-            scene: "lamb-oseen".into(),
-            n0: vec![16, 32],
-            points: 500,
-            ..AccuracyOptions::default()
-        };
-        let r = accuracy(&opts, &mut |_| {}).expect("accuracy");
-        assert_eq!(r.resolutions.len(), 2);
-        assert_eq!(r.orders.len(), 1);
-        let o = &r.orders[0];
-        // Central differences: Q's error falls ≈ 4× per halving of the cell width.
-        assert!(o.stored_q_rms > 1.5, "order {}", o.stored_q_rms);
-        for res in &r.resolutions {
-            assert_eq!(res.boundary_q.points, 0, "one grid has no level boundary");
-            assert!(res.reconstructed_q.points > 0);
-            assert!(res.stored_q.rms_rel > 0.0 && res.stored_q.rms_rel < 0.5);
-        }
-    }
-
-    #[test]
-    fn exact_hits_approach_the_exact_iso_surface_as_cells_shrink() {
-        // The Lamb–Oseen iso-surface is a cylinder around the axis; the viewer's `exact`
-        // roots of the reconstructed Q must close in on it at second order (the stored Q
-        // and its trilinear reconstruction both are), and the shading normals on its
-        // exact normal.
-        let opts = AccuracyOptions {
-            scene: "lamb-oseen".into(),
-            n0: vec![16, 32, 64],
-            points: 100,
-            rays: 64,
-            ..AccuracyOptions::default()
-        };
-        let r = accuracy(&opts, &mut |_| {}).expect("accuracy");
-        for res in &r.resolutions {
-            let s = &res.surface;
-            assert_eq!(s.rays, 64 * 64);
-            assert!(s.hits > 150, "n0 {}: only {} hits", res.n0, s.hits);
-            // A hit off by a cell would be a wrong root, not an approximation error.
-            assert!(s.position.max_rel < 0.25, "n0 {}: {:?}", res.n0, s.position);
-        }
-        for w in r.resolutions.windows(2) {
-            let (a, b) = (&w[0].surface, &w[1].surface);
-            assert!(
-                b.position.rms < 0.5 * a.position.rms,
-                "position n0 {} → {}: {:.3e} → {:.3e}",
-                w[0].n0,
-                w[1].n0,
-                a.position.rms,
-                b.position.rms
-            );
-            assert!(
-                b.normal_deg.rms < 0.6 * a.normal_deg.rms,
-                "normal n0 {} → {}: {:.3}° → {:.3}°",
-                w[0].n0,
-                w[1].n0,
-                a.normal_deg.rms,
-                b.normal_deg.rms
-            );
-        }
-        for o in &r.orders {
-            let p = o.surface_position_rms.expect("hits at both resolutions");
-            assert!(p > 1.4, "surface position order {p:.2}");
-        }
-    }
-
-    #[test]
-    fn unknown_scene_is_refused() {
-        let opts = AccuracyOptions {
-            scene: "nope".into(),
-            ..AccuracyOptions::default()
-        };
-        assert!(matches!(
-            accuracy(&opts, &mut |_| {}),
-            Err(AccuracyError::UnknownScene(_))
-        ));
-    }
 }

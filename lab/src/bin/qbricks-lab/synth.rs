@@ -1,4 +1,4 @@
-//! `qbricks-bake synth`.
+//! `qbricks-lab synth`.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -8,9 +8,9 @@ use std::io::Write;
 use anyhow::Context;
 use clap::ValueEnum;
 use files::output::QuietStdout;
-use qbricks_preprocess::sequence::FramePattern;
-use qbricks_preprocess::synth::{write_scene, SynthOptions};
-use qbricks_preprocess::vdb::write::Compression;
+use lab::synth::{write_scene, SynthOptions};
+use preprocess::sequence::FramePattern;
+use preprocess::vdb::write::Compression;
 
 #[derive(Clone, Copy, ValueEnum)]
 pub enum CompressionArg {

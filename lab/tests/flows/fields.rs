@@ -6,10 +6,10 @@ use std::path::Path;
 use std::process::Output;
 
 use crate::common::qbricks_bake;
+use lab::synth::{sample_grid, scene_layout, GridLayout};
 use qbricks_preprocess::bake::{bake, BakeError, BakeOptions};
 use qbricks_preprocess::fields::FieldKind;
 use qbricks_preprocess::grid::{AnyGrid, Grid, Leaf, Transform};
-use qbricks_preprocess::synth::{sample_grid, scene_layout, GridLayout};
 use qbricks_preprocess::vdb::write::{write_vdb, Compression};
 
 /// A scalar grid over the index box `lo..hi` with values `f(world centre)`.
@@ -66,7 +66,7 @@ fn linear(p: [f64; 3]) -> f64 {
 
 fn velocity() -> (GridLayout, Grid<[f32; 3]>) {
     let layout = scene_layout("lamb-oseen", 16, 1).unwrap().remove(0);
-    let flow = qbricks_preprocess::analytic::scene("lamb-oseen").unwrap();
+    let flow = lab::analytic::scene("lamb-oseen").unwrap();
     let g = sample_grid(flow.as_ref(), &layout);
     (layout, g)
 }

@@ -7,8 +7,8 @@ use std::process::Output;
 
 use crate::common::qbricks_bake;
 use format::BrickFileView;
+use lab::synth::scene_grids;
 use qbricks_preprocess::grid::{AnyGrid, Grid, Leaf};
-use qbricks_preprocess::synth::scene_grids;
 use qbricks_preprocess::vdb::write::{write_vdb, Compression};
 
 /// The `lamb-oseen` velocity at n0 = 16 and its three components named `base{sep}{c}`.

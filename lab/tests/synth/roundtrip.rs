@@ -6,8 +6,8 @@ use std::collections::BTreeMap;
 
 use crate::common::Rng;
 
+use lab::synth::{scene_grids, speed_grid, write_scene, SynthOptions};
 use qbricks_preprocess::grid::{AnyGrid, Grid, Leaf, Tile, Transform, LEAF_VOXELS};
-use qbricks_preprocess::synth::{scene_grids, speed_grid, write_scene, SynthOptions};
 use qbricks_preprocess::vdb::write::{write_vdb, Compression};
 use qbricks_preprocess::vdb::VdbFile;
 

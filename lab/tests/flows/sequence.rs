@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use crate::common::qbricks_bake;
+use crate::common::{qbricks_bake, qbricks_lab};
 use format::BrickFileView;
 use serde_json::Value;
 
@@ -13,7 +13,11 @@ fn run(args: &[&str], dir: &Path) -> std::process::Output {
 }
 
 fn synth(dir: &Path, scene: &str, out: &str) {
-    let o = run(&["synth", scene, "--n0", "16", "-o", out], dir);
+    let o = qbricks_lab()
+        .current_dir(dir)
+        .args(["synth", scene, "--n0", "16", "-o", out])
+        .output()
+        .unwrap();
     assert!(o.status.success(), "{o:?}");
 }
 

@@ -1,4 +1,4 @@
-//! `qbricks-view bench`: every strategy at several steps against a fine reference.
+//! `qbricks-lab bench`: every strategy at several steps against a fine reference.
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -6,14 +6,40 @@ use std::path::PathBuf;
 use anyhow::Context;
 use files::guard::Guard;
 use files::output::QuietStdout;
-use qbricks_viewer::bench::{self, BenchOptions, Run};
-use qbricks_viewer::film;
-use qbricks_viewer::mesh::Meshes;
-use qbricks_viewer::render::Renderer;
-use qbricks_viewer::view_state::ViewState;
-use qbricks_viewer::volume::Volume;
+use lab::bench::{self, BenchOptions, Run};
+use viewer::film;
+use viewer::mesh::Meshes;
+use viewer::render::Renderer;
+use viewer::view_state::ViewState;
+use viewer::volume::Volume;
 
-use crate::render::{open_volume, resolve_file};
+/// The default file, relative to the current directory (as `qbricks-view` has it).
+const DEFAULT_FILE: &str = "data/wake_small.qbk";
+
+/// `file`, or the bundled sample when there is one in the current directory.
+fn resolve_file(file: Option<PathBuf>) -> anyhow::Result<PathBuf> {
+    match file {
+        Some(f) => Ok(f),
+        None => {
+            let p = PathBuf::from(DEFAULT_FILE);
+            if !p.exists() {
+                anyhow::bail!(
+                    "{DEFAULT_FILE}: no such file (the default sample is looked up relative to \
+                     the current directory; run from the repository root or pass FILE.qbk)"
+                );
+            }
+            Ok(p)
+        }
+    }
+}
+
+/// Opens and validates a `.qbk` file; `checksum`: verify the payload checksum too.
+fn open_volume(path: &std::path::Path, checksum: bool) -> anyhow::Result<format::BrickFileView> {
+    let options = format::OpenOptions {
+        verify_checksum: checksum,
+    };
+    format::BrickFileView::open_with(path, &options).map_err(anyhow::Error::from)
+}
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -55,17 +81,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     files::limits::repeat(args.repeat)?;
     files::limits::threads(args.threads)?;
     if let Some(spp) = args.reference_spp {
-        files::limits::count(
-            "--reference-spp",
-            spp,
-            1,
-            qbricks_viewer::view_state::MAX_SPP,
-        )?;
+        files::limits::count("--reference-spp", spp, 1, viewer::view_state::MAX_SPP)?;
     }
     let size = args
         .size
         .as_deref()
-        .map(|s| qbricks_viewer::view_state::parse_size("--size", s, 1))
+        .map(|s| viewer::view_state::parse_size("--size", s, 1))
         .transpose()?;
     let view = open_volume(&path, true)?;
     let vol = Volume::new(&view).with_context(|| format!("{}", path.display()))?;

@@ -9,8 +9,8 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::Command;
 
+use lab::synth::{scene_grids, speed_grid, write_scene, SynthOptions};
 use qbricks_preprocess::grid::{AnyGrid, Grid, Leaf, Tile, Transform, LEAF_VOXELS};
-use qbricks_preprocess::synth::{scene_grids, speed_grid, write_scene, SynthOptions};
 use qbricks_preprocess::vdb::write::{
     write_vdb, write_vdb_with, Compression, MetaValue, WriteOptions,
 };

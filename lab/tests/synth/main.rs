@@ -4,6 +4,8 @@
 // As in `#[test]` functions (clippy.toml), `unwrap` is fine in their helpers too.
 #![allow(clippy::unwrap_used)]
 
+extern crate preprocess as qbricks_preprocess;
+
 #[path = "../common/mod.rs"]
 mod common;
 

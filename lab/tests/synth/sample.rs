@@ -3,12 +3,12 @@
 //! analytic flows, the layout or the writer, regenerate the file with that command.
 
 use crate::common::root;
-use qbricks_preprocess::synth::{write_scene, SynthOptions};
+use lab::synth::{write_scene, SynthOptions};
 use qbricks_preprocess::vdb::write::Compression;
 
 /// The command in the README's *Bundled data* section, and the options it stands for.
 const COMMAND: &str =
-    "qbricks-bake synth wake -o data/wake_small.vdb --n0 48 --levels 3 --compression zip";
+    "qbricks-lab synth wake -o data/wake_small.vdb --n0 48 --levels 3 --compression zip";
 
 fn options() -> SynthOptions {
     SynthOptions {

@@ -1,5 +1,5 @@
-//! Log–log line charts as PNG bytes. `qbricks-bake accuracy --plot` (errors against the
-//! cell width) and `qbricks-view bench --plot` (errors against the time per frame) draw the
+//! Log–log line charts as PNG bytes. `qbricks-lab accuracy --plot` (errors against the
+//! cell width) and `qbricks-lab bench --plot` (errors against the time per frame) draw the
 //! same kind of chart, so both go through this one set-up: white background, caption,
 //! logarithmic axes with some room around the points, one line with dots per series, a
 //! legend, and a font embedded from a crate so no system fonts are needed.

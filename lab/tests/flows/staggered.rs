@@ -2,14 +2,14 @@
 //! cell-centred one and converges at the same (second) order, while reading the same file as
 //! cell-centred is first order; the CLI takes the layout from the grid class.
 //!
-//! Measure: `cargo test --release -p qbricks-preprocess --test bake staggered:: -- --nocapture`
+//! Measure: `cargo test --release -p qbricks-lab --test flows staggered:: -- --nocapture`
 
 use crate::common::bake::{cells, field};
-use crate::common::qbricks_bake;
-use qbricks_preprocess::analytic;
+use crate::common::{qbricks_bake, qbricks_lab};
+use lab::analytic;
+use lab::synth::scene_grids_with;
 use qbricks_preprocess::bake::{bake, BakeOptions};
 use qbricks_preprocess::grid::AnyGrid;
-use qbricks_preprocess::synth::scene_grids_with;
 
 /// RMS and largest |Q − exact Q| over all leaf cells, relative to the largest |exact Q|.
 fn q_error(scene: &str, n0: u32, staggered_file: bool, staggered_bake: bool) -> (f64, f64) {
@@ -104,7 +104,7 @@ fn staggered_q_is_second_order_and_reading_it_as_centred_is_not() {
 fn cli_reads_the_class_and_layout_overrides_it() {
     let dir = tempfile::tempdir().unwrap();
     let vdb = dir.path().join("mac.vdb");
-    let out = qbricks_bake()
+    let out = qbricks_lab()
         .args(["synth", "lamb-oseen", "--n0", "24", "--staggered", "-o"])
         .arg(&vdb)
         .output()

@@ -1,8 +1,8 @@
-//! `qbricks-view bench` on the bundled sample at a tiny size: it runs, prints a JSON list
+//! `qbricks-lab bench` on the bundled sample at a tiny size: it runs, prints a JSON list
 //! with every key for every strategy × step, and the plot is a PNG. Timings are never
 //! asserted (the benchmark is not a test).
 
-use crate::common::{qbricks_view, root};
+use crate::common::{qbricks_lab, qbricks_view, root};
 
 const KEYS: [&str; 8] = [
     "strategy",
@@ -16,7 +16,7 @@ const KEYS: [&str; 8] = [
 ];
 
 fn bench(extra: &[&str], plot: &std::path::Path) -> Vec<serde_json::Value> {
-    let out = qbricks_view()
+    let out = qbricks_lab()
         .current_dir(root())
         .args(["bench", "data/wake_small.qbk", "--json", "--size", "24x16"])
         .args([
@@ -31,7 +31,7 @@ fn bench(extra: &[&str], plot: &std::path::Path) -> Vec<serde_json::Value> {
         .arg(plot)
         .args(extra)
         .output()
-        .expect("run qbricks-view bench");
+        .expect("run qbricks-lab bench");
     assert!(
         out.status.success(),
         "bench failed: {}",
@@ -110,7 +110,7 @@ fn bench_bad_arguments_exit_2_with_one_line() {
         vec!["bench", "data/wake_small.qbk", "--repeat", "0"],
         vec!["bench", "/nonexistent/x.qbk"],
     ] {
-        let out = qbricks_view()
+        let out = qbricks_lab()
             .current_dir(root())
             .args(&args)
             .output()

@@ -1,0 +1,81 @@
+//! Statistics, orders and the memory estimate of the accuracy measurement.
+use super::*;
+
+#[test]
+fn lamb_oseen_stored_q_converges_at_second_order() {
+    let opts = AccuracyOptions {
+        scene: "lamb-oseen".into(),
+        n0: vec![16, 32],
+        points: 500,
+        ..AccuracyOptions::default()
+    };
+    let r = accuracy(&opts, &mut |_| {}).expect("accuracy");
+    assert_eq!(r.resolutions.len(), 2);
+    assert_eq!(r.orders.len(), 1);
+    let o = &r.orders[0];
+    // Central differences: Q's error falls ≈ 4× per halving of the cell width.
+    assert!(o.stored_q_rms > 1.5, "order {}", o.stored_q_rms);
+    for res in &r.resolutions {
+        assert_eq!(res.boundary_q.points, 0, "one grid has no level boundary");
+        assert!(res.reconstructed_q.points > 0);
+        assert!(res.stored_q.rms_rel > 0.0 && res.stored_q.rms_rel < 0.5);
+    }
+}
+
+#[test]
+fn exact_hits_approach_the_exact_iso_surface_as_cells_shrink() {
+    // The Lamb–Oseen iso-surface is a cylinder around the axis; the viewer's `exact`
+    // roots of the reconstructed Q must close in on it at second order (the stored Q
+    // and its trilinear reconstruction both are), and the shading normals on its
+    // exact normal.
+    let opts = AccuracyOptions {
+        scene: "lamb-oseen".into(),
+        n0: vec![16, 32, 64],
+        points: 100,
+        rays: 64,
+        ..AccuracyOptions::default()
+    };
+    let r = accuracy(&opts, &mut |_| {}).expect("accuracy");
+    for res in &r.resolutions {
+        let s = &res.surface;
+        assert_eq!(s.rays, 64 * 64);
+        assert!(s.hits > 150, "n0 {}: only {} hits", res.n0, s.hits);
+        // A hit off by a cell would be a wrong root, not an approximation error.
+        assert!(s.position.max_rel < 0.25, "n0 {}: {:?}", res.n0, s.position);
+    }
+    for w in r.resolutions.windows(2) {
+        let (a, b) = (&w[0].surface, &w[1].surface);
+        assert!(
+            b.position.rms < 0.5 * a.position.rms,
+            "position n0 {} → {}: {:.3e} → {:.3e}",
+            w[0].n0,
+            w[1].n0,
+            a.position.rms,
+            b.position.rms
+        );
+        assert!(
+            b.normal_deg.rms < 0.6 * a.normal_deg.rms,
+            "normal n0 {} → {}: {:.3}° → {:.3}°",
+            w[0].n0,
+            w[1].n0,
+            a.normal_deg.rms,
+            b.normal_deg.rms
+        );
+    }
+    for o in &r.orders {
+        let p = o.surface_position_rms.expect("hits at both resolutions");
+        assert!(p > 1.4, "surface position order {p:.2}");
+    }
+}
+
+#[test]
+fn unknown_scene_is_refused() {
+    let opts = AccuracyOptions {
+        scene: "nope".into(),
+        ..AccuracyOptions::default()
+    };
+    assert!(matches!(
+        accuracy(&opts, &mut |_| {}),
+        Err(AccuracyError::UnknownScene(_))
+    ));
+}

@@ -1,0 +1,192 @@
+//! Where a scene's grids are: the world-aligned boxes of every level (see the module docs of
+//! [`super`]), and the memory they would take, checked before anything is sampled.
+
+use super::*;
+
+pub(super) const WAKE_DOMAIN: Aabb = Aabb {
+    min: [-2.0, -2.0, -2.0],
+    max: [6.0, 2.0, 2.0],
+};
+pub(super) const WAKE_CORE: Aabb = Aabb {
+    min: [-0.75, -0.75, -0.75],
+    max: [5.0, 0.75, 0.75],
+};
+const UNIT_DOMAIN: Aabb = Aabb {
+    min: [-1.0, -1.0, -1.0],
+    max: [1.0, 1.0, 1.0],
+};
+
+/// One grid of a scene layout: its name, voxel size and active index box (half-open).
+#[derive(Debug, Clone, PartialEq)]
+pub struct GridLayout {
+    pub name: String,
+    pub voxel_size: f64,
+    /// First active voxel index per axis.
+    pub lo: [i64; 3],
+    /// One past the last active voxel index per axis.
+    pub hi: [i64; 3],
+}
+
+impl GridLayout {
+    /// Active voxels in the box, saturating at `u64::MAX` (an allowed `--n0` with ten levels
+    /// has a finest box of 2^75 voxels, which a plain product would overflow).
+    pub(crate) fn voxel_count(&self) -> u64 {
+        saturating_product((0..3).map(|a| self.hi[a].saturating_sub(self.lo[a])))
+    }
+
+    /// Leaves [`sample_grid`] allocates for this box (every 8³ block the box touches),
+    /// saturating at `u64::MAX`.
+    pub(crate) fn leaf_count(&self) -> u64 {
+        let d = i64::from(LEAF_DIM);
+        saturating_product((0..3).map(|a| {
+            if self.hi[a] <= self.lo[a] {
+                0
+            } else {
+                (self.hi[a] - 1).div_euclid(d) - self.lo[a].div_euclid(d) + 1
+            }
+        }))
+    }
+
+    pub(crate) fn transform(&self) -> Transform {
+        Transform {
+            voxel_size: [self.voxel_size; 3],
+            translation: [0.5 * self.voxel_size; 3],
+        }
+    }
+
+    /// World-space centre of voxel `ijk`.
+    pub(crate) fn centre(&self, ijk: [i64; 3]) -> [f64; 3] {
+        ijk.map(|i| (i as f64 + 0.5) * self.voxel_size)
+    }
+}
+
+/// The grids (finest first) that [`scene_grids`] fills, without sampling anything.
+pub fn scene_layout(scene: &str, n0: u32, levels: u32) -> Result<Vec<GridLayout>, SynthError> {
+    let (domain, multi) = match scene {
+        "wake" => (WAKE_DOMAIN, true),
+        "wake-single" => (WAKE_DOMAIN, false),
+        "lamb-oseen" | "burgers" | "abc" | "ring-plume" => (UNIT_DOMAIN, false),
+        _ => {
+            return Err(SynthError::UnknownScene {
+                name: scene.to_string(),
+            })
+        }
+    };
+    check_range("n0", n0, 2, 1 << 16)?;
+    let levels = if multi {
+        check_range("levels", levels, 1, 10)?;
+        levels
+    } else {
+        1
+    };
+    let extent = (0..3)
+        .map(|a| domain.max[a] - domain.min[a])
+        .fold(0.0, f64::max);
+    let coarse = extent / f64::from(n0);
+    let eps = 1e-9;
+    // Coarsest first; `c` counts levels from the coarsest.
+    let mut out: Vec<GridLayout> = Vec::with_capacity(levels as usize);
+    for c in 0..levels {
+        let h = coarse / f64::from(1u32 << c);
+        let (lo, hi) = if c == 0 {
+            (
+                domain.min.map(|v| (v / h + eps).floor() as i64),
+                domain.max.map(|v| (v / h - eps).ceil() as i64),
+            )
+        } else {
+            let t = f64::from(c) / f64::from(levels - 1);
+            let parent = 2.0 * h;
+            let mut lo = [0i64; 3];
+            let mut hi = [0i64; 3];
+            for a in 0..3 {
+                let bmin = domain.min[a] + t * (WAKE_CORE.min[a] - domain.min[a]);
+                let bmax = domain.max[a] + t * (WAKE_CORE.max[a] - domain.max[a]);
+                lo[a] = 2 * (bmin / parent + eps).floor() as i64;
+                hi[a] = 2 * (bmax / parent - eps).ceil() as i64;
+            }
+            (lo, hi)
+        };
+        let name = if multi {
+            format!("vel_l{}", levels - 1 - c)
+        } else if scene == "ring-plume" {
+            // Named as Blender's Mantaflow names its cache grids.
+            "velocity".to_string()
+        } else {
+            "vel".to_string()
+        };
+        out.push(GridLayout {
+            name,
+            voxel_size: h,
+            lo,
+            hi,
+        });
+    }
+    out.reverse();
+    check_memory(scene, n0, &out, false)?;
+    Ok(out)
+}
+
+fn saturating_product(extents: impl Iterator<Item = i64>) -> u64 {
+    extents.fold(1u64, |acc, e| acc.saturating_mul(e.max(0).unsigned_abs()))
+}
+
+/// Refuses a scene whose leaves (velocity, plus speed when `speed_grids`) would take more than
+/// [`MAX_LEAF_BYTES`], whatever the machine, before anything is sampled. Returns the leaf
+/// count and bytes.
+pub(crate) fn check_memory(
+    scene: &str,
+    n0: u32,
+    layouts: &[GridLayout],
+    speed_grids: bool,
+) -> Result<(u64, u64), SynthError> {
+    let per_leaf = leaf_bytes::<Vec3>() + if speed_grids { leaf_bytes::<f32>() } else { 0 };
+    let leaves = layouts
+        .iter()
+        .fold(0u64, |acc, l| acc.saturating_add(l.leaf_count()));
+    let bytes = leaves.saturating_mul(per_leaf);
+    if bytes > MAX_LEAF_BYTES {
+        return Err(SynthError::TooLarge {
+            name: scene.to_string(),
+            n0,
+            grids: layouts.len(),
+            leaves,
+            bytes,
+            limit: MAX_LEAF_BYTES,
+        });
+    }
+    Ok((leaves, bytes))
+}
+
+/// [`check_memory`], and then the peak of writing the scene (leaves and the file's encoded
+/// grids) against the shared memory limit ([`files::limits::check_memory`]), which depends
+/// on the machine and `ulimit -v`.
+pub(super) fn check_write_memory(
+    scene: &str,
+    n0: u32,
+    layouts: &[GridLayout],
+    speed_grids: bool,
+) -> Result<(), SynthError> {
+    let (leaves, bytes) = check_memory(scene, n0, layouts, speed_grids)?;
+    let (num, den) = PEAK_PER_LEAF_BYTE;
+    limits::check_memory(
+        format!(
+            "scene {scene:?} with n0 {n0} in {} grid(s) ({leaves} leaves, sampled and written)",
+            layouts.len()
+        ),
+        bytes.saturating_mul(num) / den,
+    )
+    .map_err(SynthError::Memory)
+}
+
+fn check_range(what: &'static str, found: u32, min: u32, max: u32) -> Result<(), SynthError> {
+    if (min..=max).contains(&found) {
+        Ok(())
+    } else {
+        Err(SynthError::OutOfRange {
+            what,
+            min,
+            max,
+            found,
+        })
+    }
+}

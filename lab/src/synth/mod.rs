@@ -1,0 +1,277 @@
+//! Synthetic scenes: analytic flows sampled onto grids, as `qbricks-lab synth` writes them.
+//!
+//! # Layout
+//! All grids share one world-aligned lattice: a grid of voxel size `h` has voxel `(i, j, k)`
+//! centred at `((i + ½) h, (j + ½) h, (k + ½) h)` (transform: scale `h`, translation `h/2`),
+//! so its cells are `[i h, (i + 1) h)` and every cell of a level is exactly covered by 2³
+//! cells of the next finer level. Index coordinates are negative left of the world origin.
+//!
+//! * `wake`: `levels` nested boxes. The coarsest covers the scene domain
+//!   x ∈ [-2, 6], y, z ∈ [-2, 2] with voxel size `8 / n0` (so `n0` voxels along x, the longest
+//!   axis; the box snaps outward to the world-aligned lattice, so when 4 does not divide
+//!   `n0` each side grows by less than one voxel). Each finer level halves the voxel size and covers a box interpolated
+//!   linearly between the domain and the core box x ∈ [-0.75, 5], y, z ∈ [-0.75, 0.75]
+//!   (sphere and ring train), snapped outward to the next coarser level's cells so that
+//!   boxes nest exactly. Grids are named `vel_l0` (finest) … `vel_l{levels-1}` (coarsest)
+//!   and returned in that order.
+//! * `wake-single`, `lamb-oseen`, `burgers`, `abc`: one grid named `vel` over the scene
+//!   domain (`wake-single`: the `wake` domain; the others: [-1, 1]³) with `n0` voxels along
+//!   the longest axis; `levels` is ignored.
+//!
+//! Every voxel whose centre lies in a grid's box is active and holds the exact velocity at
+//! its centre (f32); leaves at box edges have partial active masks, inactive voxels hold the
+//! background (0, 0, 0). No tiles are written. Results are deterministic.
+
+use format::Aabb;
+use rayon::prelude::*;
+use thiserror::Error;
+
+use files::limits::{self, LimitError};
+
+use crate::analytic::{self, Flow};
+
+mod layout;
+#[cfg(test)]
+mod tests;
+mod write;
+
+use layout::check_write_memory;
+#[cfg(test)]
+use layout::{check_memory, WAKE_CORE, WAKE_DOMAIN};
+pub use layout::{scene_layout, GridLayout};
+use preprocess::bake::memory::leaf_bytes;
+use preprocess::grid::{leaf_offset, AnyGrid, Grid, Leaf, Transform, Vec3, LEAF_DIM, LEAF_VOXELS};
+use preprocess::vdb::write::{
+    write_vdb_with, Compression, MetaMap, MetaValue, WriteError, WriteOptions,
+};
+pub use write::{write_scene, GridSummary, SynthOptions};
+
+/// Most bytes of leaves a scene may allocate (velocity grids, plus the speed grids when
+/// asked for). Leaves are counted whole, as `sample_grid` allocates them, partial leaves at
+/// box edges included: a voxel count alone underestimates memory (a leaf of 3-vectors takes
+/// about 6.2 kB however few of its 512 voxels are active), and `synth` holds every grid in
+/// memory until the file is written. 4 GiB of leaves is a peak of about 10 GB once the
+/// writer's buffers are added, well past any scene the tests or the README use (the largest,
+/// `wake --n0 160 --levels 3`, takes 140 MB) and below what the project's machines have.
+pub(crate) const MAX_LEAF_BYTES: u64 = 4 << 30;
+
+/// What `synth` holds at its peak per byte of leaves: the grids and, while the file is
+/// written, every grid's encoded body (at most as large as its leaves); measured 2.0 (a
+/// 256³ Lamb–Oseen grid, 204 MB of leaves, 413 MB resident at the peak), taken as 2.5.
+const PEAK_PER_LEAF_BYTE: (u64, u64) = (5, 2);
+
+#[derive(Debug, Error)]
+pub enum SynthError {
+    #[error(transparent)]
+    Write(#[from] WriteError),
+    #[error("unknown scene {name:?} (expected one of: {})", analytic::SCENE_NAMES.join(", "))]
+    UnknownScene { name: String },
+    #[error("{what} must be in {min}..={max}, found {found}")]
+    OutOfRange {
+        what: &'static str,
+        min: u32,
+        max: u32,
+        found: u32,
+    },
+    /// Over [`MAX_LEAF_BYTES`], whatever the machine.
+    #[error(
+        "scene {name:?} with n0 {n0} in {grids} grid(s) needs {leaves} leaves ({} MiB of grid memory), more than the limit of {} MiB; use a smaller --n0 or fewer --levels",
+        bytes >> 20,
+        limit >> 20
+    )]
+    TooLarge {
+        name: String,
+        n0: u32,
+        grids: usize,
+        leaves: u64,
+        bytes: u64,
+        limit: u64,
+    },
+    /// Within [`MAX_LEAF_BYTES`] but over what this machine (or `ulimit -v`) leaves: the
+    /// shared limit of every command.
+    #[error("{0}; use a smaller --n0 or fewer --levels")]
+    Memory(LimitError),
+}
+
+/// Samples scene `scene` onto its grids (see the module docs for the layout), finest first.
+pub fn scene_grids(scene: &str, n0: u32, levels: u32) -> Result<Vec<Grid<Vec3>>, SynthError> {
+    scene_grids_with(scene, n0, levels, false, 1)
+}
+
+/// As [`scene_grids`]; with `staggered`, as MAC grids (see [`sample_grid_with`]); `frame`
+/// (1-based) picks the time of a time-dependent scene (`ring-plume`).
+pub fn scene_grids_with(
+    scene: &str,
+    n0: u32,
+    levels: u32,
+    staggered: bool,
+    frame: u64,
+) -> Result<Vec<Grid<Vec3>>, SynthError> {
+    let layouts = scene_layout(scene, n0, levels)?;
+    let flow = analytic::scene_at(scene, frame).ok_or_else(|| SynthError::UnknownScene {
+        name: scene.to_string(),
+    })?;
+    Ok(layouts
+        .iter()
+        .map(|layout| sample_grid_with(flow.as_ref(), layout, staggered))
+        .collect())
+}
+
+/// Origins of the leaves that hold `layout`'s box.
+fn leaf_origins(layout: &GridLayout) -> Vec<[i64; 3]> {
+    let d = i64::from(LEAF_DIM);
+    let first = layout.lo.map(|v| v.div_euclid(d) * d);
+    let counts: Vec<i64> = (0..3)
+        .map(|a| (layout.hi[a] - first[a] + d - 1).div_euclid(d).max(0))
+        .collect();
+    let mut origins = Vec::with_capacity((counts[0] * counts[1] * counts[2]) as usize);
+    for x in 0..counts[0] {
+        for y in 0..counts[1] {
+            for z in 0..counts[2] {
+                origins.push([first[0] + x * d, first[1] + y * d, first[2] + z * d]);
+            }
+        }
+    }
+    origins
+}
+
+/// Samples `flow` at the voxel centres of `layout`'s box.
+pub fn sample_grid(flow: &dyn Flow, layout: &GridLayout) -> Grid<Vec3> {
+    sample_grid_with(flow, layout, false)
+}
+
+/// Samples `flow` on `layout`'s box: at voxel centres, or with `staggered` as a MAC grid in
+/// OpenVDB's convention (component `c` of voxel `i` at the lower face, centre − ½h·e_c).
+/// The active voxels are the same either way, so the upper faces of the last cells along
+/// each axis are not stored (as in a solver's MAC grid of the same size as its cell grid).
+pub(crate) fn sample_grid_with(
+    flow: &dyn Flow,
+    layout: &GridLayout,
+    staggered: bool,
+) -> Grid<Vec3> {
+    let origins = leaf_origins(layout);
+    let leaves = origins
+        .par_iter()
+        .map(|&origin| sample_leaf(flow, layout, origin, staggered))
+        .collect();
+    Grid {
+        name: layout.name.clone(),
+        transform: layout.transform(),
+        background: [0.0; 3],
+        leaves,
+        tiles: Vec::new(),
+    }
+}
+
+fn sample_leaf(
+    flow: &dyn Flow,
+    layout: &GridLayout,
+    origin: [i64; 3],
+    staggered: bool,
+) -> Leaf<Vec3> {
+    let mut active = [0u64; 8];
+    let mut values = Box::new([[0.0f32; 3]; LEAF_VOXELS]);
+    let inside = |a: usize, v: i64| v >= layout.lo[a] && v < layout.hi[a];
+    for x in 0..8usize {
+        let i = origin[0] + x as i64;
+        if !inside(0, i) {
+            continue;
+        }
+        for y in 0..8usize {
+            let j = origin[1] + y as i64;
+            if !inside(1, j) {
+                continue;
+            }
+            for z in 0..8usize {
+                let k = origin[2] + z as i64;
+                if !inside(2, k) {
+                    continue;
+                }
+                let n = leaf_offset(x, y, z);
+                let p = layout.centre([i, j, k]);
+                values[n] = if staggered {
+                    std::array::from_fn(|c| {
+                        let mut f = p;
+                        f[c] -= 0.5 * layout.voxel_size;
+                        flow.velocity(f)[c] as f32
+                    })
+                } else {
+                    let u = flow.velocity(p);
+                    [u[0] as f32, u[1] as f32, u[2] as f32]
+                };
+                active[n >> 6] |= 1u64 << (n & 63);
+            }
+        }
+    }
+    Leaf {
+        // Index boxes stay far inside i32 (checked by MAX_LEAF_BYTES and the n0 range).
+        origin: origin.map(|v| v as i32),
+        active,
+        values,
+    }
+}
+
+/// A float grid `name` over `layout`'s box with `f` at the voxel centres.
+pub(crate) fn sample_scalar(
+    name: &str,
+    layout: &GridLayout,
+    f: impl Fn([f64; 3]) -> f64 + Sync,
+) -> Grid<f32> {
+    let inside = |a: usize, v: i64| v >= layout.lo[a] && v < layout.hi[a];
+    let leaves = leaf_origins(layout)
+        .par_iter()
+        .map(|&o| {
+            let mut active = [0u64; 8];
+            let values = Box::new(std::array::from_fn(|n| {
+                let ijk = [
+                    o[0] + (n >> 6) as i64,
+                    o[1] + ((n >> 3) & 7) as i64,
+                    o[2] + (n & 7) as i64,
+                ];
+                if !(0..3).all(|a| inside(a, ijk[a])) {
+                    return 0.0;
+                }
+                active[n >> 6] |= 1u64 << (n & 63);
+                f(layout.centre(ijk)) as f32
+            }));
+            Leaf {
+                origin: o.map(|v| v as i32),
+                active,
+                values,
+            }
+        })
+        .collect();
+    Grid {
+        name: name.to_string(),
+        transform: layout.transform(),
+        background: 0.0,
+        leaves,
+        tiles: Vec::new(),
+    }
+}
+
+/// `|u|` of a velocity grid, same leaves and active masks, named `speed…` for `vel…`.
+pub fn speed_grid(grid: &Grid<Vec3>) -> Grid<f32> {
+    let name = match grid.name.strip_prefix("vel") {
+        Some(rest) => format!("speed{rest}"),
+        None => format!("{}_speed", grid.name),
+    };
+    Grid {
+        name,
+        transform: grid.transform,
+        background: 0.0,
+        leaves: grid
+            .leaves
+            .iter()
+            .map(|l| Leaf {
+                origin: l.origin,
+                active: l.active,
+                values: Box::new(std::array::from_fn(|n| {
+                    let [x, y, z] = l.values[n];
+                    (x * x + y * y + z * z).sqrt()
+                })),
+            })
+            .collect(),
+        tiles: Vec::new(),
+    }
+}
