@@ -10,7 +10,7 @@
 use rayon::prelude::*;
 use serde::Serialize;
 
-use format::{Aabb, Brick, BrickFile, Field, Level, Provenance, Region, SourceGrid, ValueRange};
+use format::{Aabb, BrickFile, SourceGrid};
 
 use files::limits::LimitError;
 
@@ -18,7 +18,7 @@ use crate::bricks::{make_bricks, BrickBox};
 use crate::cells::{classify_leaves, CellSet};
 use crate::derive::{centre_from_faces, Stencil};
 use crate::error::{field_grid_not_found, grid_labels, GridCount, GridCounts};
-use crate::fields::{range_and_histogram, region_ranges, FieldKind, RangeInput, HISTOGRAM_BINS};
+use crate::fields::{region_ranges, FieldKind, RangeInput};
 use crate::grid::{AnyGrid, Transform};
 use crate::levels::assign_levels;
 use crate::nonfinite::{self, CellValue};
@@ -28,6 +28,8 @@ use crate::regions;
 pub use crate::error::BakeError;
 pub use select::{select_grids, GridKind};
 
+mod assemble;
+use assemble::{archive_bytes, assemble, check_archive};
 mod derived;
 mod extra;
 /// Memory estimates of a bake (also used by `qbricks-lab`'s `synth` and `accuracy` limits).
@@ -35,6 +37,8 @@ pub mod memory;
 mod overlap;
 mod reach;
 mod select;
+mod supports;
+use supports::snapped_supports;
 
 use derived::{derive_fields, FieldValues};
 use extra::{extra_coverage, extra_fields, ExtraGrid};
@@ -634,179 +638,6 @@ fn field_names(input: &Input, opts: &BakeOptions) -> Vec<String> {
             .collect(),
         Input::Scalar(_, _, name) => vec![name.clone()],
     }
-}
-
-/// Bytes of the archive of a bake, from the sizes of its arrays (each element as the
-/// schema archives it) and 1 MiB for the rest (names, provenance, alignment).
-fn archive_bytes(bricks: &Bricks, fields: &FieldValues, kd: &Kd) -> u64 {
-    let n = |len: usize, bytes: u64| (len as u64).saturating_mul(bytes);
-    let values: u64 = fields.values.iter().map(|v| n(v.len(), 4)).sum();
-    let histograms = n(fields.values.len(), 8 * HISTOGRAM_BINS as u64);
-    let region_bricks: u64 = kd.regions.iter().map(|(_, ids)| n(ids.len(), 4)).sum();
-    values
-        .saturating_add(histograms)
-        .saturating_add(n(bricks.boxes.len(), 64))
-        .saturating_add(n(kd.regions.len(), 8))
-        .saturating_add(region_bricks)
-        .saturating_add(n(kd.ranges.len(), 8))
-        .saturating_add(n(kd.tree.1.len(), 16 + 1))
-        .saturating_add(1 << 20)
-}
-
-/// Refuses an archive of `bytes` that the format cannot address.
-fn check_archive(leaf_cells: u64, fields: u64, bytes: u64) -> Result<(), BakeError> {
-    if bytes > format::MAX_ARCHIVE_BYTES {
-        return Err(BakeError::TooLargeForFormat {
-            leaf_cells,
-            fields,
-            bytes,
-        });
-    }
-    Ok(())
-}
-
-/// Assembly stage: the [`BrickFile`] (fields with their ranges and histograms, levels,
-/// bricks, regions, KD-tree, provenance) ready to be written, and
-/// the field ranges for the summary.
-fn assemble(
-    opts: &BakeOptions,
-    source_grids: Vec<SourceGrid>,
-    level_widths: &[f64],
-    bricks: &Bricks,
-    fields: FieldValues,
-    kd: Kd,
-    bounds: Option<Aabb>,
-) -> (BrickFile, Vec<FieldSummary>) {
-    let mut file_fields = Vec::with_capacity(fields.names.len());
-    let mut field_summaries = Vec::with_capacity(fields.names.len());
-    for (name, vals) in fields.names.into_iter().zip(fields.values) {
-        let (min, max, histogram) = range_and_histogram(&vals);
-        field_summaries.push(FieldSummary {
-            name: name.clone(),
-            min,
-            max,
-        });
-        file_fields.push(Field {
-            name,
-            min,
-            max,
-            histogram,
-            values: vals,
-        });
-    }
-    let mut file_levels: Vec<Level> = level_widths
-        .iter()
-        .map(|&w| Level {
-            cell_width: w,
-            cells: 0,
-            bricks: 0,
-        })
-        .collect();
-    for b in &bricks.boxes {
-        let l = &mut file_levels[b.level as usize];
-        l.cells += b.cells();
-        l.bricks += 1;
-    }
-    let file_bricks: Vec<Brick> = bricks
-        .boxes
-        .iter()
-        .zip(&bricks.origins)
-        .zip(&bricks.first)
-        .zip(&bricks.widths)
-        .map(|(((b, o), f), &w)| Brick {
-            level: b.level,
-            origin: *o,
-            cell_width: w,
-            inv_cell_width: 1.0 / w,
-            dims: b.dims,
-            first_value: *f,
-        })
-        .collect();
-    let mut region_bricks = Vec::new();
-    let mut file_regions = Vec::with_capacity(kd.regions.len());
-    for (_, ids) in &kd.regions {
-        file_regions.push(Region {
-            bricks_start: region_bricks.len() as u32,
-            bricks_len: ids.len() as u32,
-        });
-        region_bricks.extend_from_slice(ids);
-    }
-    let bounds = bounds.unwrap_or(Aabb {
-        min: [0.0; 3],
-        max: [0.0; 3],
-    });
-    let (kd_root, kd_nodes, kd_axes) = kd.tree;
-    let file = BrickFile {
-        provenance: Provenance {
-            source: opts.source.clone(),
-            grids: source_grids,
-            bake_options: serde_json::to_string(opts).unwrap_or_default(),
-            tool_version: env!("CARGO_PKG_VERSION").to_string(),
-        },
-        bounds,
-        levels: file_levels,
-        fields: file_fields,
-        bricks: file_bricks,
-        regions: file_regions,
-        region_bricks,
-        region_ranges: kd
-            .ranges
-            .into_iter()
-            .map(|[min, max]| ValueRange { min, max })
-            .collect(),
-        kd_root,
-        kd_nodes,
-        kd_axes,
-    };
-    (file, field_summaries)
-}
-
-/// Brick supports (first centre − w .. first centre + dims·w), with coordinates that agree
-/// up to rounding across lattices snapped to one value, so that no sliver regions appear.
-fn snapped_supports(sets: &[CellSet], bricks: &[BrickBox], finest: f64) -> Vec<Aabb> {
-    let raw: Vec<Aabb> = bricks
-        .iter()
-        .map(|b| {
-            let s = &sets[b.set];
-            let lo = [0, 1, 2].map(|a| b.lo[a] as i64 - 1);
-            let hi = [0, 1, 2].map(|a| b.lo[a] as i64 + b.dims[a] as i64);
-            Aabb {
-                min: s.transform.index_to_world(lo.map(|c| c as f64)),
-                max: s.transform.index_to_world(hi.map(|c| c as f64)),
-            }
-        })
-        .collect();
-    let tol = 1e-7 * finest;
-    let mut canon: [Vec<f64>; 3] = Default::default();
-    for (a, c) in canon.iter_mut().enumerate() {
-        c.extend(raw.iter().flat_map(|b| [b.min[a], b.max[a]]));
-        c.sort_by(f64::total_cmp);
-        // Keep the first value of every run of values closer than `tol` to their neighbour.
-        let mut out: Vec<f64> = Vec::with_capacity(c.len());
-        let mut last = f64::NEG_INFINITY;
-        for &x in c.iter() {
-            if x - last > tol {
-                out.push(x);
-            }
-            last = x;
-        }
-        *c = out;
-    }
-    let snap = |a: usize, x: f64| -> f64 {
-        let c = &canon[a];
-        let i = c.partition_point(|&v| v <= x);
-        if i == 0 {
-            x
-        } else {
-            c[i - 1]
-        }
-    };
-    raw.iter()
-        .map(|b| Aabb {
-            min: [0, 1, 2].map(|a| snap(a, b.min[a])),
-            max: [0, 1, 2].map(|a| snap(a, b.max[a])),
-        })
-        .collect()
 }
 
 /// Replaces the non-finite values of `vals` (±∞ → ±`f32::MAX`, NaN → 0), so that every

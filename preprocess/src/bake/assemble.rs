@@ -1,0 +1,135 @@
+//! Assembly stage: the [`BrickFile`] a bake writes (fields with their ranges and
+//! histograms, levels, bricks with snapped supports, regions, KD-tree, provenance), and
+//! the bound on its size that the format's 32-bit offsets set, checked before it is built.
+
+use format::{Aabb, Brick, BrickFile, Field, Level, Provenance, Region, SourceGrid, ValueRange};
+
+use crate::fields::{range_and_histogram, HISTOGRAM_BINS};
+
+use super::derived::FieldValues;
+use super::{BakeError, BakeOptions, Bricks, FieldSummary, Kd};
+
+/// Bytes of the archive of a bake, from the sizes of its arrays (each element as the
+/// schema archives it) and 1 MiB for the rest (names, provenance, alignment).
+pub(super) fn archive_bytes(bricks: &Bricks, fields: &FieldValues, kd: &Kd) -> u64 {
+    let n = |len: usize, bytes: u64| (len as u64).saturating_mul(bytes);
+    let values: u64 = fields.values.iter().map(|v| n(v.len(), 4)).sum();
+    let histograms = n(fields.values.len(), 8 * HISTOGRAM_BINS as u64);
+    let region_bricks: u64 = kd.regions.iter().map(|(_, ids)| n(ids.len(), 4)).sum();
+    values
+        .saturating_add(histograms)
+        .saturating_add(n(bricks.boxes.len(), 64))
+        .saturating_add(n(kd.regions.len(), 8))
+        .saturating_add(region_bricks)
+        .saturating_add(n(kd.ranges.len(), 8))
+        .saturating_add(n(kd.tree.1.len(), 16 + 1))
+        .saturating_add(1 << 20)
+}
+
+/// Refuses an archive of `bytes` that the format cannot address.
+pub(super) fn check_archive(leaf_cells: u64, fields: u64, bytes: u64) -> Result<(), BakeError> {
+    if bytes > format::MAX_ARCHIVE_BYTES {
+        return Err(BakeError::TooLargeForFormat {
+            leaf_cells,
+            fields,
+            bytes,
+        });
+    }
+    Ok(())
+}
+
+/// Assembly stage: the [`BrickFile`] (fields with their ranges and histograms, levels,
+/// bricks, regions, KD-tree, provenance) ready to be written, and
+/// the field ranges for the summary.
+pub(super) fn assemble(
+    opts: &BakeOptions,
+    source_grids: Vec<SourceGrid>,
+    level_widths: &[f64],
+    bricks: &Bricks,
+    fields: FieldValues,
+    kd: Kd,
+    bounds: Option<Aabb>,
+) -> (BrickFile, Vec<FieldSummary>) {
+    let mut file_fields = Vec::with_capacity(fields.names.len());
+    let mut field_summaries = Vec::with_capacity(fields.names.len());
+    for (name, vals) in fields.names.into_iter().zip(fields.values) {
+        let (min, max, histogram) = range_and_histogram(&vals);
+        field_summaries.push(FieldSummary {
+            name: name.clone(),
+            min,
+            max,
+        });
+        file_fields.push(Field {
+            name,
+            min,
+            max,
+            histogram,
+            values: vals,
+        });
+    }
+    let mut file_levels: Vec<Level> = level_widths
+        .iter()
+        .map(|&w| Level {
+            cell_width: w,
+            cells: 0,
+            bricks: 0,
+        })
+        .collect();
+    for b in &bricks.boxes {
+        let l = &mut file_levels[b.level as usize];
+        l.cells += b.cells();
+        l.bricks += 1;
+    }
+    let file_bricks: Vec<Brick> = bricks
+        .boxes
+        .iter()
+        .zip(&bricks.origins)
+        .zip(&bricks.first)
+        .zip(&bricks.widths)
+        .map(|(((b, o), f), &w)| Brick {
+            level: b.level,
+            origin: *o,
+            cell_width: w,
+            inv_cell_width: 1.0 / w,
+            dims: b.dims,
+            first_value: *f,
+        })
+        .collect();
+    let mut region_bricks = Vec::new();
+    let mut file_regions = Vec::with_capacity(kd.regions.len());
+    for (_, ids) in &kd.regions {
+        file_regions.push(Region {
+            bricks_start: region_bricks.len() as u32,
+            bricks_len: ids.len() as u32,
+        });
+        region_bricks.extend_from_slice(ids);
+    }
+    let bounds = bounds.unwrap_or(Aabb {
+        min: [0.0; 3],
+        max: [0.0; 3],
+    });
+    let (kd_root, kd_nodes, kd_axes) = kd.tree;
+    let file = BrickFile {
+        provenance: Provenance {
+            source: opts.source.clone(),
+            grids: source_grids,
+            bake_options: serde_json::to_string(opts).unwrap_or_default(),
+            tool_version: env!("CARGO_PKG_VERSION").to_string(),
+        },
+        bounds,
+        levels: file_levels,
+        fields: file_fields,
+        bricks: file_bricks,
+        regions: file_regions,
+        region_bricks,
+        region_ranges: kd
+            .ranges
+            .into_iter()
+            .map(|[min, max]| ValueRange { min, max })
+            .collect(),
+        kd_root,
+        kd_nodes,
+        kd_axes,
+    };
+    (file, field_summaries)
+}
