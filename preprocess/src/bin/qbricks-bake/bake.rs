@@ -13,7 +13,6 @@ use indicatif::{ProgressBar, ProgressStyle};
 use qbricks_preprocess::bake::{bake_with_progress, BakeOptions, BakeSummary, DEFAULT_MAX_BRICK};
 use qbricks_preprocess::sequence::FramePattern;
 
-use crate::sequence;
 use qbricks_preprocess::derive::Stencil;
 use qbricks_preprocess::fields::FieldKind;
 use qbricks_preprocess::inputs::{read_inputs, Layout, ReadError, ReadOptions};
@@ -86,9 +85,24 @@ pub struct Args {
     pub progress: bool,
 }
 
-pub fn run(args: Args) -> anyhow::Result<()> {
+/// What the arguments ask for, checked once: the read and bake options and the output, for
+/// one file or for every frame of a sequence.
+pub struct Plan {
+    pub start: Instant,
+    pub output: PathBuf,
+    pub read: ReadOptions,
+    pub opts: BakeOptions,
+}
+
+/// The input's frame pattern when it names a sequence (a placeholder, and no file of that
+/// very name: a file with `#` in its name is one file).
+pub fn frame_pattern(args: &Args) -> anyhow::Result<Option<FramePattern>> {
+    Ok(FramePattern::parse(&args.input)?.filter(|_| !args.input.exists()))
+}
+
+/// Checks the arguments and builds the options every bake of this run uses.
+pub fn plan(args: &Args) -> anyhow::Result<Plan> {
     let start = Instant::now();
-    let input_name = args.input.display().to_string();
     let output = args
         .output
         .clone()
@@ -133,12 +147,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         strict: args.strict,
         ..BakeOptions::default()
     };
-    if let Some(pattern) = FramePattern::parse(&args.input)? {
-        if !args.input.exists() {
-            return sequence::run(&args, pattern, &opts, &read, start);
-        }
-    }
+    Ok(Plan {
+        start,
+        output,
+        read,
+        opts,
+    })
+}
 
+/// Bakes one file.
+pub fn run(args: Args, plan: Plan) -> anyhow::Result<()> {
+    let Plan {
+        start,
+        output,
+        read,
+        opts,
+    } = plan;
+    let input_name = args.input.display().to_string();
     let mut guard = files::guard::Guard::new();
     guard.input("input file", &args.input).output(
         if args.output.is_some() {

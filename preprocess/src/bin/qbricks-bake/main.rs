@@ -51,7 +51,13 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Inspect(args) => inspect::run(args),
-        Command::Bake(args) => bake::run(args),
+        // One file, or every frame of a sequence (which bakes each as one file).
+        Command::Bake(args) => {
+            bake::plan(&args).and_then(|plan| match bake::frame_pattern(&args)? {
+                Some(pattern) => sequence::run(&args, pattern, &plan.opts, &plan.read, plan.start),
+                None => bake::run(args, plan),
+            })
+        }
         Command::Synth(_) => return moved("qbricks-bake", "synth"),
         Command::Accuracy(_) => return moved("qbricks-bake", "accuracy"),
     };

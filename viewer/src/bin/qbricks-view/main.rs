@@ -60,7 +60,11 @@ fn main() -> ExitCode {
         None => window::run(cli.window),
         Some(Command::Open(args)) => window::run(args),
         Some(Command::Info(args)) => info::run(args),
-        Some(Command::Render(args)) => render::run(*args),
+        // One file, or every frame of a sequence (each rendered as one file is).
+        Some(Command::Render(args)) => render::target(&args).and_then(|t| match t {
+            render::Target::File(path) => render::run(*args, path),
+            render::Target::Sequence(path, pattern) => render_sequence::run(&args, &path, pattern),
+        }),
         Some(Command::Probe(args)) => probe::run(args),
         Some(Command::Bench(_)) => return moved("qbricks-view", "bench"),
     };

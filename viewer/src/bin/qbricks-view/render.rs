@@ -96,16 +96,29 @@ pub fn open_volume(path: &Path, checksum: bool) -> anyhow::Result<format::BrickF
     format::BrickFileView::open_with(path, &options).map_err(anyhow::Error::from)
 }
 
-pub fn run(args: Args) -> anyhow::Result<()> {
+/// What `render` is given: the file (the bundled sample by default), or a sequence's frame
+/// pattern; the counts checked against the shared bounds first.
+pub enum Target {
+    File(PathBuf),
+    Sequence(PathBuf, FramePattern),
+}
+
+/// Resolves the file argument and checks the counts, once for a file or a sequence.
+pub fn target(args: &Args) -> anyhow::Result<Target> {
     let path = resolve_file(args.file.clone())?;
     files::limits::repeat(args.repeat)?;
     files::limits::threads(args.threads)?;
     // A path that exists is one file, even with `#` in its name (as in `qbricks-bake`).
     if !path.exists() {
         if let Some(pattern) = FramePattern::parse(&path)? {
-            return crate::render_sequence::run(&args, &path, pattern);
+            return Ok(Target::Sequence(path, pattern));
         }
     }
+    Ok(Target::File(path))
+}
+
+/// Renders one file.
+pub fn run(args: Args, path: PathBuf) -> anyhow::Result<()> {
     if args.frames.is_some() {
         bail!(
             "{}: --frames needs a frame sequence ('frame_####.qbk' or 'frame_%04d.qbk')",
