@@ -1,7 +1,7 @@
 //! Issue 26, "framing": the default camera must frame the structure of any layout, not only
 //! the bundled sample's nested grids (`viewer/tests/render/defaults.rs`). Here a frame of
 //! the bundled cache baked with `qbricks-bake` (one 32³ level), a single-grid file from
-//! `qbricks-bake synth wake-single --n0 48`, and the whole cache as a sequence, whose one
+//! `qbricks-lab synth wake-single --n0 48`, and the whole cache as a sequence, whose one
 //! camera frames the union of the frames' surfaces: rendered bare (`--overlays none`), the
 //! structure's bounding box in the picture covers ≥ 60 % of the width or height, is
 //! centred within 15 % and is not cut at the edges. Measured at 800×600: the cache frame
@@ -89,7 +89,7 @@ fn a_cache_frame_and_a_single_grid_are_framed_centred() {
         d,
     );
     run(
-        "qbricks-bake",
+        "qbricks-lab",
         &["synth", "wake-single", "--n0", "48", "-o", "single.vdb"],
         d,
     );
