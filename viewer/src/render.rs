@@ -118,6 +118,9 @@ pub(crate) fn render_tiles(
     // The view's trees are built here, the active tree's masks on all the pool's
     // threads, before the tiles' rays walk them (a no-op once a frame of the view has).
     scene.accel.prepare(scene.vol, scene.params.tf.mode);
+    for s in &scene.more_surfaces {
+        s.accel.prepare(scene.vol, scene.params.tf.mode);
+    }
     tiles.par_iter().all(|&tile| {
         if cancel.is_cancelled() {
             return false;
@@ -391,6 +394,10 @@ pub fn render_aov(scene: &Scene, aov: Aov) -> Frame {
         rays: scene.rays,
         shading: scene.shading,
         accel: Arc::clone(&scene.accel),
+        // The buffers are of the first surface, where the clip planes leave it.
+        more_surfaces: Vec::new(),
+        first_style: scene.first_style,
+        cuts: scene.cuts.clone(),
     };
     if iso_scene.params.tf.mode == Mode::Dvr {
         iso_scene.params.tf.mode = Mode::Iso;
