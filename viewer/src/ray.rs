@@ -184,7 +184,9 @@ impl<'s> RayCaster<'s> {
             scene.meshes.intersect(ray, t_lo, t_hi)
         };
         let t_max = mesh_hit.map_or(t_hi, |h| h.t);
-        self.first.t = t_max as f32;
+        // Where no surface is met, the depth is the mesh's, or infinite (not the end of
+        // the clipped interval: nothing is there).
+        self.first.t = mesh_hit.map_or(f32::INFINITY, |h| h.t as f32);
         let behind = |w: &mut Self| match mesh_hit {
             Some(h) => w.shade_mesh(ray, &h),
             None => bg,
@@ -201,6 +203,7 @@ impl<'s> RayCaster<'s> {
             Mode::Iso => match self.surface_of(0, ray, t_lo, t_max, jit) {
                 Some(s) => {
                     self.hits += 1;
+                    self.log_hit(&s, 0);
                     self.first = self.first_at(ray, &s);
                     self.shade_surface(ray, &s, None)
                 }
@@ -215,6 +218,18 @@ impl<'s> RayCaster<'s> {
                 acc.over(back)
             }
         }
+    }
+
+    /// Logs (`--pixel`) that surface `i` is drawn at `s`; the surface is named when the
+    /// view has several.
+    fn log_hit(&mut self, s: &SurfacePoint, i: usize) {
+        let several = !self.scene.more_surfaces.is_empty();
+        self.main.record(Event::Hit {
+            t: s.t.unwrap_or(f64::NAN),
+            value: s.eval.map(|e| e.value),
+            normal: Some(s.normal.to_array()),
+            surface: several.then_some(i as u32),
+        });
     }
 
     /// What [`FirstSurface`] records of an iso-surface point.
@@ -280,6 +295,7 @@ impl<'s> RayCaster<'s> {
                         self.first = self.first_at(ray, &s);
                         first = false;
                     }
+                    self.log_hit(&s, i);
                     let style = self.style(i);
                     let c = self.shade_surface(ray, &s, style.colour);
                     acc.add(c, style.opacity);
@@ -475,14 +491,19 @@ impl<'s> RayCaster<'s> {
             t
         };
         let hit = tracer.iso(o, ray.dir.to_array(), t0, t1, jit);
-        let events = if i == 0 { None } else { tracer.log.take() };
-        if let Some(mut events) = events {
-            if let Some(Event::Hit { surface, .. }) = events.last_mut() {
-                *surface = Some(i as u32);
+        // The tracer logged its walk and the hit it found; the hit is logged again when
+        // it is drawn ([`RayCaster::log_hit`]), since a crossing found behind an opaque
+        // one is never drawn.
+        let mut events = tracer.log.take();
+        if hit.is_some() {
+            if let Some(Event::Hit { .. }) = events.as_ref().and_then(|e| e.last()) {
+                events.as_mut().map(Vec::pop);
             }
-            if let Some(log) = self.main.log.as_mut() {
-                log.extend(events);
-            }
+        }
+        if i == 0 {
+            self.main.log = events;
+        } else if let (Some(events), Some(log)) = (events, self.main.log.as_mut()) {
+            log.extend(events);
         }
         let hit = hit?;
         let eval = hit.eval;
@@ -494,11 +515,6 @@ impl<'s> RayCaster<'s> {
             Shading::Analytic => e.grad,
         };
         let normal = facing(gradient, ray.dir);
-        if let Some(Event::Hit { normal: n, .. }) =
-            self.main.log.as_mut().and_then(|l| l.last_mut())
-        {
-            *n = Some(normal.to_array());
-        }
         Some(SurfacePoint {
             world: DVec3::from_array(vol.to_world(hit.p)),
             local: hit.p,

@@ -666,4 +666,103 @@ mod tests {
             assert!(e.contains(bad[0]) && e.contains("expected"), "{e}");
         }
     }
+
+    /// Issue 27: the cutting flags build the surfaces and planes, round-trip through the
+    /// state's JSON, and refuse what is out of bounds naming the flag.
+    #[test]
+    fn surfaces_and_planes_from_flags() {
+        #[derive(clap::Parser)]
+        struct Cli {
+            #[command(flatten)]
+            view: Overrides,
+        }
+        use clap::Parser;
+        let fields = crate::view_state::tests::fields();
+        let run = |args: &[&str]| {
+            let cli = Cli::try_parse_from(std::iter::once("x").chain(args.iter().copied()))
+                .map_err(|e| e.to_string())?;
+            let mut s = ViewState::default_for([0.0; 3], [1.0; 3], &fields);
+            cli.view.apply(&mut s, false).map_err(|e| e.to_string())?;
+            s.validate().map_err(|e| e.to_string())?;
+            Ok::<_, String>(s)
+        };
+        let s = run(&[
+            "--iso",
+            "0.1,0.02,-0.5",
+            "--iso-opacity",
+            "1,0.3",
+            "--iso-colour",
+            "map,#ff8000",
+            "--clip",
+            "x>1.5",
+            "--clip",
+            "0,0,0:0,0,-2",
+            "--slice",
+            "z>0",
+            "--slice",
+            "1,2,3:1,1,0",
+            "--slice-opacity",
+            "0.5",
+            "--slice-contours",
+            "--slice-clip",
+        ])
+        .expect("valid");
+        assert_eq!(s.iso, 0.1);
+        assert!(
+            (s.transfer.sigma - 0.008).abs() < 1e-12,
+            "the band follows --iso"
+        );
+        let surfaces = s.surfaces();
+        assert_eq!(surfaces.len(), 3);
+        assert_eq!(
+            surfaces
+                .iter()
+                .map(|s| (s.value, s.opacity))
+                .collect::<Vec<_>>(),
+            [(0.1, 1.0), (0.02, 0.3), (-0.5, 1.0)]
+        );
+        assert_eq!(surfaces[0].colour, None);
+        assert_eq!(surfaces[1].colour, Some([1.0, 128.0 / 255.0, 0.0]));
+        assert_eq!(s.clip.len(), 2);
+        assert_eq!(s.clip[1].unit_normal(), [0.0, 0.0, -1.0]);
+        assert_eq!(s.slices.len(), 2);
+        assert!(s
+            .slices
+            .iter()
+            .all(|l| l.opacity == 0.5 && l.contours && l.clip));
+        // The state file holds all of it and reads back the same.
+        let back =
+            ViewState::from_json(std::path::Path::new("s.json"), &s.to_json()).expect("round trip");
+        assert_eq!(back, s);
+        // A state without any of it writes none of the new keys (files stay as they were).
+        let plain = run(&[]).expect("plain");
+        let json = plain.to_json();
+        for key in ["iso_opacity", "iso_colour", "more_isos", "clip", "slices"] {
+            assert!(!json.contains(&format!("\"{key}\"")), "{key} in {json}");
+        }
+        // --iso-opacity alone styles the state's surfaces.
+        let o = run(&["--iso-opacity", "0.5"]).expect("opacity");
+        assert_eq!((o.iso, o.iso_opacity), (plain.iso, 0.5));
+        let seven_clips: Vec<&str> = ["--clip", "x>0"].repeat(7);
+        for (bad, want) in [
+            (&["--iso", "1,2,3,4,5,6,7,8,9"][..], "--iso"),
+            (&["--iso", "1,nan"], "--iso"),
+            (
+                &["--iso", "1", "--iso-opacity", "1,1"],
+                "--iso-opacity: expected at most 1",
+            ),
+            (&["--iso-opacity", "0"], "--iso-opacity"),
+            (&["--iso-colour", "red"], "--iso-colour"),
+            (&["--clip", "w>1"], "--clip"),
+            (&["--slice", "0,0,0:0,0,0"], "--slice"),
+            (
+                &["--slice", "z>0", "--slice-opacity", "1.5"],
+                "--slice-opacity",
+            ),
+            (&seven_clips, "--clip: expected at most 6"),
+        ] {
+            let e = run(bad).expect_err("refused");
+            assert!(e.contains(want), "{bad:?}: {e}");
+        }
+    }
 }

@@ -394,4 +394,77 @@ mod tests {
         let e = ViewState::load(Path::new("/nonexistent/v.json")).expect_err("missing");
         assert!(e.to_string().contains("/nonexistent/v.json"), "{e}");
     }
+
+    /// Issue 27: surfaces and planes a state file may hold but the renderer cannot use
+    /// are refused, named by their JSON path.
+    #[test]
+    fn bad_surfaces_and_planes_are_named() {
+        use crate::planes::{Plane, Slice};
+        use crate::view_state::IsoSurface;
+        let base = ViewState::default_for([0.0; 3], [1.0; 3], &super::super::tests::fields());
+        let plane = Plane {
+            origin: [0.0; 3],
+            normal: [0.0, 0.0, 1.0],
+        };
+        let surface = IsoSurface {
+            value: 0.1,
+            opacity: 0.5,
+            colour: None,
+        };
+        let cases: Vec<(Box<dyn Fn(&mut ViewState)>, &str)> = vec![
+            (Box::new(|s| s.iso_opacity = 0.0), "iso_opacity"),
+            (
+                Box::new(|s| s.iso_colour = Some([2.0, 0.0, 0.0])),
+                "iso_colour",
+            ),
+            (
+                Box::new(move |s| s.more_isos = vec![surface; 8]),
+                "more_isos: expected at most 7",
+            ),
+            (
+                Box::new(move |s| {
+                    s.more_isos = vec![IsoSurface {
+                        value: f64::NAN,
+                        ..surface
+                    }]
+                }),
+                "more_isos[0].value",
+            ),
+            (
+                Box::new(move |s| s.clip = vec![plane; 7]),
+                "clip: expected at most 6",
+            ),
+            (
+                Box::new(move |s| {
+                    s.clip = vec![
+                        plane,
+                        Plane {
+                            normal: [0.0; 3],
+                            ..plane
+                        },
+                    ]
+                }),
+                "clip[1]: the normal",
+            ),
+            (
+                Box::new(move |s| s.slices = vec![Slice::new(plane); 4]),
+                "slices: expected at most 3",
+            ),
+            (
+                Box::new(move |s| {
+                    s.slices = vec![Slice {
+                        opacity: 0.0,
+                        ..Slice::new(plane)
+                    }]
+                }),
+                "slices[0].opacity",
+            ),
+        ];
+        for (change, want) in cases {
+            let mut s = base.clone();
+            change(&mut s);
+            let e = s.validate().expect_err(want).to_string();
+            assert!(e.starts_with(want), "{want}: {e}");
+        }
+    }
 }
