@@ -411,7 +411,8 @@ mod tests {
             opacity: 0.5,
             colour: None,
         };
-        let cases: Vec<(Box<dyn Fn(&mut ViewState)>, &str)> = vec![
+        type Change = Box<dyn Fn(&mut ViewState)>;
+        let cases: Vec<(Change, &str)> = vec![
             (Box::new(|s| s.iso_opacity = 0.0), "iso_opacity"),
             (
                 Box::new(|s| s.iso_colour = Some([2.0, 0.0, 0.0])),
