@@ -75,7 +75,7 @@ fn measure_shading_normals_on_the_wake() {
     let flow = lab::analytic::scene("wake").expect("wake flow");
     let mut st = ViewState::default_for_volume(vol);
     Overrides {
-        iso: Some(0.05),
+        iso: Some(0.05.into()),
         eye: Some("0.5,2.2,3.6".into()),
         look_at: Some("2.2,0,0".into()),
         width: Some(512),

@@ -43,6 +43,16 @@ impl Accum {
         self.transmittance *= 1.0 - alpha;
     }
 
+    /// Puts what `behind` gathered (along a later stretch of the same ray) behind what is
+    /// here.
+    #[inline]
+    pub(crate) fn then(&mut self, behind: &Accum) {
+        for a in 0..3 {
+            self.rgb[a] += self.transmittance * behind.rgb[a];
+        }
+        self.transmittance *= behind.transmittance;
+    }
+
     /// Opacity reached; nothing behind can show.
     #[inline]
     pub(crate) fn done(&self) -> bool {

@@ -10,6 +10,7 @@
 use glam::{DVec3, Vec3};
 
 use crate::camera::Ray;
+use crate::integrate::Accum;
 use crate::mesh::MeshHit;
 use crate::reconstruct::Eval;
 use crate::sampling::{Event, Stats, Strategy, Tracer};
@@ -44,6 +45,22 @@ pub struct SurfacePoint {
     pub normal: DVec3,
     /// Reconstruction at the point (`None` only where the weights vanish).
     pub eval: Option<Eval>,
+    /// Distance along the ray (`None`: measure it from `world`).
+    pub t: Option<f64>,
+}
+
+/// Contour lines on slices, for surfaces coloured by the colour map: dark, so they show
+/// on every palette's light end and as an edge on its dark end.
+const CONTOUR_COLOUR: [f64; 3] = [0.02, 0.02, 0.02];
+
+/// Step of shadow rays: they only need the occlusion, sampled a little coarser (exact
+/// finds roots, whatever the step).
+fn shadow_params_step(p: crate::sampling::Params) -> f64 {
+    if p.strategy == Strategy::Exact {
+        p.step
+    } else {
+        p.step.max(1.0)
+    }
 }
 
 /// Per-thread ray casting state: the tracers (with their reusable stacks) and counters.
@@ -51,6 +68,9 @@ pub struct RayCaster<'s> {
     scene: &'s Scene<'s>,
     pub(crate) main: Tracer<'s>,
     shadow: Tracer<'s>,
+    /// Camera and shadow tracers of the iso-surfaces beyond the first
+    /// ([`Scene::more_surfaces`]), in their order.
+    more: Vec<(Tracer<'s>, Tracer<'s>)>,
     /// Rays that hit the iso-surface (iso) or gathered opacity ≥ 0.01 (dvr).
     pub hits: u64,
     pub rays: u64,
@@ -78,14 +98,24 @@ impl FirstSurface {
 impl<'s> RayCaster<'s> {
     pub fn new(scene: &'s Scene<'s>) -> Self {
         let mut shadow_params = scene.params;
-        if shadow_params.strategy != Strategy::Exact {
-            // Shadow rays only need the occlusion, sampled a little coarser.
-            shadow_params.step = shadow_params.step.max(1.0);
-        }
+        shadow_params.step = shadow_params_step(scene.params);
+        let more = scene
+            .more_surfaces
+            .iter()
+            .map(|s| {
+                let mut shadow_params = s.params;
+                shadow_params.step = shadow_params_step(s.params);
+                (
+                    Tracer::new(scene.vol, &s.accel, s.params),
+                    Tracer::new(scene.vol, &s.accel, shadow_params),
+                )
+            })
+            .collect();
         RayCaster {
             scene,
             main: Tracer::new(scene.vol, &scene.accel, scene.params),
             shadow: Tracer::new(scene.vol, &scene.accel, shadow_params),
+            more,
             hits: 0,
             rays: 0,
             first: FirstSurface::NONE,
@@ -96,6 +126,10 @@ impl<'s> RayCaster<'s> {
     pub(crate) fn stats(&self) -> Stats {
         let mut s = self.main.stats;
         s += self.shadow.stats;
+        for (m, sh) in &self.more {
+            s += m.stats;
+            s += sh.stats;
+        }
         s
     }
 
@@ -125,44 +159,58 @@ impl<'s> RayCaster<'s> {
         let st = scene.state;
         let vol = scene.vol;
         self.rays += 1;
+        self.first = FirstSurface::NONE;
         let o = vol.to_local(ray.origin.to_array());
         let d = ray.dir.to_array();
+        let bg = st.background.map(f64::from);
+        // The clip planes cut the ray's interval before anything is walked, so what lies
+        // behind a plane is seen and empty-space skipping works as without planes.
+        let (t_lo, t_hi) = if scene.cuts.clips.is_empty() {
+            (0.0, f64::INFINITY)
+        } else {
+            let kept = scene.cuts.interval(&o, &d, 0.0, f64::INFINITY);
+            self.main.record(Event::Clip {
+                t0: kept.map_or(f64::INFINITY, |k| k.0),
+                t1: kept.map_or(f64::INFINITY, |k| k.1),
+            });
+            match kept {
+                Some(k) => k,
+                None => return bg,
+            }
+        };
         let mesh_hit = if scene.meshes.is_empty() {
             None
         } else {
-            scene.meshes.intersect(ray, 0.0, f64::INFINITY)
+            scene.meshes.intersect(ray, t_lo, t_hi)
         };
-        let t_max = mesh_hit.map_or(f64::INFINITY, |h| h.t);
-        self.first = FirstSurface {
-            t: t_max as f32,
-            value: f32::NAN,
-        };
-        let bg = st.background.map(f64::from);
+        let t_max = mesh_hit.map_or(t_hi, |h| h.t);
+        // Where no surface is met, the depth is the mesh's, or infinite (not the end of
+        // the clipped interval: nothing is there).
+        self.first.t = mesh_hit.map_or(f32::INFINITY, |h| h.t as f32);
         let behind = |w: &mut Self| match mesh_hit {
             Some(h) => w.shade_mesh(ray, &h),
             None => bg,
         };
+        if !scene.is_single_opaque() {
+            let (acc, _) = match scene.params.tf.mode {
+                Mode::Iso => self.composite_iso(ray, t_lo, t_max, jit),
+                Mode::Dvr => self.composite_dvr(ray, t_lo, t_max, jit),
+            };
+            let back = if acc.done() { [0.0; 3] } else { behind(self) };
+            return acc.over(back);
+        }
         match scene.params.tf.mode {
-            Mode::Iso => match self.surface_within(ray, t_max, jit) {
+            Mode::Iso => match self.surface_of(0, ray, t_lo, t_max, jit) {
                 Some(s) => {
                     self.hits += 1;
-                    self.first = FirstSurface {
-                        t: (s.world - ray.origin).dot(ray.dir) as f32,
-                        value: match (scene.params.colour_field, s.eval) {
-                            (Some(_), Some(e)) => e.colour as f32,
-                            _ => f32::NAN,
-                        },
-                    };
-                    self.shade_surface(ray, &s)
+                    self.log_hit(&s, 0);
+                    self.first = self.first_at(ray, &s);
+                    self.shade_surface(ray, &s, None)
                 }
                 None => behind(self),
             },
             Mode::Dvr => {
-                let shadows = st.shadows;
-                let (main, shadow) = (&mut self.main, &mut self.shadow);
-                let acc = main.dvr(o, d, 0.0, t_max, jit, &mut |p, e| {
-                    shade_sample(scene, shadow, shadows, ray, p, e)
-                });
+                let acc = self.dvr_between(ray, t_lo, t_max, jit);
                 if acc.alpha() >= 0.01 {
                     self.hits += 1;
                 }
@@ -172,35 +220,307 @@ impl<'s> RayCaster<'s> {
         }
     }
 
-    /// The iso-surface point along `ray` (iso mode, the view's strategy), with its
-    /// shading normal.
-    pub fn surface(&mut self, ray: &Ray, jit: f64) -> Option<SurfacePoint> {
-        self.surface_within(ray, f64::INFINITY, jit)
+    /// Logs (`--pixel`) that surface `i` is drawn at `s`; the surface is named when the
+    /// view has several.
+    fn log_hit(&mut self, s: &SurfacePoint, i: usize) {
+        let several = !self.scene.more_surfaces.is_empty();
+        self.main.record(Event::Hit {
+            t: s.t.unwrap_or(f64::NAN),
+            value: s.eval.map(|e| e.value),
+            normal: Some(s.normal.to_array()),
+            surface: several.then_some(i as u32),
+        });
     }
 
-    fn surface_within(&mut self, ray: &Ray, t_max: f64, jit: f64) -> Option<SurfacePoint> {
+    /// What [`FirstSurface`] records of an iso-surface point.
+    fn first_at(&self, ray: &Ray, s: &SurfacePoint) -> FirstSurface {
+        FirstSurface {
+            t: (s.world - ray.origin).dot(ray.dir) as f32,
+            value: match (self.scene.params.colour_field, s.eval) {
+                (Some(_), Some(e)) => e.colour as f32,
+                _ => f32::NAN,
+            },
+        }
+    }
+
+    /// Dvr along `ray` for `t ∈ [t0, t1]`, composited front to back.
+    fn dvr_between(&mut self, ray: &Ray, t0: f64, t1: f64, jit: f64) -> Accum {
+        let scene = self.scene;
+        let o = scene.vol.to_local(ray.origin.to_array());
+        let d = ray.dir.to_array();
+        let shadows = scene.state.shadows;
+        let (main, shadow, more) = (&mut self.main, &mut self.shadow, &mut self.more);
+        main.dvr(o, d, t0, t1, jit, &mut |p, e| {
+            shade_sample(scene, shadow, more, shadows, ray, p, e)
+        })
+    }
+
+    /// Iso mode with several surfaces, translucent ones or slices: every iso-surface
+    /// crossing and slice along `[t0, t1]`, composited in ray order until the ray is
+    /// opaque. Returns the colour so far and whether any iso-surface was met.
+    fn composite_iso(&mut self, ray: &Ray, t0: f64, t1: f64, jit: f64) -> (Accum, bool) {
+        let scene = self.scene;
+        let n = 1 + scene.more_surfaces.len();
+        let mut acc = Accum::default();
+        // The next crossing of each surface. An opaque one ends the ray, so the surfaces
+        // after it are only searched up to it.
+        let mut next: [Option<SurfacePoint>; crate::view_state::MAX_ISO_SURFACES] =
+            [None; crate::view_state::MAX_ISO_SURFACES];
+        let mut bound = t1;
+        for (i, slot) in next.iter_mut().enumerate().take(n) {
+            *slot = self.surface_of(i, ray, t0, bound, jit);
+            if let Some(s) = slot {
+                if self.style(i).opacity >= 1.0 {
+                    bound = bound.min(self.t_of(ray, s));
+                }
+            }
+        }
+        let mut slices = self.slice_crossings(ray, t0, t1);
+        let mut hit = false;
+        let mut first = true;
+        // A crossing is searched again just past the last one: a hundred-thousandth of
+        // the finest cell, far below any other crossing's distance at float precision.
+        let eps = 1e-5 * scene.vol.finest_w;
+        loop {
+            let surface = (0..n)
+                .filter_map(|i| next[i].map(|s| (self.t_of(ray, &s), i)))
+                .min_by(|a, b| a.0.total_cmp(&b.0));
+            let slice = slices.first().copied();
+            match (surface, slice) {
+                (None, None) => break,
+                (Some((t, i)), sl) if sl.is_none_or(|(ts, _)| t <= ts) => {
+                    let Some(s) = next[i].take() else { break };
+                    hit = true;
+                    if first {
+                        self.first = self.first_at(ray, &s);
+                        first = false;
+                    }
+                    self.log_hit(&s, i);
+                    let style = self.style(i);
+                    let c = self.shade_surface(ray, &s, style.colour);
+                    acc.add(c, style.opacity);
+                    if acc.done() {
+                        break;
+                    }
+                    next[i] = self.surface_of(i, ray, t + eps, bound, jit);
+                }
+                (_, Some((ts, j))) => {
+                    slices.remove(0);
+                    if let Some((c, value)) = self.slice_colour(ray, ts, j) {
+                        if first {
+                            self.first = FirstSurface {
+                                t: ts as f32,
+                                value: value as f32,
+                            };
+                            first = false;
+                        }
+                        acc.add(c, scene.cuts.slices[j].opacity);
+                        if acc.done() {
+                            break;
+                        }
+                    }
+                }
+                (Some(_), None) => unreachable!("handled by the first arm"),
+            }
+        }
+        if hit {
+            self.hits += 1;
+        }
+        (acc, hit)
+    }
+
+    /// Dvr with slices: the band composited piece by piece between the slices.
+    fn composite_dvr(&mut self, ray: &Ray, t0: f64, t1: f64, jit: f64) -> (Accum, bool) {
+        let scene = self.scene;
+        let mut acc = Accum::default();
+        let mut from = t0;
+        for (ts, j) in self.slice_crossings(ray, t0, t1) {
+            acc.then(&self.dvr_between(ray, from, ts, jit));
+            from = ts;
+            if acc.done() {
+                break;
+            }
+            if let Some((c, value)) = self.slice_colour(ray, ts, j) {
+                if self.first.value.is_nan() && self.first.t >= ts as f32 {
+                    self.first = FirstSurface {
+                        t: ts as f32,
+                        value: value as f32,
+                    };
+                }
+                acc.add(c, scene.cuts.slices[j].opacity);
+                if acc.done() {
+                    break;
+                }
+            }
+        }
+        if !acc.done() {
+            acc.then(&self.dvr_between(ray, from, t1, jit));
+        }
+        let hit = acc.alpha() >= 0.01;
+        if hit {
+            self.hits += 1;
+        }
+        (acc, hit)
+    }
+
+    /// Where `ray` meets the view's slices within `(t0, t1)`, nearest first.
+    fn slice_crossings(&self, ray: &Ray, t0: f64, t1: f64) -> Vec<(f64, usize)> {
         let vol = self.scene.vol;
         let o = vol.to_local(ray.origin.to_array());
-        let hit = self.main.iso(o, ray.dir.to_array(), 0.0, t_max, jit)?;
+        let d = ray.dir.to_array();
+        let mut v: Vec<(f64, usize)> = self
+            .scene
+            .cuts
+            .slices
+            .iter()
+            .enumerate()
+            .filter_map(|(j, s)| {
+                let t = s.plane.crossing(&o, &d)?;
+                // A slice that clips lies at the start of the interval it leaves.
+                (t >= t0 && t < t1).then_some((t, j))
+            })
+            .collect();
+        v.sort_by(|a, b| a.0.total_cmp(&b.0));
+        v
+    }
+
+    /// The colour of slice `j` where `ray` meets it at `t`, and the colour field's value
+    /// there: the reconstruction `probe` gives at that point (so a slice across a level
+    /// boundary has no crack), through the colour map, with the iso values' contour lines
+    /// when asked. `None` outside the data (nothing is drawn there).
+    fn slice_colour(&mut self, ray: &Ray, t: f64, j: usize) -> Option<([f64; 3], f64)> {
+        let scene = self.scene;
+        let vol = scene.vol;
+        let slice = scene.cuts.slices[j];
+        let o = vol.to_local(ray.origin.to_array());
+        let p: [f64; 3] = std::array::from_fn(|a| o[a] + t * ray.dir[a]);
+        let region = vol.region_at(p)?;
+        let colour_field = scene.params.colour_field;
+        let e = vol.eval(region as usize, p, scene.params.field, colour_field)?;
+        self.main.stats.samples += 1;
+        let value = if colour_field.is_some() {
+            e.colour
+        } else {
+            e.value
+        };
+        self.main.record(Event::Slice {
+            t,
+            slice: j as u32,
+            value,
+        });
+        let mut c = scene.state.colormap.colour(value as f32).map(f64::from);
+        if slice.contours {
+            // Distance to each iso value's contour, in the plane: the value's offset over
+            // the in-plane gradient. Lines about one and a half pixels wide.
+            let n = slice.plane.n;
+            let g = e.grad;
+            let gn = g[0] * n[0] + g[1] * n[1] + g[2] * n[2];
+            let gp = (0..3)
+                .map(|a| (g[a] - gn * n[a]).powi(2))
+                .sum::<f64>()
+                .sqrt();
+            let px = scene.rays.pixel_size_at(t).max(f64::MIN_POSITIVE);
+            for i in 0..1 + scene.more_surfaces.len() {
+                let iso = if i == 0 {
+                    scene.params.tf.iso
+                } else {
+                    scene.more_surfaces[i - 1].params.tf.iso
+                };
+                let dist = (e.value - iso).abs() / gp;
+                let cover = (1.25 - dist / px).clamp(0.0, 1.0);
+                if cover > 0.0 {
+                    let line = self
+                        .style(i)
+                        .colour
+                        .map_or(CONTOUR_COLOUR, |c| c.map(f64::from));
+                    c = std::array::from_fn(|a| c[a] + cover * (line[a] - c[a]));
+                }
+            }
+        }
+        Some((c, value))
+    }
+
+    /// How surface `i` (0: the view's first) is drawn.
+    fn style(&self, i: usize) -> crate::scene::SurfaceStyle {
+        if i == 0 {
+            self.scene.first_style
+        } else {
+            self.scene.more_surfaces[i - 1].style
+        }
+    }
+
+    /// Distance along `ray` to a surface point.
+    fn t_of(&self, ray: &Ray, s: &SurfacePoint) -> f64 {
+        s.t.unwrap_or_else(|| (s.world - ray.origin).dot(ray.dir))
+    }
+
+    /// The iso-surface point along `ray` (iso mode, the view's strategy, the first
+    /// surface), with its shading normal, on the part of the ray the clip planes keep.
+    pub fn surface(&mut self, ray: &Ray, jit: f64) -> Option<SurfacePoint> {
+        let vol = self.scene.vol;
+        let o = vol.to_local(ray.origin.to_array());
+        let (t0, t1) = self
+            .scene
+            .cuts
+            .interval(&o, &ray.dir.to_array(), 0.0, f64::INFINITY)?;
+        self.surface_of(0, ray, t0, t1, jit)
+    }
+
+    /// The first crossing of iso-surface `i` (0: the view's first) along `ray` for
+    /// `t ∈ [t0, t1]`, with its shading normal.
+    fn surface_of(
+        &mut self,
+        i: usize,
+        ray: &Ray,
+        t0: f64,
+        t1: f64,
+        jit: f64,
+    ) -> Option<SurfacePoint> {
+        let scene = self.scene;
+        let vol = scene.vol;
+        let o = vol.to_local(ray.origin.to_array());
+        let tracer = if i == 0 {
+            &mut self.main
+        } else {
+            // The extra surfaces' tracers log where the main one does (`--pixel`).
+            let logging = self.main.log.is_some();
+            let t = &mut self.more[i - 1].0;
+            if logging && t.log.is_none() {
+                t.log = Some(Vec::new());
+            }
+            t
+        };
+        let hit = tracer.iso(o, ray.dir.to_array(), t0, t1, jit);
+        // The tracer logged its walk and the hit it found; the hit is logged again when
+        // it is drawn ([`RayCaster::log_hit`]), since a crossing found behind an opaque
+        // one is never drawn.
+        let mut events = tracer.log.take();
+        if hit.is_some() {
+            if let Some(Event::Hit { .. }) = events.as_ref().and_then(|e| e.last()) {
+                events.as_mut().map(Vec::pop);
+            }
+        }
+        if i == 0 {
+            self.main.log = events;
+        } else if let (Some(events), Some(log)) = (events, self.main.log.as_mut()) {
+            log.extend(events);
+        }
+        let hit = hit?;
         let eval = hit.eval;
         let e = eval.unwrap_or_default();
-        let gradient = match self.scene.shading {
+        let gradient = match scene.shading {
             Shading::Smooth => vol
-                .shading_gradient_near(hit.region, hit.p, self.scene.params.field)
+                .shading_gradient_near(hit.region, hit.p, scene.params.field)
                 .unwrap_or(e.grad),
             Shading::Analytic => e.grad,
         };
         let normal = facing(gradient, ray.dir);
-        if let Some(Event::Hit { normal: n, .. }) =
-            self.main.log.as_mut().and_then(|l| l.last_mut())
-        {
-            *n = Some(normal.to_array());
-        }
         Some(SurfacePoint {
             world: DVec3::from_array(vol.to_world(hit.p)),
             local: hit.p,
             normal,
             eval,
+            t: Some(hit.t),
         })
     }
 
@@ -209,19 +529,22 @@ impl<'s> RayCaster<'s> {
     #[cfg(feature = "gui")]
     pub(crate) fn first_surface(&mut self, ray: &Ray) -> Option<f64> {
         let scene = self.scene;
+        let o = scene.vol.to_local(ray.origin.to_array());
+        let (t_lo, t_hi) = scene
+            .cuts
+            .interval(&o, &ray.dir.to_array(), 0.0, f64::INFINITY)?;
         let mesh_t = if scene.meshes.is_empty() {
             None
         } else {
-            scene.meshes.intersect(ray, 0.0, f64::INFINITY).map(|h| h.t)
+            scene.meshes.intersect(ray, t_lo, t_hi).map(|h| h.t)
         };
         let mut params = scene.params;
         params.strategy = Strategy::Exact;
         params.tf.mode = Mode::Iso;
         let mut tracer = Tracer::new(scene.vol, &scene.accel, params);
-        let o = scene.vol.to_local(ray.origin.to_array());
-        let t_max = mesh_t.unwrap_or(f64::INFINITY);
+        let t_max = mesh_t.unwrap_or(t_hi);
         let iso_t = tracer
-            .iso(o, ray.dir.to_array(), 0.0, t_max, 0.5)
+            .iso(o, ray.dir.to_array(), t_lo, t_max, 0.5)
             .map(|hit| {
                 let p = DVec3::from_array(scene.vol.to_world(hit.p));
                 (p - ray.origin).dot(ray.dir)
@@ -243,11 +566,14 @@ impl<'s> RayCaster<'s> {
             .map(f64::from)
     }
 
-    /// Phong-shaded iso-surface point.
-    fn shade_surface(&mut self, ray: &Ray, s: &SurfacePoint) -> [f64; 3] {
+    /// Phong-shaded iso-surface point, in `colour` or the colour map's.
+    fn shade_surface(&mut self, ray: &Ray, s: &SurfacePoint, colour: Option<[f32; 3]>) -> [f64; 3] {
         let scene = self.scene;
         let st = scene.state;
-        let base = base_colour(scene, &s.eval.unwrap_or_default(), s.eval.is_some());
+        let base = match colour {
+            Some(c) => Vec3::from_array(c),
+            None => base_colour(scene, &s.eval.unwrap_or_default(), s.eval.is_some()),
+        };
         let n = s.normal;
         let pw = s.world;
         let vis = self.visibility(pw, n);
@@ -263,14 +589,25 @@ impl<'s> RayCaster<'s> {
         if !st.shadows {
             return Vec::new();
         }
+        let (shadow, more) = (&mut self.shadow, &mut self.more);
         st.lights
             .iter()
-            .map(|l| light_visibility(scene, &mut self.shadow, p, n, l))
+            .map(|l| light_visibility(scene, shadow, more, p, n, l))
             .collect()
     }
 }
 
-fn light_visibility(scene: &Scene, shadow: &mut Tracer, p: DVec3, n: DVec3, light: &Light) -> f32 {
+/// How much of `light` reaches world point `p` (normal `n`): meshes and opaque
+/// iso-surfaces block it, a translucent surface lets `1 − opacity` through (once per
+/// surface), dvr attenuates it; what the clip planes remove casts no shadow.
+fn light_visibility(
+    scene: &Scene,
+    shadow: &mut Tracer,
+    more: &mut [(Tracer, Tracer)],
+    p: DVec3,
+    n: DVec3,
+    light: &Light,
+) -> f32 {
     let (l, dist) = light.towards(p);
     if n.dot(l) <= 0.0 {
         return 1.0; // phong ignores lights behind the surface anyway
@@ -278,9 +615,6 @@ fn light_visibility(scene: &Scene, shadow: &mut Tracer, p: DVec3, n: DVec3, ligh
     let eps = 1e-3 * scene.vol.finest_w;
     let origin = p + eps * n;
     let ray = Ray { origin, dir: l };
-    if !scene.meshes.is_empty() && scene.meshes.occluded(&ray, 0.0, dist) {
-        return 0.0;
-    }
     let o = scene.vol.to_local(origin.to_array());
     let d = l.to_array();
     let t_max = if dist.is_finite() {
@@ -288,15 +622,29 @@ fn light_visibility(scene: &Scene, shadow: &mut Tracer, p: DVec3, n: DVec3, ligh
     } else {
         f64::INFINITY
     };
+    let Some((t0, t1)) = scene.cuts.interval(&o, &d, 0.0, t_max) else {
+        return 1.0;
+    };
+    if !scene.meshes.is_empty() && scene.meshes.occluded(&ray, t0, t1) {
+        return 0.0;
+    }
     match scene.params.tf.mode {
         Mode::Iso => {
-            if shadow.iso_occluded(o, d, 0.0, t_max) {
-                0.0
-            } else {
-                1.0
+            let mut through = 1.0f64;
+            if shadow.iso_occluded(o, d, t0, t1) {
+                through *= 1.0 - scene.first_style.opacity;
             }
+            for ((_, sh), s) in more.iter_mut().zip(&scene.more_surfaces) {
+                if through <= 0.0 {
+                    break;
+                }
+                if sh.iso_occluded(o, d, t0, t1) {
+                    through *= 1.0 - s.style.opacity;
+                }
+            }
+            through as f32
         }
-        Mode::Dvr => shadow.transmittance(o, d, 0.0, t_max) as f32,
+        Mode::Dvr => shadow.transmittance(o, d, t0, t1) as f32,
     }
 }
 
@@ -327,6 +675,7 @@ fn base_colour(scene: &Scene, e: &Eval, has_eval: bool) -> Vec3 {
 fn shade_sample(
     scene: &Scene,
     shadow: &mut Tracer,
+    more: &mut [(Tracer, Tracer)],
     shadows: bool,
     ray: &Ray,
     p: &[f64; 3],
@@ -352,7 +701,7 @@ fn shade_sample(
     let vis: Vec<f32> = if shadows {
         st.lights
             .iter()
-            .map(|l| light_visibility(scene, shadow, pw, n, l))
+            .map(|l| light_visibility(scene, shadow, more, pw, n, l))
             .collect()
     } else {
         Vec::new()

@@ -118,6 +118,9 @@ pub(crate) fn render_tiles(
     // The view's trees are built here, the active tree's masks on all the pool's
     // threads, before the tiles' rays walk them (a no-op once a frame of the view has).
     scene.accel.prepare(scene.vol, scene.params.tf.mode);
+    for s in &scene.more_surfaces {
+        s.accel.prepare(scene.vol, scene.params.tf.mode);
+    }
     tiles.par_iter().all(|&tile| {
         if cancel.is_cancelled() {
             return false;
@@ -391,6 +394,10 @@ pub fn render_aov(scene: &Scene, aov: Aov) -> Frame {
         rays: scene.rays,
         shading: scene.shading,
         accel: Arc::clone(&scene.accel),
+        // The buffers are of the first surface, where the clip planes leave it.
+        more_surfaces: Vec::new(),
+        first_style: scene.first_style,
+        cuts: scene.cuts.clone(),
     };
     if iso_scene.params.tf.mode == Mode::Dvr {
         iso_scene.params.tf.mode = Mode::Iso;
@@ -509,7 +516,7 @@ pub(crate) fn trace_pixel(scene: &Scene, x: u32, y: u32) -> PixelTrace {
             origin: ray.origin.to_array(),
             dir: ray.dir.to_array(),
             jitter: jit,
-            events: caster.main.log.take().unwrap_or_default(),
+            events: in_ray_order(caster.main.log.take().unwrap_or_default()),
         });
     }
     PixelTrace {
@@ -518,6 +525,19 @@ pub(crate) fn trace_pixel(scene: &Scene, x: u32, y: u32) -> PixelTrace {
         colour: sum.map(|c| (c / spp as f64) as f32),
         rays,
     }
+}
+
+/// `events` sorted by where they happen along the ray (stably: events at one place keep
+/// their order), the clip interval first: the walks of several iso-surfaces' searches
+/// are logged one after the other, but they are read as one ray.
+fn in_ray_order(mut events: Vec<Event>) -> Vec<Event> {
+    let at = |e: &Event| match *e {
+        Event::Clip { .. } => f64::NEG_INFINITY,
+        Event::Segment { t0, .. } | Event::Interval { t0, .. } => t0,
+        Event::Sample { t, .. } | Event::Hit { t, .. } | Event::Slice { t, .. } => t,
+    };
+    events.sort_by(|a, b| at(a).total_cmp(&at(b)));
+    events
 }
 
 /// Renders on a pool of `threads` workers (0: all cores).

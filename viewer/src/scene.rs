@@ -13,6 +13,7 @@ use crate::accel::{Accel, AccelCache};
 use crate::camera::RayGen;
 use crate::fields::UnknownField;
 use crate::mesh::Meshes;
+use crate::planes::HalfSpace;
 use crate::sampling::Params;
 use crate::shading::Shading;
 use crate::transfer::{PreIntegrated, Transfer};
@@ -32,6 +33,100 @@ pub struct Scene<'a> {
     /// The view's acceleration: the trees its rays walk, for the field and iso value of
     /// `params` (see [`crate::accel`]).
     pub accel: Arc<Accel>,
+    /// The iso-surfaces beyond the first (iso mode), each with the acceleration of its
+    /// value; empty in dvr mode, which draws the band around the first.
+    pub more_surfaces: Vec<SurfaceTrace>,
+    /// Style of the first iso-surface (its value and acceleration are `params` and
+    /// `accel`).
+    pub first_style: SurfaceStyle,
+    /// Clip and slice planes in the volume's local frame.
+    pub cuts: Cuts,
+}
+
+/// How an iso-surface is drawn.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SurfaceStyle {
+    pub opacity: f64,
+    /// A fixed colour instead of the colour map's.
+    pub colour: Option<[f32; 3]>,
+}
+
+/// An iso-surface beyond the view's first: its ray parameters (the view's, at its
+/// value) and the acceleration of that value.
+pub struct SurfaceTrace {
+    pub params: Params,
+    pub accel: Arc<Accel>,
+    pub style: SurfaceStyle,
+}
+
+/// A slice plane resolved for rays.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SliceTrace {
+    pub plane: HalfSpace,
+    pub opacity: f64,
+    pub contours: bool,
+}
+
+/// The view's planes, resolved once per frame in the volume's local frame.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Cuts {
+    /// Every half-space a ray is cut to: the clip planes, and the slices that clip what
+    /// lies in front of them (oriented away from the camera).
+    pub clips: Vec<HalfSpace>,
+    pub slices: Vec<SliceTrace>,
+}
+
+impl Cuts {
+    /// The planes of `state` in `vol`'s local frame.
+    pub fn new(vol: &Volume, state: &ViewState) -> Cuts {
+        let frame = vol.frame;
+        let mut clips: Vec<HalfSpace> = state
+            .clip
+            .iter()
+            .map(|p| HalfSpace::new(p, frame))
+            .collect();
+        let eye = state.camera.eye;
+        let forward: [f64; 3] = std::array::from_fn(|a| state.camera.look_at[a] - eye[a]);
+        let local_eye: [f64; 3] = std::array::from_fn(|a| eye[a] - frame[a]);
+        let slices = state
+            .slices
+            .iter()
+            .map(|s| {
+                let plane = HalfSpace::new(&s.plane, frame);
+                if s.clip {
+                    // Keep the side away from the camera; a camera on the plane keeps
+                    // the side it looks into.
+                    let side = plane.distance(&local_eye);
+                    let away = if side != 0.0 {
+                        side < 0.0
+                    } else {
+                        plane.n.iter().zip(forward).map(|(n, f)| n * f).sum::<f64>() >= 0.0
+                    };
+                    clips.push(if away {
+                        plane
+                    } else {
+                        HalfSpace {
+                            n: plane.n.map(|x| -x),
+                            c: -plane.c,
+                        }
+                    });
+                }
+                SliceTrace {
+                    plane,
+                    opacity: s.opacity,
+                    contours: s.contours,
+                }
+            })
+            .collect();
+        Cuts { clips, slices }
+    }
+
+    /// `[t0, t1]` of the ray `o + t d` (local frame) cut by every clip; `None` when
+    /// nothing of it is left.
+    #[inline]
+    pub fn interval(&self, o: &[f64; 3], d: &[f64; 3], t0: f64, t1: f64) -> Option<(f64, f64)> {
+        crate::planes::clip_interval(&self.clips, o, d, t0, t1)
+    }
 }
 
 impl<'a> Scene<'a> {
@@ -43,7 +138,8 @@ impl<'a> Scene<'a> {
     ) -> Result<Self, UnknownField> {
         let params = resolve(vol, state)?;
         let accel = Arc::new(Accel::new(vol, params.accel_key()));
-        Ok(Scene::with_accel(vol, state, meshes, params, accel))
+        let more = more_surfaces(state, &params, |key| Arc::new(Accel::new(vol, key)));
+        Ok(Scene::with_accel(vol, state, meshes, params, accel, more))
     }
 
     /// [`Scene::new`] with the acceleration taken from `cache`, which must hold
@@ -57,7 +153,8 @@ impl<'a> Scene<'a> {
     ) -> Result<Self, UnknownField> {
         let params = resolve(vol, state)?;
         let accel = cache.get(vol, params.accel_key());
-        Ok(Scene::with_accel(vol, state, meshes, params, accel))
+        let more = more_surfaces(state, &params, |key| cache.get(vol, key));
+        Ok(Scene::with_accel(vol, state, meshes, params, accel, more))
     }
 
     fn with_accel(
@@ -66,10 +163,14 @@ impl<'a> Scene<'a> {
         meshes: &'a Meshes,
         mut params: Params,
         accel: Arc<Accel>,
+        mut more_surfaces: Vec<SurfaceTrace>,
     ) -> Self {
         // Nothing outside the regions that can contribute is walked; an empty box (none
         // can) is one no ray enters.
         params.clip = Some(accel.clip());
+        for s in &mut more_surfaces {
+            s.params.clip = Some(s.accel.clip());
+        }
         Scene {
             vol,
             state,
@@ -78,8 +179,50 @@ impl<'a> Scene<'a> {
             rays: state.camera.ray_generator(state.width, state.height),
             shading: Shading::default(),
             accel,
+            more_surfaces,
+            first_style: SurfaceStyle {
+                opacity: state.iso_opacity,
+                colour: state.iso_colour,
+            },
+            cuts: Cuts::new(vol, state),
         }
     }
+
+    /// Whether rays see one opaque iso-surface (or a dvr band) and no slice: the
+    /// frame's rays then stop at their first hit.
+    pub(crate) fn is_single_opaque(&self) -> bool {
+        self.more_surfaces.is_empty()
+            && self.first_style.opacity >= 1.0
+            && self.cuts.slices.is_empty()
+    }
+}
+
+/// The surfaces of `state` beyond the first (iso mode only), each with the acceleration
+/// `accel` gives for its key.
+fn more_surfaces(
+    state: &ViewState,
+    params: &Params,
+    mut accel: impl FnMut(crate::accel::AccelKey) -> Arc<Accel>,
+) -> Vec<SurfaceTrace> {
+    if state.mode != crate::transfer::Mode::Iso {
+        return Vec::new();
+    }
+    state
+        .more_isos
+        .iter()
+        .map(|s| {
+            let mut p = *params;
+            p.tf.iso = s.value;
+            SurfaceTrace {
+                accel: accel(p.accel_key()),
+                params: p,
+                style: SurfaceStyle {
+                    opacity: s.opacity,
+                    colour: s.colour,
+                },
+            }
+        })
+        .collect()
 }
 
 /// The ray parameters of `state` in `vol`: the iso and colour fields' indices (a name the

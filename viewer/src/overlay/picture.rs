@@ -33,7 +33,11 @@ pub fn annotate(
         return;
     }
     let depth = depth.filter(|d| d.len() == width as usize * height as usize);
-    let isos = [state.iso];
+    // Dvr draws the band around the first value only.
+    let isos: Vec<f64> = match state.mode {
+        crate::transfer::Mode::Iso => state.surfaces().iter().map(|s| s.value).collect(),
+        crate::transfer::Mode::Dvr => vec![state.iso],
+    };
     let info = OverlayInfo {
         rays: state.camera.ray_generator(width, height),
         pivot: state.camera.look_at,

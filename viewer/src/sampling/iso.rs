@@ -52,6 +52,7 @@ impl Tracer<'_> {
             t,
             value: eval.map(|e| e.value),
             normal: None,
+            surface: None,
         });
         Some(IsoHit { t, p, eval, region })
     }

@@ -225,6 +225,20 @@ pub enum Event {
         /// Unit shading normal (world), filled in by the ray caster that shades the hit.
         #[serde(skip_serializing_if = "Option::is_none")]
         normal: Option<[f64; 3]>,
+        /// Which iso-surface (0: `iso`, 1…: `more_isos`); absent for the first.
+        #[serde(skip_serializing_if = "Option::is_none")]
+        surface: Option<u32>,
+    },
+    /// The part of the ray the clip planes keep (both infinite: none of it).
+    Clip {
+        t0: f64,
+        t1: f64,
+    },
+    /// The ray meets slice `slice`, where the colour field has `value`.
+    Slice {
+        t: f64,
+        slice: u32,
+        value: f64,
     },
 }
 
@@ -332,7 +346,7 @@ impl<'v> Tracer<'v> {
         }
     }
 
-    fn record(&mut self, e: Event) {
+    pub(crate) fn record(&mut self, e: Event) {
         if let Some(l) = &mut self.log {
             l.push(e);
         }

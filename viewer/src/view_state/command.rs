@@ -63,6 +63,8 @@ impl ViewState {
                 if *name != self.iso_field {
                     self.iso_field = name.clone();
                     if !keep_iso {
+                        // The other surfaces' values belong to the old field too.
+                        self.more_isos.clear();
                         let (iso, sigma) = default_iso(f);
                         self.iso = iso;
                         self.transfer.sigma = sigma;

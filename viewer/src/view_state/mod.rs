@@ -11,6 +11,7 @@ use crate::camera::Camera;
 use crate::colormap::ColorMap;
 use crate::mesh::MeshInstance;
 use crate::overlay::Overlays;
+pub use crate::planes::{Plane, Slice};
 pub use crate::sampling::Strategy;
 use crate::shading::{default_lights, Light, Material};
 pub use crate::transfer::{Band, Mode};
@@ -23,7 +24,7 @@ mod validate;
 pub use crate::fields::UnknownField;
 pub use command::ViewCommand;
 pub use file::ViewStateError;
-pub use overrides::{OverrideError, Overrides};
+pub use overrides::{IsoValues, OverrideError, Overrides, SurfaceColour};
 pub use size::{parse_size, SizeError};
 pub use validate::InvalidViewState;
 
@@ -55,7 +56,26 @@ pub struct ViewState {
     pub mode: Mode,
     /// Field the iso value / transfer function applies to (e.g. `q`).
     pub iso_field: String,
+    /// The iso value of the first iso-surface (iso mode; the middle of the dvr band).
     pub iso: f64,
+    /// Opacity of the first iso-surface: 1 hides what lies behind it; less shows the
+    /// surfaces inside it (see `more_isos`).
+    #[serde(default = "one_f64", skip_serializing_if = "is_one")]
+    pub iso_opacity: f64,
+    /// A fixed colour for the first iso-surface instead of the colour map's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub iso_colour: Option<[f32; 3]>,
+    /// Further iso-surfaces of the iso field (iso mode), drawn with the first in ray
+    /// order: e.g. a translucent shell around an opaque core. At most
+    /// [`MAX_ISO_SURFACES`] surfaces in all.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub more_isos: Vec<IsoSurface>,
+    /// Clip planes: each keeps the side its normal points to (see [`crate::planes`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub clip: Vec<Plane>,
+    /// Slice planes coloured by the colour field.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub slices: Vec<Slice>,
     pub strategy: Strategy,
     /// Sample step in units of the local (finest contributing) cell width.
     pub step: f64,
@@ -97,6 +117,29 @@ pub struct ViewState {
 
 fn one() -> u32 {
     1
+}
+
+fn one_f64() -> f64 {
+    1.0
+}
+
+fn is_one(x: &f64) -> bool {
+    *x == 1.0
+}
+
+/// Most iso-surfaces in one view (`iso` and `more_isos` together).
+pub const MAX_ISO_SURFACES: usize = 8;
+
+/// One iso-surface of the iso field: its value, opacity and (optionally) a fixed colour
+/// instead of the colour map's.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct IsoSurface {
+    pub value: f64,
+    #[serde(default = "one_f64")]
+    pub opacity: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub colour: Option<[f32; 3]>,
 }
 
 /// Dark blue-grey, so both white-ish meshes and blue shells stand out.
@@ -209,6 +252,11 @@ impl ViewState {
             mode: Mode::Iso,
             iso_field,
             iso,
+            iso_opacity: 1.0,
+            iso_colour: None,
+            more_isos: Vec::new(),
+            clip: Vec::new(),
+            slices: Vec::new(),
             strategy: Strategy::Exact,
             step: 0.5,
             spp: 1,
@@ -268,6 +316,30 @@ impl ViewState {
                 f.name
             )
         })
+    }
+
+    /// Every iso-surface of the view, the first (`iso`) first.
+    pub fn surfaces(&self) -> Vec<IsoSurface> {
+        let first = IsoSurface {
+            value: self.iso,
+            opacity: self.iso_opacity,
+            colour: self.iso_colour,
+        };
+        std::iter::once(first)
+            .chain(self.more_isos.iter().copied())
+            .collect()
+    }
+
+    /// Replaces the iso-surfaces by `surfaces` (the first sets `iso` as
+    /// [`ViewState::set_iso`] does); an empty list changes nothing.
+    pub fn set_surfaces(&mut self, surfaces: &[IsoSurface]) {
+        let Some((first, more)) = surfaces.split_first() else {
+            return;
+        };
+        self.set_iso(first.value);
+        self.iso_opacity = first.opacity;
+        self.iso_colour = first.colour;
+        self.more_isos = more.to_vec();
     }
 
     /// Sets the iso value and keeps the dvr band's width at 8 % of it, as in the seed

@@ -3,12 +3,13 @@
 //! (the iso value, the iso and colour fields) go through [`ViewState::apply`], as the
 //! window's panel does.
 
-use super::{FieldRange, Mode, Strategy, ViewCommand, ViewState};
+use super::{FieldRange, IsoSurface, Mode, Strategy, ViewCommand, ViewState, MAX_ISO_SURFACES};
 use crate::camera::Projection;
 use crate::fields::UnknownField;
 use crate::mesh::{MeshInstance, MeshSpecError};
 use crate::overlay::Overlays;
 use crate::palette::{Palette, PaletteSpec};
+use crate::planes::{Plane, Slice, MAX_CLIP_PLANES, MAX_SLICES};
 
 /// Command-line changes to a view state (`qbricks-view render` flags). They live here,
 /// next to the state they change, so the window and the headless renderer apply the same
@@ -24,9 +25,36 @@ pub struct Overrides {
     /// Render mode.
     #[arg(long, value_enum)]
     pub mode: Option<Mode>,
-    /// Iso value of the iso field.
+    /// Iso value(s) of the iso field: V or V1,V2,… (up to 8 surfaces, drawn together in
+    /// ray order; see --iso-opacity).
     #[arg(long, allow_hyphen_values = true)]
-    pub iso: Option<f64>,
+    pub iso: Option<IsoValues>,
+    /// Opacity of each iso-surface, A1,A2,… in (0, 1] in the order of --iso [default: 1]:
+    /// e.g. `--iso 0.02,0.1 --iso-opacity 0.3` shows an opaque Q = 0.1 core through a
+    /// translucent Q = 0.02 shell.
+    #[arg(long = "iso-opacity", value_delimiter = ',')]
+    pub iso_opacity: Vec<f64>,
+    /// Colour of each iso-surface, C1,C2,… in the order of --iso: `#rrggbb`, or `map`
+    /// for the colour map's colour of the colour field [default: map].
+    #[arg(long = "iso-colour", alias = "iso-color", value_delimiter = ',')]
+    pub iso_colour: Vec<SurfaceColour>,
+    /// Clip plane OX,OY,OZ:NX,NY,NZ (a point and a normal; the side the normal points to
+    /// is kept) or `x>1.5`, `z<0`. Repeatable, up to 6; replaces the state's clip planes.
+    #[arg(long = "clip", allow_hyphen_values = true)]
+    pub clip: Vec<Plane>,
+    /// Slice plane OX,OY,OZ:NX,NY,NZ or `z>0` (the normal's sign does not matter),
+    /// coloured by the colour field. Repeatable, up to 3; replaces the state's slices.
+    #[arg(long = "slice", allow_hyphen_values = true)]
+    pub slices: Vec<Plane>,
+    /// Opacity of the --slice planes, in (0, 1] [default: 1].
+    #[arg(long = "slice-opacity")]
+    pub slice_opacity: Option<f64>,
+    /// Draw the iso values' contour lines on the --slice planes.
+    #[arg(long = "slice-contours")]
+    pub slice_contours: bool,
+    /// The --slice planes also remove what lies between them and the camera.
+    #[arg(long = "slice-clip")]
+    pub slice_clip: bool,
     /// Sampling strategy (`exact` is for iso mode; in dvr it samples as `uniform`, or as
     /// `bisect` with --no-preintegrated).
     #[arg(long, value_enum)]
@@ -136,11 +164,99 @@ impl std::str::FromStr for ColourRange {
     }
 }
 
+/// `--iso`: one or more iso values.
+#[derive(Debug, Clone, PartialEq)]
+pub struct IsoValues(pub Vec<f64>);
+
+impl From<f64> for IsoValues {
+    fn from(v: f64) -> Self {
+        IsoValues(vec![v])
+    }
+}
+
+/// Why an `--iso` list is refused.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("expected V or V1,V2,… (finite numbers, at most {MAX_ISO_SURFACES}), found `{text}`")]
+pub struct IsoValuesError {
+    pub text: String,
+}
+
+impl std::str::FromStr for IsoValues {
+    type Err = IsoValuesError;
+    fn from_str(s: &str) -> Result<Self, IsoValuesError> {
+        let bad = || IsoValuesError {
+            text: s.to_string(),
+        };
+        let values = s
+            .split(',')
+            .map(|v| v.trim().parse::<f64>().ok().filter(|x| x.is_finite()))
+            .collect::<Option<Vec<f64>>>()
+            .ok_or_else(bad)?;
+        if values.is_empty() || values.len() > MAX_ISO_SURFACES {
+            return Err(bad());
+        }
+        Ok(IsoValues(values))
+    }
+}
+
+/// `--iso-colour`: a fixed colour, or the colour map's.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum SurfaceColour {
+    Map,
+    Fixed([f32; 3]),
+}
+
+/// Why an `--iso-colour` entry is refused.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("expected `map` or a colour #rrggbb, found `{text}`")]
+pub struct SurfaceColourError {
+    pub text: String,
+}
+
+impl std::str::FromStr for SurfaceColour {
+    type Err = SurfaceColourError;
+    fn from_str(s: &str) -> Result<Self, SurfaceColourError> {
+        let bad = || SurfaceColourError {
+            text: s.to_string(),
+        };
+        let t = s.trim();
+        if t.eq_ignore_ascii_case("map") {
+            return Ok(SurfaceColour::Map);
+        }
+        let hex = t.strip_prefix('#').ok_or_else(bad)?;
+        if hex.len() != 6 || !hex.is_ascii() {
+            return Err(bad());
+        }
+        let channel = |i: usize| {
+            u8::from_str_radix(&hex[i..i + 2], 16)
+                .map(|v| f32::from(v) / 255.0)
+                .map_err(|_| bad())
+        };
+        Ok(SurfaceColour::Fixed([
+            channel(0)?,
+            channel(2)?,
+            channel(4)?,
+        ]))
+    }
+}
+
 /// A `--mesh`, `--eye`, `--look-at` or `--up` flag that does not parse.
 #[derive(Debug, thiserror::Error)]
 pub enum OverrideError {
     #[error("--mesh: {0}")]
     Mesh(MeshSpecError),
+    /// `--iso-opacity` or `--iso-colour` with more entries than surfaces, or a count
+    /// flag over its limit; `flag` without its dashes.
+    #[error("--{flag}: expected at most {most} entries, found {found}")]
+    TooMany {
+        flag: &'static str,
+        most: usize,
+        found: usize,
+    },
+    #[error("--iso-opacity: expected opacities in (0, 1], found {0}")]
+    Opacity(f64),
+    #[error("--slice-opacity: expected an opacity in (0, 1], found {0}")]
+    SliceOpacity(f64),
     /// `flag` without its dashes (`eye`, `look-at`, `up`).
     #[error("--{flag}: {error}")]
     Point {
@@ -169,15 +285,8 @@ impl Overrides {
         if let Some(v) = self.mode {
             state.mode = v;
         }
-        if let Some(value) = self.iso {
-            // A state file's band is the user's; a new view's follows the iso value.
-            let iso = ViewCommand::Iso {
-                value,
-                band_follows: !from_file,
-            };
-            // Setting the iso value names no field: it cannot fail.
-            let _ = state.apply(&iso, &[]);
-        }
+        self.apply_surfaces(state, from_file)?;
+        self.apply_planes(state)?;
         if let Some(v) = self.strategy {
             state.strategy = v;
         }
@@ -250,6 +359,104 @@ impl Overrides {
 }
 
 impl Overrides {
+    /// `--iso`, `--iso-opacity`, `--iso-colour`: the list of iso-surfaces. Opacities and
+    /// colours apply to the surfaces in order (those of `--iso`, else the state's); a
+    /// surface without one keeps its own (a new one: opaque, coloured by the map).
+    fn apply_surfaces(&self, state: &mut ViewState, from_file: bool) -> Result<(), OverrideError> {
+        let mut surfaces = state.surfaces();
+        if let Some(IsoValues(values)) = &self.iso {
+            if values.len() > MAX_ISO_SURFACES {
+                return Err(OverrideError::TooMany {
+                    flag: "iso",
+                    most: MAX_ISO_SURFACES,
+                    found: values.len(),
+                });
+            }
+            surfaces = values
+                .iter()
+                .enumerate()
+                .map(|(i, &value)| IsoSurface {
+                    value,
+                    ..surfaces.get(i).copied().unwrap_or(IsoSurface {
+                        value,
+                        opacity: 1.0,
+                        colour: None,
+                    })
+                })
+                .collect();
+        }
+        for (flag, found) in [
+            ("iso-opacity", self.iso_opacity.len()),
+            ("iso-colour", self.iso_colour.len()),
+        ] {
+            if found > surfaces.len() {
+                return Err(OverrideError::TooMany {
+                    flag,
+                    most: surfaces.len(),
+                    found,
+                });
+            }
+        }
+        for (s, &a) in surfaces.iter_mut().zip(&self.iso_opacity) {
+            if !(a > 0.0 && a <= 1.0) {
+                return Err(OverrideError::Opacity(a));
+            }
+            s.opacity = a;
+        }
+        for (s, c) in surfaces.iter_mut().zip(&self.iso_colour) {
+            s.colour = match c {
+                SurfaceColour::Map => None,
+                SurfaceColour::Fixed(c) => Some(*c),
+            };
+        }
+        if let Some((first, _)) = surfaces.split_first() {
+            if self.iso.is_some() {
+                // A state file's band is the user's; a new view's follows the iso value.
+                let iso = ViewCommand::Iso {
+                    value: first.value,
+                    band_follows: !from_file,
+                };
+                // Setting the iso value names no field: it cannot fail.
+                let _ = state.apply(&iso, &[]);
+            }
+            state.iso_opacity = first.opacity;
+            state.iso_colour = first.colour;
+            state.more_isos = surfaces[1..].to_vec();
+        }
+        Ok(())
+    }
+
+    /// `--clip` and `--slice` with their options: given, they replace the state's.
+    fn apply_planes(&self, state: &mut ViewState) -> Result<(), OverrideError> {
+        for (flag, most, found) in [
+            ("clip", MAX_CLIP_PLANES, self.clip.len()),
+            ("slice", MAX_SLICES, self.slices.len()),
+        ] {
+            if found > most {
+                return Err(OverrideError::TooMany { flag, most, found });
+            }
+        }
+        if !self.clip.is_empty() {
+            state.clip = self.clip.clone();
+        }
+        if let Some(a) = self.slice_opacity {
+            if !(a > 0.0 && a <= 1.0) {
+                return Err(OverrideError::SliceOpacity(a));
+            }
+        }
+        if !self.slices.is_empty() {
+            state.slices = self.slices.iter().map(|p| Slice::new(*p)).collect();
+        }
+        for s in &mut state.slices {
+            if let Some(a) = self.slice_opacity {
+                s.opacity = a;
+            }
+            s.contours |= self.slice_contours;
+            s.clip |= self.slice_clip;
+        }
+        Ok(())
+    }
+
     /// Whether the flags place the camera (`--eye`, `--look-at`, `--up`, `--ortho`):
     /// without them and without a state file, a new view frames the iso surface the
     /// flags chose ([`ViewState::frame_surface`]) for the image size they chose.
@@ -341,7 +548,7 @@ mod tests {
         let over = |colour: Option<&str>, iso_field: Option<&str>, iso: Option<f64>| Overrides {
             colour_field: colour.map(str::to_string),
             iso_field: iso_field.map(str::to_string),
-            iso,
+            iso: iso.map(IsoValues::from),
             ..Overrides::default()
         };
 
@@ -457,6 +664,105 @@ mod tests {
         ] {
             let e = run(bad).expect_err("refused");
             assert!(e.contains(bad[0]) && e.contains("expected"), "{e}");
+        }
+    }
+
+    /// Issue 27: the cutting flags build the surfaces and planes, round-trip through the
+    /// state's JSON, and refuse what is out of bounds naming the flag.
+    #[test]
+    fn surfaces_and_planes_from_flags() {
+        #[derive(clap::Parser)]
+        struct Cli {
+            #[command(flatten)]
+            view: Overrides,
+        }
+        use clap::Parser;
+        let fields = crate::view_state::tests::fields();
+        let run = |args: &[&str]| {
+            let cli = Cli::try_parse_from(std::iter::once("x").chain(args.iter().copied()))
+                .map_err(|e| e.to_string())?;
+            let mut s = ViewState::default_for([0.0; 3], [1.0; 3], &fields);
+            cli.view.apply(&mut s, false).map_err(|e| e.to_string())?;
+            s.validate().map_err(|e| e.to_string())?;
+            Ok::<_, String>(s)
+        };
+        let s = run(&[
+            "--iso",
+            "0.1,0.02,-0.5",
+            "--iso-opacity",
+            "1,0.3",
+            "--iso-colour",
+            "map,#ff8000",
+            "--clip",
+            "x>1.5",
+            "--clip",
+            "0,0,0:0,0,-2",
+            "--slice",
+            "z>0",
+            "--slice",
+            "1,2,3:1,1,0",
+            "--slice-opacity",
+            "0.5",
+            "--slice-contours",
+            "--slice-clip",
+        ])
+        .expect("valid");
+        assert_eq!(s.iso, 0.1);
+        assert!(
+            (s.transfer.sigma - 0.008).abs() < 1e-12,
+            "the band follows --iso"
+        );
+        let surfaces = s.surfaces();
+        assert_eq!(surfaces.len(), 3);
+        assert_eq!(
+            surfaces
+                .iter()
+                .map(|s| (s.value, s.opacity))
+                .collect::<Vec<_>>(),
+            [(0.1, 1.0), (0.02, 0.3), (-0.5, 1.0)]
+        );
+        assert_eq!(surfaces[0].colour, None);
+        assert_eq!(surfaces[1].colour, Some([1.0, 128.0 / 255.0, 0.0]));
+        assert_eq!(s.clip.len(), 2);
+        assert_eq!(s.clip[1].unit_normal(), [0.0, 0.0, -1.0]);
+        assert_eq!(s.slices.len(), 2);
+        assert!(s
+            .slices
+            .iter()
+            .all(|l| l.opacity == 0.5 && l.contours && l.clip));
+        // The state file holds all of it and reads back the same.
+        let back =
+            ViewState::from_json(std::path::Path::new("s.json"), &s.to_json()).expect("round trip");
+        assert_eq!(back, s);
+        // A state without any of it writes none of the new keys (files stay as they were).
+        let plain = run(&[]).expect("plain");
+        let json = plain.to_json();
+        for key in ["iso_opacity", "iso_colour", "more_isos", "clip", "slices"] {
+            assert!(!json.contains(&format!("\"{key}\"")), "{key} in {json}");
+        }
+        // --iso-opacity alone styles the state's surfaces.
+        let o = run(&["--iso-opacity", "0.5"]).expect("opacity");
+        assert_eq!((o.iso, o.iso_opacity), (plain.iso, 0.5));
+        let seven_clips: Vec<&str> = ["--clip", "x>0"].repeat(7);
+        for (bad, want) in [
+            (&["--iso", "1,2,3,4,5,6,7,8,9"][..], "--iso"),
+            (&["--iso", "1,nan"], "--iso"),
+            (
+                &["--iso", "1", "--iso-opacity", "1,1"],
+                "--iso-opacity: expected at most 1",
+            ),
+            (&["--iso-opacity", "0"], "--iso-opacity"),
+            (&["--iso-colour", "red"], "--iso-colour"),
+            (&["--clip", "w>1"], "--clip"),
+            (&["--slice", "0,0,0:0,0,0"], "--slice"),
+            (
+                &["--slice", "z>0", "--slice-opacity", "1.5"],
+                "--slice-opacity",
+            ),
+            (&seven_clips, "--clip: expected at most 6"),
+        ] {
+            let e = run(bad).expect_err("refused");
+            assert!(e.contains(want), "{bad:?}: {e}");
         }
     }
 }

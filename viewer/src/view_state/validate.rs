@@ -1,10 +1,13 @@
 //! What a view state may hold beyond what its JSON types allow, checked once
 //! ([`ViewState::validate`]) wherever a state comes in: a file, the window, the flags.
 
-use super::{ViewState, MAX_IMAGE_SIDE, MAX_LIGHTS, MAX_MESHES, MAX_SPP, MIN_STEP};
+use super::{
+    ViewState, MAX_IMAGE_SIDE, MAX_ISO_SURFACES, MAX_LIGHTS, MAX_MESHES, MAX_SPP, MIN_STEP,
+};
 use crate::camera::Projection;
 use crate::colormap::ColorMapError;
 use crate::mesh::MeshError;
+use crate::planes::{PlaneError, MAX_CLIP_PLANES, MAX_SLICES};
 use crate::shading::ShadingError;
 
 /// What [`ViewState::validate`] refuses: a value the JSON types allow but the renderer
@@ -48,6 +51,27 @@ pub enum InvalidViewState {
     Mesh { index: usize, error: MeshError },
     #[error("background: expected components in 0..=1, found {background:?}")]
     Background { background: [f32; 3] },
+    #[error("more_isos: expected at most {} entries (with `iso`, {MAX_ISO_SURFACES} surfaces), found {count}", MAX_ISO_SURFACES - 1)]
+    TooManySurfaces { count: usize },
+    /// `iso_opacity`, `more_isos[i].value` or `more_isos[i].opacity`: `name` is the path.
+    #[error("{name}: expected {expected}, found {value}")]
+    Surface {
+        name: String,
+        expected: &'static str,
+        value: f64,
+    },
+    /// `iso_colour` or `more_isos[i].colour`.
+    #[error("{name}: expected components in 0..=1, found {colour:?}")]
+    SurfaceColour { name: String, colour: [f32; 3] },
+    #[error("clip: expected at most {MAX_CLIP_PLANES} planes, found {count}")]
+    TooManyClipPlanes { count: usize },
+    #[error("slices: expected at most {MAX_SLICES} planes, found {count}")]
+    TooManySlices { count: usize },
+    /// `clip[i]` or `slices[i]`.
+    #[error("{name}: {error}")]
+    Plane { name: String, error: PlaneError },
+    #[error("slices[{index}].opacity: expected 0 < opacity ≤ 1, found {value}")]
+    SliceOpacity { index: usize, value: f64 },
     /// `width` or `height`.
     #[error("{name}: expected 1..={MAX_IMAGE_SIDE}, found {value}")]
     ImageSide { name: &'static str, value: u32 },
@@ -146,9 +170,86 @@ impl ViewState {
                 background: self.background,
             });
         }
+        self.validate_cuts()?;
         for (name, value) in [("width", self.width), ("height", self.height)] {
             if !(1..=MAX_IMAGE_SIDE).contains(&value) {
                 return Err(InvalidViewState::ImageSide { name, value });
+            }
+        }
+        Ok(())
+    }
+}
+
+impl ViewState {
+    /// The surfaces, clip and slice planes: counts, finite values, opacities in (0, 1].
+    fn validate_cuts(&self) -> Result<(), InvalidViewState> {
+        if self.more_isos.len() + 1 > MAX_ISO_SURFACES {
+            return Err(InvalidViewState::TooManySurfaces {
+                count: self.more_isos.len(),
+            });
+        }
+        let styles = std::iter::once((
+            "iso_".to_string(),
+            self.iso,
+            self.iso_opacity,
+            self.iso_colour,
+        ))
+        .chain(
+            self.more_isos
+                .iter()
+                .enumerate()
+                .map(|(i, s)| (format!("more_isos[{i}]."), s.value, s.opacity, s.colour)),
+        );
+        for (path, value, opacity, colour) in styles {
+            if !value.is_finite() {
+                return Err(InvalidViewState::Surface {
+                    name: format!("{path}value").replace("iso_value", "iso"),
+                    expected: "a finite number",
+                    value,
+                });
+            }
+            if !(opacity > 0.0 && opacity <= 1.0) {
+                return Err(InvalidViewState::Surface {
+                    name: format!("{path}opacity"),
+                    expected: "0 < opacity ≤ 1",
+                    value: opacity,
+                });
+            }
+            if let Some(c) = colour {
+                if c.iter().any(|x| !(0.0..=1.0).contains(x)) {
+                    return Err(InvalidViewState::SurfaceColour {
+                        name: format!("{path}colour"),
+                        colour: c,
+                    });
+                }
+            }
+        }
+        if self.clip.len() > MAX_CLIP_PLANES {
+            return Err(InvalidViewState::TooManyClipPlanes {
+                count: self.clip.len(),
+            });
+        }
+        if self.slices.len() > MAX_SLICES {
+            return Err(InvalidViewState::TooManySlices {
+                count: self.slices.len(),
+            });
+        }
+        for (i, p) in self.clip.iter().enumerate() {
+            p.check().map_err(|error| InvalidViewState::Plane {
+                name: format!("clip[{i}]"),
+                error,
+            })?;
+        }
+        for (index, s) in self.slices.iter().enumerate() {
+            s.plane.check().map_err(|error| InvalidViewState::Plane {
+                name: format!("slices[{index}]"),
+                error,
+            })?;
+            if !(s.opacity > 0.0 && s.opacity <= 1.0) {
+                return Err(InvalidViewState::SliceOpacity {
+                    index,
+                    value: s.opacity,
+                });
             }
         }
         Ok(())
@@ -292,5 +393,79 @@ mod tests {
         );
         let e = ViewState::load(Path::new("/nonexistent/v.json")).expect_err("missing");
         assert!(e.to_string().contains("/nonexistent/v.json"), "{e}");
+    }
+
+    /// Issue 27: surfaces and planes a state file may hold but the renderer cannot use
+    /// are refused, named by their JSON path.
+    #[test]
+    fn bad_surfaces_and_planes_are_named() {
+        use crate::planes::{Plane, Slice};
+        use crate::view_state::IsoSurface;
+        let base = ViewState::default_for([0.0; 3], [1.0; 3], &super::super::tests::fields());
+        let plane = Plane {
+            origin: [0.0; 3],
+            normal: [0.0, 0.0, 1.0],
+        };
+        let surface = IsoSurface {
+            value: 0.1,
+            opacity: 0.5,
+            colour: None,
+        };
+        type Change = Box<dyn Fn(&mut ViewState)>;
+        let cases: Vec<(Change, &str)> = vec![
+            (Box::new(|s| s.iso_opacity = 0.0), "iso_opacity"),
+            (
+                Box::new(|s| s.iso_colour = Some([2.0, 0.0, 0.0])),
+                "iso_colour",
+            ),
+            (
+                Box::new(move |s| s.more_isos = vec![surface; 8]),
+                "more_isos: expected at most 7",
+            ),
+            (
+                Box::new(move |s| {
+                    s.more_isos = vec![IsoSurface {
+                        value: f64::NAN,
+                        ..surface
+                    }]
+                }),
+                "more_isos[0].value",
+            ),
+            (
+                Box::new(move |s| s.clip = vec![plane; 7]),
+                "clip: expected at most 6",
+            ),
+            (
+                Box::new(move |s| {
+                    s.clip = vec![
+                        plane,
+                        Plane {
+                            normal: [0.0; 3],
+                            ..plane
+                        },
+                    ]
+                }),
+                "clip[1]: the normal",
+            ),
+            (
+                Box::new(move |s| s.slices = vec![Slice::new(plane); 4]),
+                "slices: expected at most 3",
+            ),
+            (
+                Box::new(move |s| {
+                    s.slices = vec![Slice {
+                        opacity: 0.0,
+                        ..Slice::new(plane)
+                    }]
+                }),
+                "slices[0].opacity",
+            ),
+        ];
+        for (change, want) in cases {
+            let mut s = base.clone();
+            change(&mut s);
+            let e = s.validate().expect_err(want).to_string();
+            assert!(e.starts_with(want), "{want}: {e}");
+        }
     }
 }

@@ -348,3 +348,80 @@ fn render_dvr_picks_its_default_strategy_and_refuses_a_negative_step() {
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("step") && err.contains("-1"), "{err}");
 }
+
+/// Issue 27 from the command line: clip and slice planes and two surfaces render a PNG;
+/// `--pixel` lists the clip interval, the slice and the hits; a bad plane is refused
+/// naming the flag, with nothing written.
+#[test]
+fn cutting_flags_render_and_explain_a_pixel() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let file = sample(dir.path());
+    let f = file.to_str().expect("utf8");
+    let png = dir.path().join("cut.png");
+    let p = png.to_str().expect("utf8");
+    let cut: &[&str] = &[
+        "--iso",
+        "0.005,0.05",
+        "--iso-opacity",
+        "0.3,1",
+        "--clip",
+        "z<0.3",
+        "--slice",
+        "0,0,0:0,0,1",
+        "--slice-opacity",
+        "0.5",
+        "--slice-contours",
+        "--width",
+        "64",
+        "--height",
+        "40",
+        "--ortho",
+        "9",
+        "--eye",
+        "2,0,9",
+        "--look-at",
+        "2,0,0",
+        "--up",
+        "0,1,0",
+    ];
+    let mut args = vec!["render", f, "-o", p];
+    args.extend_from_slice(cut);
+    let (code, _, stderr) = run(&args, dir.path());
+    assert_eq!(code, 0, "{stderr}");
+    assert!(png.exists());
+    let mut args = vec!["render", f, "--pixel", "32,20"];
+    args.extend_from_slice(cut);
+    let (code, stdout, stderr) = run(&args, dir.path());
+    assert_eq!(code, 0, "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(&stdout).expect("json");
+    let events = v["rays"][0]["events"].as_array().expect("events");
+    let kinds: Vec<&str> = events.iter().filter_map(|e| e["event"].as_str()).collect();
+    assert_eq!(kinds.first(), Some(&"clip"), "{kinds:?}");
+    // Looking down z from z = 9: the clip keeps z < 0.3, so from t = 8.7 on.
+    assert!((events[0]["t0"].as_f64().expect("t0") - 8.7).abs() < 1e-9);
+    let slice = events
+        .iter()
+        .find(|e| e["event"] == "slice")
+        .expect("the centre ray meets the slice");
+    assert!((slice["t"].as_f64().expect("t") - 9.0).abs() < 1e-9);
+    assert!(slice["value"].as_f64().is_some());
+    let ts: Vec<f64> = events.iter().filter_map(|e| e["t"].as_f64()).collect();
+    assert!(ts.windows(2).all(|w| w[0] <= w[1]), "in ray order: {ts:?}");
+
+    for (bad, want) in [
+        (&["--clip", "w>1"][..], "--clip"),
+        (&["--slice", "1,2,3:0,0,0"], "--slice"),
+        (
+            &["--iso", "0.1", "--iso-opacity", "0.5,0.5"],
+            "--iso-opacity",
+        ),
+    ] {
+        let out = dir.path().join("bad.png");
+        let mut args = vec!["render", f, "-o", out.to_str().expect("utf8")];
+        args.extend(bad);
+        let (code, _, stderr) = run(&args, dir.path());
+        assert_eq!(code, 2, "{bad:?}: {stderr}");
+        assert!(stderr.contains(want), "{bad:?}: {stderr}");
+        assert!(!out.exists(), "{bad:?} wrote a file");
+    }
+}

@@ -11,6 +11,7 @@
 #[path = "../common/mod.rs"]
 mod common;
 
+mod cuts;
 mod defaults;
 mod golden;
 mod golden_sample;
