@@ -342,7 +342,8 @@ pub enum SampleError {
 
 /// Samples `fields` (indices into `vol.fields`, in the order wanted) at every sample of
 /// `plane` on a grid of `res`, rows in parallel; the result does not depend on the number
-/// of threads. The memory is checked ([`check_memory`]) and allocated fallibly first.
+/// of threads. The sides ([`files::limits::plane_resolution`]) and the memory
+/// ([`check_memory`]) are checked, and the memory allocated fallibly, first.
 pub fn sample(
     vol: &Volume,
     plane: &Plane,
@@ -359,6 +360,8 @@ pub fn sample(
             count: vol.fields.len(),
         });
     }
+    // A resolution built by hand, not by `ResolutionSpec::resolve`, is checked too.
+    files::limits::plane_resolution(res.nu.into(), res.nv.into())?;
     check_memory(res, nf)?;
     let n = usize::try_from(res.count().saturating_mul(nf as u64)).unwrap_or(usize::MAX);
     let what = format!("a {}x{} plane of {nf} field(s)", res.nu, res.nv);

@@ -216,7 +216,7 @@ fn csv_json_and_npy_read_back_to_the_samples() {
 }
 
 #[test]
-fn sampling_refuses_no_fields_and_unknown_fields() {
+fn sampling_refuses_no_fields_unknown_fields_and_empty_grids() {
     let (file, plane, res) = small_samples();
     let view = testvol::open(&file).unwrap();
     let vol = Volume::new(&view).unwrap();
@@ -231,6 +231,12 @@ fn sampling_refuses_no_fields_and_unknown_fields() {
             .unwrap_err()
             .to_string(),
         "field 2 is not in the file (2 fields)"
+    );
+    assert_eq!(
+        plane::sample(&vol, &plane, Resolution { nu: 0, nv: 3 }, &[0])
+            .unwrap_err()
+            .to_string(),
+        "--resolution: expected 1..=16384, found 0"
     );
     let e = plane::check_memory(
         Resolution {
