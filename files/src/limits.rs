@@ -1,5 +1,5 @@
 //! The bounds every command applies, in one place: counts a user may ask for (threads,
-//! repeats, frames) and the memory a run may allocate.
+//! repeats, frames, plane samples) and the memory a run may allocate.
 //!
 //! A count outside its range is refused before any work starts, with the same message in
 //! every command (`--threads: expected 1..=256, found 100000`). Memory is checked the same
@@ -21,6 +21,9 @@ pub const MAX_REPEAT: u32 = 1000;
 pub const MAX_FRAMES: u64 = 100_000;
 /// Most UI frames of a scripted orbit (`--orbit-frames`): an hour at 30 frames per second.
 pub const MAX_ORBIT_FRAMES: u32 = 108_000;
+/// Most samples along each side of a sampled plane (`probe --plane … --resolution`): as
+/// many as the largest image a render may make is wide.
+pub const MAX_PLANE_SIDE: u64 = 16_384;
 
 /// A request outside the bounds.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -74,6 +77,13 @@ pub fn threads(value: Option<usize>) -> Result<Option<usize>, LimitError> {
 /// `--repeat`: 1..=[`MAX_REPEAT`].
 pub fn repeat(value: u32) -> Result<u32, LimitError> {
     count("--repeat", value, 1, MAX_REPEAT)
+}
+
+/// `--resolution NU,NV` of a sampled plane: each side 1..=[`MAX_PLANE_SIDE`]. The memory
+/// the samples take is checked by the command, which knows how many fields it keeps.
+pub fn plane_resolution(nu: u64, nv: u64) -> Result<[u32; 2], LimitError> {
+    let side = |n| count("--resolution", n, 1, MAX_PLANE_SIDE).map(|n| n as u32);
+    Ok([side(nu)?, side(nv)?])
 }
 
 /// What a run may allocate, and why it is that much.
@@ -224,6 +234,17 @@ mod tests {
         assert_eq!(
             repeat(0).expect_err("zero").to_string(),
             "--repeat: expected 1..=1000, found 0"
+        );
+        assert_eq!(plane_resolution(16_384, 1), Ok([16_384, 1]));
+        assert_eq!(
+            plane_resolution(256, 16_385)
+                .expect_err("too many")
+                .to_string(),
+            "--resolution: expected 1..=16384, found 16385"
+        );
+        assert_eq!(
+            plane_resolution(0, 8).expect_err("zero").to_string(),
+            "--resolution: expected 1..=16384, found 0"
         );
     }
 

@@ -425,6 +425,40 @@ const CASES: &[Case] = &[
     case(BAKE, &["bake", "tile640.vdb", "-o", "t.qbk"], 2,
         "qbricks-bake: tile640.vdb: the bake of 262144000 input cells (grid \"vel\") needs about 10076 MiB, more than the limit of")
         .absent(&["t.qbk"]),
+    // Issue 27: `probe --plane` writes through the same policy: never over its input (also
+    // through a link), into streams, through links; refused requests leave no file; the
+    // sides and the memory are bounded before anything is sampled.
+    case(VIEW, &["probe", "w.qbk", "--plane", "z=0", "-o", "w.qbk"], 2,
+        "qbricks-view: w.qbk: -o would overwrite the brick file w.qbk, an input of this run")
+        .exact()
+        .same(&["w.qbk"]),
+    case(VIEW, &["probe", "w.qbk", "--plane", "z=0", "--format", "npy", "-o", "ln_w.qbk"], 2,
+        "qbricks-view: ln_w.qbk: -o would overwrite the brick file w.qbk, an input of this run")
+        .same(&["w.qbk"])
+        .links(&["ln_w.qbk"]),
+    case(VIEW, &["probe", "w.qbk", "--plane", "z=0", "--resolution", "4,2", "--format", "npy",
+        "-o", "/dev/stdout"], 0, "qbricks-view: --plane: 4x2 samples (NU x NV) of q, speed on")
+        .stdout("NUMPY"),
+    case(VIEW, &["probe", "w.qbk", "--plane", "x=1", "--resolution", "3", "--format", "npy",
+        "-o", "ln_real.png"], 0, "qbricks-view: --plane: 3x3 samples")
+        .links(&["ln_real.png"])
+        .made(&[("real.png", "")]),
+    case(VIEW, &["probe", "w.qbk", "--plane", "z=0"], 0,
+        "qbricks-view: --plane: 256x131 samples (NU x NV) of q, speed on")
+        .closed(),
+    case(VIEW, &["probe", "w.qbk", "--plane", "0,0,0:1,1,0:2,2,0", "-o", "p.npy"], 2,
+        "qbricks-view: --plane: U [1.0, 1.0, 0.0] and V [2.0, 2.0, 0.0] are parallel: they span no plane")
+        .exact()
+        .absent(&["p.npy"]),
+    case(VIEW, &["probe", "w.qbk", "--plane", "z=0", "--resolution", "100000", "-o", "p.csv"], 2,
+        "qbricks-view: --resolution: expected 1..=16384, found 100000")
+        .exact()
+        .absent(&["p.csv"]),
+    case(VIEW, &["probe", "w.qbk", "--plane", "z=0", "--resolution", "16384,16384", "-o",
+        "p.npy"], 2,
+        "qbricks-view: a 16384x16384 plane of 2 field(s) needs about 2048 MiB, more than the limit of")
+        .limit_kib(1 << 20)
+        .absent(&["p.npy"]),
     // Issue 31: the commands that moved to `qbricks-lab` say so, whatever their arguments.
     case(BAKE, &["synth", "wake", "-o", "a.vdb"], 2,
         "qbricks-bake: synth: moved: run `qbricks-lab synth …` (same arguments)")

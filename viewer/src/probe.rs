@@ -1,6 +1,10 @@
-//! Field values and the gradient of one field at given points (`qbricks-view probe`).
+//! Field values and the gradient of one field at given points (`qbricks-view probe`), and
+//! every field on a plane sampled on a regular grid ([`plane`], written by [`plane_file`]).
 
 use crate::volume::Volume;
+
+pub mod plane;
+pub mod plane_file;
 
 /// One probed point: every field (NaN outside the data), the exact gradient of the
 /// reconstruction of the chosen field, and the unit shading normal the renderer uses

@@ -207,11 +207,41 @@ impl Volume<'_> {
         let r = self.region_at(p)? as usize;
         let e = self.eval(r, p, grad_field, None)?;
         let values = (0..self.fields.len())
-            .map(|f| self.eval_value(r, p, f).map_or(f32::NAN, |v| v as f32))
+            .map(|f| self.probed_value(r, p, f))
             .collect();
         Some(Sample {
             values,
             gradient: e.grad,
         })
+    }
+
+    /// The fields `fields` at the **world** point `p`, as [`Volume::sample`] reports them
+    /// (bit for bit: the same region, the same sums, rounded to `f32` alike), into `out`
+    /// (one value per field). `false` outside the data, where `out` is left as it was: no
+    /// region holds `p`, or the weights vanish there (they vanish for every field alike).
+    pub fn values_at(&self, p_world: [f64; 3], fields: &[usize], out: &mut [f32]) -> bool {
+        let p = self.to_local(p_world);
+        let Some(r) = self.region_at(p) else {
+            return false;
+        };
+        let r = r as usize;
+        let (Some(first), Some(&f0)) = (out.first_mut(), fields.first()) else {
+            return false;
+        };
+        // Where the weights vanish, `Volume::sample` (its `eval`) reports nothing at all.
+        let Some(v) = self.eval_value(r, p, f0) else {
+            return false;
+        };
+        *first = v as f32;
+        for (o, &f) in out.iter_mut().zip(fields).skip(1) {
+            *o = self.probed_value(r, p, f);
+        }
+        true
+    }
+
+    /// Field `f` at local `p` in region `r` as a probe reports it: the reconstruction
+    /// rounded to `f32`, NaN where the weights vanish.
+    fn probed_value(&self, r: usize, p: [f64; 3], f: usize) -> f32 {
+        self.eval_value(r, p, f).map_or(f32::NAN, |v| v as f32)
     }
 }

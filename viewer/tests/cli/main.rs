@@ -1,5 +1,6 @@
 //! The `qbricks-view` commands from the command line, one test binary: `--help` here,
-//! `render` and `probe` (`render_probe`), `info` (`info`); `bench` moved to `qbricks-lab`. The hostile
+//! `render` and `probe` (`render_probe`), `probe --plane` (`probe_plane`), `info` (`info`);
+//! `bench` moved to `qbricks-lab`. The hostile
 //! cases shared with `qbricks-bake` are the table in the root
 //! `tests/cross_crate/cli_cases.rs`.
 
@@ -7,6 +8,7 @@
 mod common;
 
 mod info;
+mod probe_plane;
 mod render_probe;
 
 #[test]

@@ -33,7 +33,7 @@ enum Command {
     Info(info::Args),
     /// Render a view to a PNG without a window.
     Render(Box<render::Args>),
-    /// Print field values and gradients at points.
+    /// Print field values and gradients at points, or sample every field on a plane.
     Probe(probe::Args),
     /// Moved to `qbricks-lab bench`.
     #[command(hide = true)]
