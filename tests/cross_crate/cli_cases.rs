@@ -485,7 +485,7 @@ const CASES: &[Case] = &[
         .absent(&["d.qbk"]),
     // 5c. A vec3 grid asked for as a field says what it is and what to do.
     case(BAKE, &["bake", "vec3_field.vdb", "-o", "v.qbk", "--fields", "q,vel2"], 2,
-        "qbricks-bake: vec3_field.vdb: --fields: \"vel2\" is a vec3 grid, and a field list takes q, speed, velocity and scalar grids: to bake it as the velocity, give --velocity vel2 (with --fields q,speed,velocity for its components)")
+        "qbricks-bake: vec3_field.vdb: --fields: \"vel2\" is a vec3 grid, and a field list takes q, speed, vorticity, lambda2, helicity, velocity and scalar grids: to bake it as the velocity, give --velocity vel2 (with --fields q,speed,velocity for its components)")
         .exact()
         .absent(&["v.qbk"]),
     // 5d. Non-finite values in two grids: both named, each with its count.
