@@ -1,8 +1,10 @@
-//! Closed-form flows with exact velocity gradients (and so exact Q).
+//! Closed-form flows with exact velocity gradients (and so exact Q, λ2, vorticity and
+//! helicity).
 //!
 //! These are the ground truth for accuracy tests and the source of the synthetic VDB scenes
 //! written by `qbricks-lab synth` (see [`crate::synth`]). Every flow gives its velocity and
-//! its velocity gradient in closed form at any point; Q follows from the gradient.
+//! its velocity gradient in closed form at any point; Q, λ2, the vorticity and the helicity
+//! follow from the gradient through [`preprocess::measures`], the functions the bake uses.
 //!
 //! | scene name | flow | what it is for |
 //! |---|---|---|
@@ -37,7 +39,19 @@ pub trait Flow: Send + Sync {
     fn gradient(&self, p: [f64; 3]) -> Gradient;
     /// Q-criterion at `p`.
     fn q(&self, p: [f64; 3]) -> f64 {
-        q_from_gradient(&self.gradient(p))
+        measures::q(&self.gradient(p))
+    }
+    /// Vorticity magnitude `|∇ × u|` at `p`.
+    fn vorticity(&self, p: [f64; 3]) -> f64 {
+        measures::vorticity_magnitude(&self.gradient(p))
+    }
+    /// λ2 at `p`: the middle eigenvalue of `S² + Ω²`, negative in vortex cores.
+    fn lambda2(&self, p: [f64; 3]) -> f64 {
+        measures::lambda2(&self.gradient(p))
+    }
+    /// Normalised helicity `u · ω / (|u| |ω|)` at `p`.
+    fn helicity(&self, p: [f64; 3]) -> f64 {
+        measures::helicity(&self.velocity(p), &self.gradient(p))
     }
     /// Whether the velocity is smooth (at least C²) in the ball of `radius` around `p`, so
     /// that finite-difference stencils of that reach converge there. Accuracy tests use it
@@ -47,10 +61,13 @@ pub trait Flow: Send + Sync {
     }
 }
 
-use preprocess::derive::q_from_gradient;
-/// The exact Q and speed of a flow use the same formulas as the baked fields, so a
-/// difference between them is the discretisation's, never a second formula's.
+/// The exact Q, λ2, vorticity, helicity and speed of a flow use the same formulas as the
+/// baked fields (on the closed-form gradient instead of the stencil's), so a difference
+/// between them is the discretisation's, never a second formula's.
 pub use preprocess::derive::speed;
+use preprocess::measures;
+#[cfg(test)]
+use preprocess::measures::q as q_from_gradient;
 
 /// Names accepted by [`scene`], in documentation order.
 pub(crate) const SCENE_NAMES: [&str; 6] = [
