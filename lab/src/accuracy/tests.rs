@@ -20,6 +20,57 @@ fn lamb_oseen_stored_q_converges_at_second_order() {
         assert!(res.reconstructed_q.points > 0);
         assert!(res.stored_q.rms_rel > 0.0 && res.stored_q.rms_rel < 0.5);
     }
+    // Vorticity and λ2 come from the same gradient: the same order (λ2 = −Q in this plane
+    // flow, so its errors are Q's up to the discrete divergence).
+    for (name, v) in [
+        ("vorticity", o.stored_vorticity_rms),
+        ("lambda2", o.stored_lambda2_rms),
+        ("reconstructed vorticity", o.reconstructed_vorticity_rms),
+        ("reconstructed lambda2", o.reconstructed_lambda2_rms),
+    ] {
+        assert!(v > 1.5 && v > o.stored_q_rms - 0.3, "{name} order {v}");
+    }
+    let res = &r.resolutions[1];
+    assert!((res.lambda2_scale - res.q_scale).abs() < 0.05 * res.q_scale);
+    assert!(res.vorticity_scale > 1.0 && res.vorticity_scale < 1.4);
+}
+
+#[test]
+fn nested_scene_reports_every_measure_across_the_level_boundary() {
+    let opts = AccuracyOptions {
+        scene: "burgers-nested".into(),
+        n0: vec![16, 32],
+        levels: 2,
+        points: 400,
+        rays: 16,
+        ..AccuracyOptions::default()
+    };
+    let r = accuracy(&opts, &mut |_| {}).expect("accuracy");
+    for res in &r.resolutions {
+        assert_eq!(res.levels.len(), 2);
+        for s in [
+            &res.boundary_q,
+            &res.boundary_vorticity,
+            &res.boundary_lambda2,
+        ] {
+            assert_eq!(s.points, 400);
+            assert!(s.rms_rel > 0.0 && s.rms_rel < 0.2, "{s:?}");
+        }
+        for l in &res.levels {
+            assert!(l.vorticity.points > 0 && l.lambda2.points == l.q.points);
+        }
+    }
+    let o = &r.orders[0];
+    for (name, v) in [
+        ("q", o.boundary_q_rms),
+        ("vorticity", o.boundary_vorticity_rms),
+        ("lambda2", o.boundary_lambda2_rms),
+    ] {
+        let v = v.expect("points near the boundary at both resolutions");
+        assert!(v > 1.5, "{name} order near the level boundary {v}");
+    }
+    assert!(o.stored_lambda2_rms > o.stored_q_rms - 0.3);
+    assert!(o.stored_vorticity_rms > o.stored_q_rms - 0.3);
 }
 
 #[test]
