@@ -436,7 +436,7 @@ const CASES: &[Case] = &[
         .absent(&["b.png"]).exact(),
     // 2. Estimated from n0 and the levels before anything is sampled.
     case(LAB, &["accuracy", "lamb-oseen", "--n0", "512"], 2,
-        "qbricks-lab: n0 512: measuring scene \"lamb-oseen\" (sampled, baked and compared in memory) needs about 10774 MiB, more than the limit of"),
+        "qbricks-lab: n0 512: measuring scene \"lamb-oseen\" (sampled, baked and compared in memory) needs about 8726 MiB, more than the limit of"),
     case(LAB, &["synth", "lamb-oseen", "--n0", "512", "-o", "a.vdb"], 2,
         "qbricks-lab: synth lamb-oseen: scene \"lamb-oseen\" with n0 512 in 1 grid(s) (262144 leaves, sampled and written) needs about 3895 MiB, more than the limit of")
         .absent(&["a.vdb"]),

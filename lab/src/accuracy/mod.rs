@@ -66,6 +66,10 @@ pub struct AccuracyOptions {
     /// The surface checks cast `rays`×`rays` camera rays (the viewer's default framing of
     /// the iso-surface).
     pub rays: u32,
+    /// The fields baked and compared, of [`MEASURED`]; `q` is always among them (the
+    /// reconstruction and surface checks use it). Fewer fields make a smaller archive: at
+    /// n0 512 a single grid's four fields pass the format's 2 GiB.
+    pub fields: Vec<String>,
 }
 
 impl Default for AccuracyOptions {
@@ -79,6 +83,7 @@ impl Default for AccuracyOptions {
             seed: 1,
             iso: None,
             rays: 128,
+            fields: MEASURED.map(String::from).to_vec(),
         }
     }
 }
@@ -101,6 +106,8 @@ pub enum AccuracyError {
     /// A resolution whose estimated peak ([`memory_needed`]) is over the shared limit.
     #[error("n0 {0}: {1}")]
     Memory(u32, LimitError),
+    #[error("--fields: {0} (the fields are q, which is always measured, speed, vorticity and lambda2)")]
+    Fields(String),
 }
 
 /// The baked fields compared with the flow, by file field name, in report order.
@@ -118,16 +125,39 @@ fn exact_values(e: &Exact) -> [f64; 4] {
     [e.q, e.speed, e.vorticity, e.lambda2]
 }
 
-/// Bytes per leaf cell a measurement holds once its bake is done: the file's fields (4
-/// bytes each) and the exact |value| of each quantity kept for its percentile (8 each),
-/// plus the bake's per-cell bookkeeping that is still held (bricks, regions).
-const MEASURE_CELL_BYTES: u64 = 4 * MEASURED.len() as u64 + 8 * MEASURED.len() as u64 + CELL_BYTES;
+/// Bytes per leaf cell a measurement of `fields` fields holds once its bake is done: the
+/// file's fields (4 bytes each) and the exact |value| of each quantity kept for its
+/// percentile (8 each), plus the bake's per-cell bookkeeping that is still held (bricks,
+/// regions).
+fn measure_cell_bytes(fields: u64) -> u64 {
+    (4 + 8) * fields + CELL_BYTES
+}
 
-/// The estimated peak of measuring `scene` at `n0`: the larger of its bake (the one
-/// estimate every bake is checked with, [`preprocess::bake::memory`]) and what the comparison
-/// holds afterwards, both with the sampled grids' leaves. From the layout alone, so it is
-/// known before anything is sampled.
-pub fn memory_needed(scene: &str, n0: u32, levels: u32) -> Result<u64, SynthError> {
+/// Which of [`MEASURED`] `fields` asks for; refuses unknown and repeated names and a list
+/// without `q`.
+fn measured(fields: &[String]) -> Result<[bool; 4], AccuracyError> {
+    let mut on = [false; 4];
+    for f in fields {
+        let k = MEASURED
+            .iter()
+            .position(|m| m == f)
+            .ok_or_else(|| AccuracyError::Fields(format!("unknown field \"{f}\"")))?;
+        if on[k] {
+            return Err(AccuracyError::Fields(format!("\"{f}\" is given twice")));
+        }
+        on[k] = true;
+    }
+    if !on[Q] {
+        return Err(AccuracyError::Fields("q is missing".into()));
+    }
+    Ok(on)
+}
+
+/// The estimated peak of measuring `fields` fields of `scene` at `n0`: the larger of its
+/// bake (the one estimate every bake is checked with, [`preprocess::bake::memory`]) and what
+/// the comparison holds afterwards, both with the sampled grids' leaves. From the layout
+/// alone, so it is known before anything is sampled.
+pub fn memory_needed(scene: &str, n0: u32, levels: u32, fields: u64) -> Result<u64, SynthError> {
     let layouts = scene_layout(scene, n0, levels)?;
     let grids: Vec<(GridFootprint, u64)> = layouts
         .iter()
@@ -138,11 +168,11 @@ pub fn memory_needed(scene: &str, n0: u32, levels: u32) -> Result<u64, SynthErro
             )
         })
         .collect();
-    let bake = bake_bytes(&grids, &[], MEASURED.len() as u64);
+    let bake = bake_bytes(&grids, &[], fields);
     let (decoded, cells) = grids.iter().fold((0u64, 0u64), |(d, c), (f, _)| {
         (d.saturating_add(f.decoded), c.saturating_add(f.cells))
     });
-    let after = decoded.saturating_add(cells.saturating_mul(MEASURE_CELL_BYTES));
+    let after = decoded.saturating_add(cells.saturating_mul(measure_cell_bytes(fields)));
     Ok(bake.max(after))
 }
 
@@ -255,14 +285,15 @@ pub struct OrderReport {
     pub n0_fine: u32,
     pub stored_q_rms: f64,
     pub stored_q_max: f64,
-    pub stored_speed_rms: f64,
-    pub stored_vorticity_rms: f64,
-    pub stored_vorticity_max: f64,
-    pub stored_lambda2_rms: f64,
-    pub stored_lambda2_max: f64,
+    /// Orders of the fields besides Q: `None` when a field is not measured (`fields`).
+    pub stored_speed_rms: Option<f64>,
+    pub stored_vorticity_rms: Option<f64>,
+    pub stored_vorticity_max: Option<f64>,
+    pub stored_lambda2_rms: Option<f64>,
+    pub stored_lambda2_max: Option<f64>,
     pub reconstructed_q_rms: f64,
-    pub reconstructed_vorticity_rms: f64,
-    pub reconstructed_lambda2_rms: f64,
+    pub reconstructed_vorticity_rms: Option<f64>,
+    pub reconstructed_lambda2_rms: Option<f64>,
     pub boundary_q_rms: Option<f64>,
     pub boundary_vorticity_rms: Option<f64>,
     pub boundary_lambda2_rms: Option<f64>,
@@ -338,32 +369,45 @@ fn measure(
         .into_iter()
         .map(AnyGrid::Vec3s)
         .collect();
+    let on = measured(&opts.fields)?;
+    let kinds = [
+        FieldKind::Q,
+        FieldKind::Speed,
+        FieldKind::Vorticity,
+        FieldKind::Lambda2,
+    ];
     let bopts = BakeOptions {
         stencil: opts.stencil,
-        fields: Some(vec![
-            FieldKind::Q,
-            FieldKind::Speed,
-            FieldKind::Vorticity,
-            FieldKind::Lambda2,
-        ]),
+        fields: Some(
+            kinds
+                .into_iter()
+                .zip(on)
+                .filter_map(|(k, on)| on.then_some(k))
+                .collect(),
+        ),
         ..BakeOptions::default()
     };
     let (file, summary) = bake(grids, &bopts).map_err(|e| AccuracyError::Bake(n0, e))?;
-    let fields: Vec<usize> = MEASURED
-        .iter()
-        .map(|name| field_index(&file, name))
-        .collect::<Result<_, _>>()?;
+    // The file's field of each measured quantity.
+    let mut fields: [Option<usize>; 4] = [None; 4];
+    for k in 0..MEASURED.len() {
+        if on[k] {
+            fields[k] = Some(field_index(&file, MEASURED[k])?);
+        }
+    }
+    let fq = field_index(&file, MEASURED[Q])?;
 
     // Errors at every leaf-cell centre, per level, brick after brick; the exact |value|s
     // are kept for the percentiles that scale them (room for all of them at once: growing
     // the lists by doubling would need half as much again while they move).
     let cells = summary.leaf_cells as usize;
     let mut magnitudes: Vec<Vec<f64>> = Vec::with_capacity(MEASURED.len());
-    for name in MEASURED {
+    for (name, on) in MEASURED.iter().zip(on) {
+        let room = if on { cells } else { 0 };
         magnitudes.push(
             with_capacity(
                 format!("the exact {name} at {} leaf cells", summary.leaf_cells),
-                cells,
+                room,
             )
             .map_err(|e| AccuracyError::Memory(n0, e))?,
         );
@@ -385,7 +429,8 @@ fn measure(
                     let p = [0, 1, 2].map(|a| b.origin[a] + c[a] as f64 * b.cell_width);
                     let i = b.first_value as usize + x + nx * (y + ny * z);
                     let exact = exact_values(&flow.exact(p));
-                    for (k, &f) in fields.iter().enumerate() {
+                    for (k, f) in fields.iter().enumerate() {
+                        let Some(f) = *f else { continue };
                         let e = f64::from(file.fields[f].values[i]) - exact[k];
                         all[k].add(e);
                         if let Some(l) = level.as_deref_mut() {
@@ -419,11 +464,11 @@ fn measure(
     let (lo, hi) = (file.bounds.min, file.bounds.max);
     let mut rec: [Acc; 4] = Default::default();
     let reconstruct_at = |p: [f64; 3], acc: &mut [Acc; 4]| {
-        if let Some(v) = reconstruct(&file, fields[Q], p) {
+        if let Some(v) = reconstruct(&file, fq, p) {
             let exact = exact_values(&flow.exact(p));
             acc[Q].add(v - exact[Q]);
             for k in RECONSTRUCTED.into_iter().filter(|&k| k != Q) {
-                if let Some(v) = reconstruct(&file, fields[k], p) {
+                if let Some(v) = fields[k].and_then(|f| reconstruct(&file, f, p)) {
                     acc[k].add(v - exact[k]);
                 }
             }
@@ -494,6 +539,7 @@ pub fn accuracy(
     if opts.n0.is_empty() {
         return Err(AccuracyError::NoResolutions);
     }
+    let nfields = measured(&opts.fields)?.iter().filter(|&&on| on).count() as u64;
     let iso = match opts.iso {
         Some(v) => v,
         None => default_iso(flow.as_ref(), opts)?,
@@ -501,7 +547,7 @@ pub fn accuracy(
     // Every resolution is checked before the first is sampled: a run that cannot finish
     // does not start.
     for &n0 in &opts.n0 {
-        let need = memory_needed(&opts.scene, n0, opts.levels)?;
+        let need = memory_needed(&opts.scene, n0, opts.levels, nfields)?;
         check_memory(
             format!(
                 "measuring scene \"{}\" (sampled, baked and compared in memory)",
@@ -524,29 +570,29 @@ pub fn accuracy(
         .map(|w| {
             let (a, b) = (w[0], w[1]);
             let o = |ea: f64, eb: f64| order(ea, eb, a.finest_width, b.finest_width);
-            // The order of RMS errors measured at both resolutions.
+            // The order of errors measured at both resolutions (RMS, or max).
             let both = |ea: &ErrorStats, eb: &ErrorStats| {
                 (ea.points > 0 && eb.points > 0).then(|| o(ea.rms, eb.rms))
+            };
+            let both_max = |ea: &ErrorStats, eb: &ErrorStats| {
+                (ea.points > 0 && eb.points > 0).then(|| o(ea.max, eb.max))
             };
             OrderReport {
                 n0_coarse: a.n0,
                 n0_fine: b.n0,
                 stored_q_rms: o(a.stored_q.rms, b.stored_q.rms),
                 stored_q_max: o(a.stored_q.max, b.stored_q.max),
-                stored_speed_rms: o(a.stored_speed.rms, b.stored_speed.rms),
-                stored_vorticity_rms: o(a.stored_vorticity.rms, b.stored_vorticity.rms),
-                stored_vorticity_max: o(a.stored_vorticity.max, b.stored_vorticity.max),
-                stored_lambda2_rms: o(a.stored_lambda2.rms, b.stored_lambda2.rms),
-                stored_lambda2_max: o(a.stored_lambda2.max, b.stored_lambda2.max),
+                stored_speed_rms: both(&a.stored_speed, &b.stored_speed),
+                stored_vorticity_rms: both(&a.stored_vorticity, &b.stored_vorticity),
+                stored_vorticity_max: both_max(&a.stored_vorticity, &b.stored_vorticity),
+                stored_lambda2_rms: both(&a.stored_lambda2, &b.stored_lambda2),
+                stored_lambda2_max: both_max(&a.stored_lambda2, &b.stored_lambda2),
                 reconstructed_q_rms: o(a.reconstructed_q.rms, b.reconstructed_q.rms),
-                reconstructed_vorticity_rms: o(
-                    a.reconstructed_vorticity.rms,
-                    b.reconstructed_vorticity.rms,
+                reconstructed_vorticity_rms: both(
+                    &a.reconstructed_vorticity,
+                    &b.reconstructed_vorticity,
                 ),
-                reconstructed_lambda2_rms: o(
-                    a.reconstructed_lambda2.rms,
-                    b.reconstructed_lambda2.rms,
-                ),
+                reconstructed_lambda2_rms: both(&a.reconstructed_lambda2, &b.reconstructed_lambda2),
                 boundary_q_rms: both(&a.boundary_q, &b.boundary_q),
                 boundary_vorticity_rms: both(&a.boundary_vorticity, &b.boundary_vorticity),
                 boundary_lambda2_rms: both(&a.boundary_lambda2, &b.boundary_lambda2),

@@ -28,6 +28,7 @@ fn lamb_oseen_stored_q_converges_at_second_order() {
         ("reconstructed vorticity", o.reconstructed_vorticity_rms),
         ("reconstructed lambda2", o.reconstructed_lambda2_rms),
     ] {
+        let v = v.expect("measured at both resolutions");
         assert!(v > 1.5 && v > o.stored_q_rms - 0.3, "{name} order {v}");
     }
     let res = &r.resolutions[1];
@@ -69,8 +70,47 @@ fn nested_scene_reports_every_measure_across_the_level_boundary() {
         let v = v.expect("points near the boundary at both resolutions");
         assert!(v > 1.5, "{name} order near the level boundary {v}");
     }
-    assert!(o.stored_lambda2_rms > o.stored_q_rms - 0.3);
-    assert!(o.stored_vorticity_rms > o.stored_q_rms - 0.3);
+    for v in [o.stored_lambda2_rms, o.stored_vorticity_rms] {
+        assert!(v.expect("measured") > o.stored_q_rms - 0.3);
+    }
+}
+
+#[test]
+fn fields_choose_what_is_baked_and_q_is_always_measured() {
+    let opts = AccuracyOptions {
+        scene: "abc".into(),
+        n0: vec![8, 16],
+        points: 50,
+        rays: 8,
+        fields: vec!["q".into(), "lambda2".into()],
+        ..AccuracyOptions::default()
+    };
+    let r = accuracy(&opts, &mut |_| {}).expect("accuracy");
+    for res in &r.resolutions {
+        assert!(res.stored_q.points > 0 && res.stored_lambda2.points > 0);
+        assert_eq!(res.stored_speed.points, 0);
+        assert_eq!(res.stored_vorticity.points, 0);
+        assert_eq!(res.reconstructed_vorticity.points, 0);
+        assert!(res.reconstructed_lambda2.points > 0);
+    }
+    let o = &r.orders[0];
+    assert!(o.stored_lambda2_rms.is_some() && o.reconstructed_lambda2_rms.is_some());
+    assert!(o.stored_speed_rms.is_none() && o.stored_vorticity_rms.is_none());
+    // Fewer fields, less memory.
+    let need = |n| memory_needed("abc", 256, 1, n).expect("layout");
+    assert!(need(2) < need(4));
+    for (fields, what) in [
+        (vec!["speed"], "q is missing"),
+        (vec!["q", "helicity"], "unknown field \"helicity\""),
+        (vec!["q", "q"], "\"q\" is given twice"),
+    ] {
+        let opts = AccuracyOptions {
+            fields: fields.into_iter().map(String::from).collect(),
+            ..opts.clone()
+        };
+        let e = accuracy(&opts, &mut |_| {}).expect_err("refused");
+        assert!(e.to_string().contains(what), "{e}");
+    }
 }
 
 #[test]

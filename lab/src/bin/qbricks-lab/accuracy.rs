@@ -44,6 +44,10 @@ pub struct Args {
     /// The surface checks cast RAYS×RAYS camera rays with the viewer's `exact` strategy.
     #[arg(long, default_value_t = 128)]
     pub rays: u32,
+    /// Fields baked and compared, comma separated: q (always), speed, vorticity, lambda2.
+    /// Fewer fields make a smaller archive (it must stay under 2 GiB).
+    #[arg(long, value_delimiter = ',', default_value = "q,speed,vorticity,lambda2")]
+    pub fields: Vec<String>,
     /// Print the report as JSON.
     #[arg(long)]
     pub json: bool,
@@ -76,6 +80,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         points: args.points,
         iso: args.iso,
         rays: args.rays,
+        fields: args.fields.iter().map(|f| f.trim().to_string()).collect(),
         ..AccuracyOptions::default()
     };
     let bar = ProgressBar::with_draw_target(
@@ -164,6 +169,10 @@ fn write_text(out: &mut impl Write, r: &AccuracyReport) -> std::io::Result<()> {
             ),
         ];
         for (name, stored, rec, near) in rows {
+            if stored.points == 0 {
+                // Not measured (--fields).
+                continue;
+            }
             writeln!(
                 out,
                 "  {:<10} {:<21} {:<21} {}",
@@ -174,17 +183,23 @@ fn write_text(out: &mut impl Write, r: &AccuracyReport) -> std::io::Result<()> {
             )?;
         }
         for l in &res.levels {
-            writeln!(
-                out,
-                "    level {} (h {:.5}, {} cells): Q {}   speed {}   vorticity {}   lambda2 {}",
+            let mut line = format!(
+                "    level {} (h {:.5}, {} cells): Q {}",
                 l.level,
                 l.cell_width,
                 l.q.points,
-                e(&l.q),
-                e(&l.speed),
-                e(&l.vorticity),
-                e(&l.lambda2)
-            )?;
+                e(&l.q)
+            );
+            for (name, s) in [
+                ("speed", &l.speed),
+                ("vorticity", &l.vorticity),
+                ("lambda2", &l.lambda2),
+            ] {
+                if s.points > 0 {
+                    line += &format!("   {name} {}", e(s));
+                }
+            }
+            writeln!(out, "{line}")?;
         }
         let s = &res.surface;
         writeln!(
@@ -207,36 +222,39 @@ fn write_text(out: &mut impl Write, r: &AccuracyReport) -> std::io::Result<()> {
             "  {:<10} {:<17} {:<15} near level boundaries",
             "field", "stored rms (max)", "reconstructed"
         )?;
+        let with_max = |rms: Option<f64>, max: Option<f64>| match (rms, max) {
+            (Some(r), Some(m)) => Some(format!("{r:.2} ({m:.2})")),
+            _ => None,
+        };
         let rows = [
             (
                 "Q",
-                format!("{:.2} ({:.2})", o.stored_q_rms, o.stored_q_max),
+                Some(format!("{:.2} ({:.2})", o.stored_q_rms, o.stored_q_max)),
                 opt(Some(o.reconstructed_q_rms)),
                 opt(o.boundary_q_rms),
             ),
             (
                 "speed",
-                format!("{:.2}", o.stored_speed_rms),
+                o.stored_speed_rms.map(|v| format!("{v:.2}")),
                 "-".to_string(),
                 "-".to_string(),
             ),
             (
                 "vorticity",
-                format!(
-                    "{:.2} ({:.2})",
-                    o.stored_vorticity_rms, o.stored_vorticity_max
-                ),
-                opt(Some(o.reconstructed_vorticity_rms)),
+                with_max(o.stored_vorticity_rms, o.stored_vorticity_max),
+                opt(o.reconstructed_vorticity_rms),
                 opt(o.boundary_vorticity_rms),
             ),
             (
                 "lambda2",
-                format!("{:.2} ({:.2})", o.stored_lambda2_rms, o.stored_lambda2_max),
-                opt(Some(o.reconstructed_lambda2_rms)),
+                with_max(o.stored_lambda2_rms, o.stored_lambda2_max),
+                opt(o.reconstructed_lambda2_rms),
                 opt(o.boundary_lambda2_rms),
             ),
         ];
         for (name, stored, rec, near) in rows {
+            // A field not measured (--fields) has no stored order.
+            let Some(stored) = stored else { continue };
             writeln!(out, "  {name:<10} {stored:<17} {rec:<15} {near}")?;
         }
         if let (Some(p), Some(n)) = (o.surface_position_rms, o.normal_angle_rms) {
