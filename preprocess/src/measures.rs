@@ -209,7 +209,11 @@ mod tests {
             [1.0, 1.0 + 1e-12, 5.0],
         ];
         for want in cases {
-            for (axis, angle) in [([1.0, 0.0, 0.0], 0.3), ([1.0, 2.0, 3.0], 1.1), ([-2.0, 0.5, 1.0], 2.9)] {
+            for (axis, angle) in [
+                ([1.0, 0.0, 0.0], 0.3),
+                ([1.0, 2.0, 3.0], 1.1),
+                ([-2.0, 0.5, 1.0], 2.9),
+            ] {
                 let m = rotated(&diag(want), axis, angle);
                 let e = symmetric_eigenvalues(&m);
                 assert!(e.iter().all(|v| v.is_finite()), "{want:?}: {e:?}");
@@ -282,7 +286,9 @@ mod tests {
     fn lambda2_is_minus_q_in_plane_flows() {
         let mut x = 7u64;
         let mut next = || {
-            x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            x = x
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             (x >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
         };
         for _ in 0..100 {

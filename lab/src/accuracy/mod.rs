@@ -106,7 +106,9 @@ pub enum AccuracyError {
     /// A resolution whose estimated peak ([`memory_needed`]) is over the shared limit.
     #[error("n0 {0}: {1}")]
     Memory(u32, LimitError),
-    #[error("--fields: {0} (the fields are q, which is always measured, speed, vorticity and lambda2)")]
+    #[error(
+        "--fields: {0} (the fields are q, which is always measured, speed, vorticity and lambda2)"
+    )]
     Fields(String),
 }
 

@@ -103,7 +103,11 @@ mod tests {
             }
             let s = super::super::speed(&u);
             assert!((unit.vorticity(p) - s).abs() < 1e-14);
-            assert!((unit.helicity(p) - 1.0).abs() < 1e-14, "{}", unit.helicity(p));
+            assert!(
+                (unit.helicity(p) - 1.0).abs() < 1e-14,
+                "{}",
+                unit.helicity(p)
+            );
             assert!((mirrored.helicity(p) + 1.0).abs() < 1e-14);
             // The lab's scene: ω = k u with k = π.
             let f = Abc::sample_scene();

@@ -146,7 +146,10 @@ fn cli_bakes_the_vortex_measures_with_the_ranges_of_the_flow() {
             for k in -16..16 {
                 let p = [i, j, k].map(|c| (f64::from(c) + 0.5) * h);
                 let e = flow.exact(p);
-                for (r, v) in exact.iter_mut().zip([e.q, e.lambda2, e.vorticity, e.helicity]) {
+                for (r, v) in exact
+                    .iter_mut()
+                    .zip([e.q, e.lambda2, e.vorticity, e.helicity])
+                {
                     *r = [r[0].min(v), r[1].max(v)];
                 }
             }
@@ -163,7 +166,10 @@ fn cli_bakes_the_vortex_measures_with_the_ranges_of_the_flow() {
     assert!(exact[1][0] < -0.4 && exact[2][1] > 1.2, "{exact:?}");
     // The axial flow runs along ω above z = 0 and against it below.
     let (lo, hi) = (fields[3].1, fields[3].2);
-    assert!((-1.0..-0.9).contains(&lo) && hi <= 1.0 && hi > 0.9, "{lo} {hi}");
+    assert!(
+        (-1.0..-0.9).contains(&lo) && hi <= 1.0 && hi > 0.9,
+        "{lo} {hi}"
+    );
 
     // An unknown name is still taken for a scalar grid the file lacks.
     let out = bake("q,lambda3");

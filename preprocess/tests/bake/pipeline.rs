@@ -188,7 +188,10 @@ fn rms_errors(
         }
     }
     assert!(near.1 > 0);
-    ((all.0 / all.1 as f64).sqrt(), (near.0 / near.1 as f64).sqrt())
+    (
+        (all.0 / all.1 as f64).sqrt(),
+        (near.0 / near.1 as f64).sqrt(),
+    )
 }
 
 /// Vorticity and λ2 come from Q's gradient stencil, with its cross-level treatment, so they
@@ -199,7 +202,9 @@ fn vorticity_and_lambda2_converge_like_q_across_a_level_boundary() {
     use qbricks_preprocess::measures;
     let exact: [(&str, &dyn Fn([f64; 3]) -> f64); 3] = [
         ("q", &abc_q),
-        ("vorticity", &|p| measures::vorticity_magnitude(&abc_gradient(p))),
+        ("vorticity", &|p| {
+            measures::vorticity_magnitude(&abc_gradient(p))
+        }),
         ("lambda2", &|p| measures::lambda2(&abc_gradient(p))),
     ];
     for stencil in [Stencil::Central, Stencil::CrossLevel] {
@@ -224,7 +229,11 @@ fn vorticity_and_lambda2_converge_like_q_across_a_level_boundary() {
             assert!(h.max <= 1.0 && h.min >= -1.0, "{h:?}");
             let hv = &file.fields[field(&file, "helicity")].values;
             let aligned = hv.iter().filter(|&&v| v > 0.95).count();
-            assert!(aligned as f64 > 0.95 * hv.len() as f64, "{aligned} of {}", hv.len());
+            assert!(
+                aligned as f64 > 0.95 * hv.len() as f64,
+                "{aligned} of {}",
+                hv.len()
+            );
             // Q from the shared gradient is the Q of a plain bake, bit for bit.
             let (plain, _) = bake(two_level(n, &abc), &opts(stencil)).expect("bake");
             assert_eq!(
@@ -240,7 +249,11 @@ fn vorticity_and_lambda2_converge_like_q_across_a_level_boundary() {
             let q = order(0, near);
             eprintln!(
                 "{stencil:?} {}: orders q {q:.2}, vorticity {:.2}, lambda2 {:.2}",
-                if near { "near the boundary" } else { "all cells" },
+                if near {
+                    "near the boundary"
+                } else {
+                    "all cells"
+                },
                 order(1, near),
                 order(2, near)
             );

@@ -326,7 +326,10 @@ mod tests {
         assert_eq!(default_iso(&range("lambda2", -0.5, 0.0)).0, 0.1 * -0.5f64);
         let (iso, _) = default_iso(&range("q", -0.5, 0.04));
         assert!((iso - 0.004).abs() < 1e-7);
-        assert_eq!(default_iso(&range("lambda2", 0.2, 0.4)).0, 0.5 * (0.2f32 as f64 + 0.4f32 as f64));
+        assert_eq!(
+            default_iso(&range("lambda2", 0.2, 0.4)).0,
+            0.5 * (0.2f32 as f64 + 0.4f32 as f64)
+        );
         // As the view's iso field (λ2 the only field), and by name, not by shape.
         let s = ViewState::default_for([0.0; 3], [1.0; 3], &[range("lambda2", -0.5, 0.04)]);
         s.validate().expect("valid");

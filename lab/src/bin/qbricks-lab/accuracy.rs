@@ -46,7 +46,11 @@ pub struct Args {
     pub rays: u32,
     /// Fields baked and compared, comma separated: q (always), speed, vorticity, lambda2.
     /// Fewer fields make a smaller archive (it must stay under 2 GiB).
-    #[arg(long, value_delimiter = ',', default_value = "q,speed,vorticity,lambda2")]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "q,speed,vorticity,lambda2"
+    )]
     pub fields: Vec<String>,
     /// Print the report as JSON.
     #[arg(long)]
