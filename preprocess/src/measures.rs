@@ -13,6 +13,9 @@
 //! - `ω = ∇ × u` and its magnitude ([`vorticity`], [`vorticity_magnitude`]);
 //! - `u · ω / (|u| |ω|)` in [−1, 1], zero where either vector is ([`helicity`]).
 
+// Tensor formulas read best with explicit indices.
+#![allow(clippy::needless_range_loop)]
+
 /// Velocity gradient `g[i][j] = ∂uᵢ/∂xⱼ`.
 pub type Gradient = [[f64; 3]; 3];
 

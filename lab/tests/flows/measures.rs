@@ -17,7 +17,8 @@ use qbricks_preprocess::grid::AnyGrid;
 use qbricks_preprocess::vdb::write::Compression;
 
 /// The measures compared, by file field name, with their exact values.
-const MEASURES: [(&str, fn(&Exact) -> f64); 3] = [
+type Pick = fn(&Exact) -> f64;
+const MEASURES: [(&str, Pick); 3] = [
     ("q", |e| e.q),
     ("vorticity", |e| e.vorticity),
     ("lambda2", |e| e.lambda2),

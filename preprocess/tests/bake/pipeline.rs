@@ -200,12 +200,13 @@ fn rms_errors(
 #[test]
 fn vorticity_and_lambda2_converge_like_q_across_a_level_boundary() {
     use qbricks_preprocess::measures;
-    let exact: [(&str, &dyn Fn([f64; 3]) -> f64); 3] = [
-        ("q", &abc_q),
-        ("vorticity", &|p| {
+    type Exact = fn([f64; 3]) -> f64;
+    let exact: [(&str, Exact); 3] = [
+        ("q", abc_q),
+        ("vorticity", |p| {
             measures::vorticity_magnitude(&abc_gradient(p))
         }),
-        ("lambda2", &|p| measures::lambda2(&abc_gradient(p))),
+        ("lambda2", |p| measures::lambda2(&abc_gradient(p))),
     ];
     for stencil in [Stencil::Central, Stencil::CrossLevel] {
         let mut errs = vec![];
@@ -221,7 +222,7 @@ fn vorticity_and_lambda2_converge_like_q_across_a_level_boundary() {
             };
             let (file, s) = bake(two_level(n, &abc), &o).expect("bake");
             let w = L / n as f64;
-            errs.push(exact.map(|(name, f)| rms_errors(&file, name, f, 0.1 * L, w)));
+            errs.push(exact.map(|(name, f)| rms_errors(&file, name, &f, 0.1 * L, w)));
             // ω = u: the helicity is 1 up to the stencil's error (which the direction of a
             // small u near a stagnation point does not survive), never past [−1, 1].
             let h = &s.fields[3];

@@ -143,13 +143,11 @@ fn write_text(out: &mut impl Write, r: &AccuracyReport) -> std::io::Result<()> {
             res.vorticity_scale,
             res.lambda2_scale
         )?;
+        let reconstructed = format!("reconstructed ({})", res.reconstructed_q.points);
         writeln!(
             out,
-            "  {:<10} {:<21} {:<21} {}",
-            "field",
-            "stored",
-            format!("reconstructed ({})", res.reconstructed_q.points),
-            format!("near level boundaries ({})", res.boundary_q.points)
+            "  {:<10} {:<21} {:<21} near level boundaries ({})",
+            "field", "stored", reconstructed, res.boundary_q.points
         )?;
         let rows: [(&str, &ErrorStats, Option<&ErrorStats>, Option<&ErrorStats>); 4] = [
             (
