@@ -1,4 +1,5 @@
-//! Derived fields at cell centres: velocity gradient, Q-criterion, speed.
+//! Derived fields at cell centres: the velocity gradient (from which
+//! [`crate::measures`] makes Q, λ2, vorticity and helicity) and speed.
 //!
 //! The gradient uses central differences (2·dx) on the cell's own grid; covered cells are
 //! valid neighbours. Where a grid's own neighbour is missing (its edge or an inactive cell):
@@ -36,18 +37,6 @@ pub enum Stencil {
     Central,
     /// Neighbour velocity from the reconstructed multi-level field at edges.
     CrossLevel,
-}
-
-/// `Q = ½(‖Ω‖² − ‖S‖²) = −½ Σᵢⱼ gᵢⱼ gⱼᵢ` for `g[i][j] = ∂uᵢ/∂xⱼ`.
-pub fn q_from_gradient(g: &[[f64; 3]; 3]) -> f64 {
-    let mut s = 0.0;
-    for (i, row) in g.iter().enumerate() {
-        for (j, gij) in row.iter().enumerate() {
-            s += gij * g[j][i];
-        }
-    }
-    // `+ 0.0` turns −0 (zero gradient) into +0 so that ranges print as 0.
-    -0.5 * s + 0.0
 }
 
 /// Euclidean norm of a velocity.
@@ -253,19 +242,4 @@ pub(crate) fn gradient(
         }
     }
     g
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn q_of_rotation_and_strain() {
-        // Solid-body rotation about z: u = (-y, x, 0): Q = 1.
-        let rot = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]];
-        assert!((q_from_gradient(&rot) - 1.0).abs() < 1e-15);
-        // Pure strain u = (x, -y, 0): Q = -1.
-        let strain = [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 0.0]];
-        assert!((q_from_gradient(&strain) + 1.0).abs() < 1e-15);
-    }
 }

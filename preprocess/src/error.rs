@@ -156,7 +156,7 @@ pub enum BakeError {
     /// `available` is "scalar grids: …" or says that there is none.
     #[error("--fields: no scalar grid named \"{name}\" ({available})")]
     FieldGridNotFound { name: String, available: String },
-    #[error("--fields: \"{name}\" is a vec3 grid, and a field list takes q, speed, velocity and scalar grids: to bake it as the velocity, give --velocity {name} (with --fields q,speed,velocity for its components)")]
+    #[error("--fields: \"{name}\" is a vec3 grid, and a field list takes q, speed, vorticity, lambda2, helicity, velocity and scalar grids: to bake it as the velocity, give --velocity {name} (with --fields q,speed,velocity for its components)")]
     FieldIsVector { name: String },
     #[error("--grid names several scalar grids ({names}): a scalar grid is baked as its own field, one per bake (or bake the velocity with --fields q,speed,<grid>,…)")]
     SeveralScalarGrids { names: String },
@@ -237,8 +237,8 @@ mod tests {
         let grids = [("vel", GridKind::Vector), ("vel2", GridKind::Vector)];
         assert_eq!(
             field_grid_not_found("vel2", &grids).to_string(),
-            "--fields: \"vel2\" is a vec3 grid, and a field list takes q, speed, velocity and \
-             scalar grids: to bake it as the velocity, give --velocity vel2 (with --fields \
+            "--fields: \"vel2\" is a vec3 grid, and a field list takes q, speed, vorticity, \
+             lambda2, helicity, velocity and scalar grids: to bake it as the velocity, give --velocity vel2 (with --fields \
              q,speed,velocity for its components)"
         );
         assert_eq!(

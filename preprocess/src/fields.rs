@@ -19,6 +19,12 @@ pub enum FieldKind {
     Q,
     /// Velocity magnitude.
     Speed,
+    /// Vorticity magnitude `|∇ × u|`.
+    Vorticity,
+    /// λ2 criterion: the middle eigenvalue of `S² + Ω²`, negative in vortex cores.
+    Lambda2,
+    /// Normalised helicity `u · ω / (|u| |ω|)`, in [−1, 1].
+    Helicity,
     /// The three velocity components (three fields `velocity_x`, `velocity_y`, `velocity_z`).
     Velocity,
     /// The scalar grid(s) of this name, sampled trilinearly at the leaf-cell centres.
@@ -26,12 +32,16 @@ pub enum FieldKind {
 }
 
 impl FieldKind {
-    /// `q`, `speed`, `velocity`, or `None` for any other name (a scalar grid's, for callers
-    /// that take extra fields: see [`FieldKind::parse_or_grid`]).
+    /// `q`, `speed`, `vorticity`, `lambda2`, `helicity`, `velocity`, or `None` for any other
+    /// name (a scalar grid's, for callers that take extra fields: see
+    /// [`FieldKind::parse_or_grid`]).
     pub(crate) fn parse(s: &str) -> Option<FieldKind> {
         match s.trim().to_ascii_lowercase().as_str() {
             "q" => Some(FieldKind::Q),
             "speed" => Some(FieldKind::Speed),
+            "vorticity" => Some(FieldKind::Vorticity),
+            "lambda2" => Some(FieldKind::Lambda2),
+            "helicity" => Some(FieldKind::Helicity),
             "velocity" => Some(FieldKind::Velocity),
             _ => None,
         }
@@ -52,11 +62,23 @@ impl FieldKind {
         match self {
             FieldKind::Q => vec!["q".into()],
             FieldKind::Speed => vec!["speed".into()],
+            FieldKind::Vorticity => vec!["vorticity".into()],
+            FieldKind::Lambda2 => vec!["lambda2".into()],
+            FieldKind::Helicity => vec!["helicity".into()],
             FieldKind::Velocity => ["velocity_x", "velocity_y", "velocity_z"]
                 .map(String::from)
                 .to_vec(),
             FieldKind::Scalar(name) => vec![name.clone()],
         }
+    }
+
+    /// Whether the field is made from the velocity gradient (one stencil for all of them,
+    /// computed once per cell).
+    pub(crate) fn needs_gradient(&self) -> bool {
+        matches!(
+            self,
+            FieldKind::Q | FieldKind::Vorticity | FieldKind::Lambda2 | FieldKind::Helicity
+        )
     }
 }
 

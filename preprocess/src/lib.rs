@@ -12,6 +12,7 @@ pub mod grid;
 pub mod inputs;
 pub mod kdtree;
 pub mod levels;
+pub mod measures;
 pub mod nonfinite;
 pub mod reconstruct;
 pub mod regions;

@@ -470,7 +470,7 @@ const CASES: &[Case] = &[
         .absent(&["b.png"]).exact(),
     // 2. Estimated from n0 and the levels before anything is sampled.
     case(LAB, &["accuracy", "lamb-oseen", "--n0", "512"], 2,
-        "qbricks-lab: n0 512: measuring scene \"lamb-oseen\" (sampled, baked and compared in memory) needs about 10774 MiB, more than the limit of"),
+        "qbricks-lab: n0 512: measuring scene \"lamb-oseen\" (sampled, baked and compared in memory) needs about 8726 MiB, more than the limit of"),
     case(LAB, &["synth", "lamb-oseen", "--n0", "512", "-o", "a.vdb"], 2,
         "qbricks-lab: synth lamb-oseen: scene \"lamb-oseen\" with n0 512 in 1 grid(s) (262144 leaves, sampled and written) needs about 3895 MiB, more than the limit of")
         .absent(&["a.vdb"]),
@@ -519,7 +519,7 @@ const CASES: &[Case] = &[
         .absent(&["d.qbk"]),
     // 5c. A vec3 grid asked for as a field says what it is and what to do.
     case(BAKE, &["bake", "vec3_field.vdb", "-o", "v.qbk", "--fields", "q,vel2"], 2,
-        "qbricks-bake: vec3_field.vdb: --fields: \"vel2\" is a vec3 grid, and a field list takes q, speed, velocity and scalar grids: to bake it as the velocity, give --velocity vel2 (with --fields q,speed,velocity for its components)")
+        "qbricks-bake: vec3_field.vdb: --fields: \"vel2\" is a vec3 grid, and a field list takes q, speed, vorticity, lambda2, helicity, velocity and scalar grids: to bake it as the velocity, give --velocity vel2 (with --fields q,speed,velocity for its components)")
         .exact()
         .absent(&["v.qbk"]),
     // 5d. Non-finite values in two grids: both named, each with its count.

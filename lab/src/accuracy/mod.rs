@@ -1,14 +1,15 @@
 //! How accurate is the data model? Bakes an analytic `synth` flow at several resolutions and
 //! compares what the file stores, and what the basis-method reconstruction makes of it, with
-//! the exact Q and speed of the flow.
+//! the exact Q, speed, vorticity magnitude and λ2 of the flow ([`MEASURED`]; the three
+//! made from the velocity gradient share the bake's one stencil).
 //!
 //! The stored values are checked at every leaf-cell centre (per level, since a coarse level
-//! carries a coarse stencil's error); the reconstruction at random points in the data and at
-//! random points within two coarse cells of a level boundary, where cracks and blending
-//! errors would show. Errors are given absolute and relative to the 99th percentile of the
-//! exact |Q| (resp. speed) over the leaf-cell centres, so flows of different strength
-//! compare; the observed order of convergence between two resolutions is
-//! `log2(e_coarse / e_fine) / log2(h_coarse / h_fine)`.
+//! carries a coarse stencil's error); the reconstruction of Q, vorticity and λ2 at random
+//! points in the data and at random points within two coarse cells of a level boundary
+//! (nested scenes), where cracks and blending errors would show. Errors are given absolute
+//! and relative to the 99th percentile of the exact |value| over the leaf-cell centres, so
+//! flows of different strength compare; the observed order of convergence between two
+//! resolutions is `log2(e_coarse / e_fine) / log2(h_coarse / h_fine)`.
 //!
 //! The iso-surface is checked where the viewer finds it: rays cast through each bake with
 //! the viewer's own `exact` strategy and shading (this crate links the viewer, never the
@@ -30,11 +31,12 @@ use viewer::volume::Volume;
 
 use files::limits::{check_memory, with_capacity, LimitError};
 
-use crate::analytic::{self, Flow};
+use crate::analytic::{self, Exact, Flow};
 use crate::synth::{scene_grids, scene_layout, SynthError};
 use preprocess::bake::memory::{bake_bytes, GridFootprint, CELL_BYTES, VELOCITY_SLOT_BYTES};
 use preprocess::bake::{bake, BakeError, BakeOptions};
 use preprocess::derive::Stencil;
+use preprocess::fields::FieldKind;
 use preprocess::grid::{AnyGrid, Vec3};
 use preprocess::reconstruct::reconstruct_over;
 
@@ -64,6 +66,10 @@ pub struct AccuracyOptions {
     /// The surface checks cast `rays`×`rays` camera rays (the viewer's default framing of
     /// the iso-surface).
     pub rays: u32,
+    /// The fields baked and compared, of [`MEASURED`]; `q` is always among them (the
+    /// reconstruction and surface checks use it). Fewer fields make a smaller archive: at
+    /// n0 512 a single grid's four fields pass the format's 2 GiB.
+    pub fields: Vec<String>,
 }
 
 impl Default for AccuracyOptions {
@@ -77,13 +83,14 @@ impl Default for AccuracyOptions {
             seed: 1,
             iso: None,
             rays: 128,
+            fields: MEASURED.map(String::from).to_vec(),
         }
     }
 }
 
 #[derive(Debug, thiserror::Error)]
 pub enum AccuracyError {
-    #[error("unknown scene `{0}`: expected wake, wake-single, lamb-oseen, burgers or abc")]
+    #[error("unknown scene `{0}`: expected one of {names}", names = analytic::SCENE_NAMES.join(", "))]
     UnknownScene(String),
     #[error(transparent)]
     Synth(#[from] SynthError),
@@ -99,29 +106,60 @@ pub enum AccuracyError {
     /// A resolution whose estimated peak ([`memory_needed`]) is over the shared limit.
     #[error("n0 {0}: {1}")]
     Memory(u32, LimitError),
+    #[error(
+        "--fields: {0} (the fields are q, which is always measured, speed, vorticity and lambda2)"
+    )]
+    Fields(String),
 }
 
-/// Bytes per leaf cell a measurement holds once its bake is done: the file's two fields
-/// (8), the exact and stored values kept per cell (48) and one sorted copy of the exact
-/// values for the percentile (8), plus the bake's per-cell bookkeeping that is still held
-/// (bricks, regions).
-const MEASURE_CELL_BYTES: u64 = 8 + std::mem::size_of::<CellVal>() as u64 + 8 + CELL_BYTES;
+/// The baked fields compared with the flow, by file field name, in report order.
+pub const MEASURED: [&str; 4] = ["q", "speed", "vorticity", "lambda2"];
+/// Indices into [`MEASURED`] (and the per-quantity arrays below).
+const Q: usize = 0;
+const SPEED: usize = 1;
+const VORTICITY: usize = 2;
+const LAMBDA2: usize = 3;
+/// The quantities reconstructed at random points (speed is not: it is no vortex measure).
+const RECONSTRUCTED: [usize; 3] = [Q, VORTICITY, LAMBDA2];
 
-/// One leaf cell of a bake with the exact values at its centre.
-struct CellVal {
-    level: u32,
-    width: f64,
-    q: f64,
-    q_exact: f64,
-    s: f64,
-    s_exact: f64,
+/// The exact value of each of [`MEASURED`].
+fn exact_values(e: &Exact) -> [f64; 4] {
+    [e.q, e.speed, e.vorticity, e.lambda2]
 }
 
-/// The estimated peak of measuring `scene` at `n0`: the larger of its bake (the one
-/// estimate every bake is checked with, [`preprocess::bake::memory`]) and what the comparison
-/// holds afterwards, both with the sampled grids' leaves. From the layout alone, so it is
-/// known before anything is sampled.
-pub fn memory_needed(scene: &str, n0: u32, levels: u32) -> Result<u64, SynthError> {
+/// Bytes per leaf cell a measurement of `fields` fields holds once its bake is done: the
+/// file's fields (4 bytes each) and the exact |value| of each quantity kept for its
+/// percentile (8 each), plus the bake's per-cell bookkeeping that is still held (bricks,
+/// regions).
+fn measure_cell_bytes(fields: u64) -> u64 {
+    (4 + 8) * fields + CELL_BYTES
+}
+
+/// Which of [`MEASURED`] `fields` asks for; refuses unknown and repeated names and a list
+/// without `q`.
+fn measured(fields: &[String]) -> Result<[bool; 4], AccuracyError> {
+    let mut on = [false; 4];
+    for f in fields {
+        let k = MEASURED
+            .iter()
+            .position(|m| m == f)
+            .ok_or_else(|| AccuracyError::Fields(format!("unknown field \"{f}\"")))?;
+        if on[k] {
+            return Err(AccuracyError::Fields(format!("\"{f}\" is given twice")));
+        }
+        on[k] = true;
+    }
+    if !on[Q] {
+        return Err(AccuracyError::Fields("q is missing".into()));
+    }
+    Ok(on)
+}
+
+/// The estimated peak of measuring `fields` fields of `scene` at `n0`: the larger of its
+/// bake (the one estimate every bake is checked with, [`preprocess::bake::memory`]) and what
+/// the comparison holds afterwards, both with the sampled grids' leaves. From the layout
+/// alone, so it is known before anything is sampled.
+pub fn memory_needed(scene: &str, n0: u32, levels: u32, fields: u64) -> Result<u64, SynthError> {
     let layouts = scene_layout(scene, n0, levels)?;
     let grids: Vec<(GridFootprint, u64)> = layouts
         .iter()
@@ -132,11 +170,11 @@ pub fn memory_needed(scene: &str, n0: u32, levels: u32) -> Result<u64, SynthErro
             )
         })
         .collect();
-    let bake = bake_bytes(&grids, &[], 2);
+    let bake = bake_bytes(&grids, &[], fields);
     let (decoded, cells) = grids.iter().fold((0u64, 0u64), |(d, c), (f, _)| {
         (d.saturating_add(f.decoded), c.saturating_add(f.cells))
     });
-    let after = decoded.saturating_add(cells.saturating_mul(MEASURE_CELL_BYTES));
+    let after = decoded.saturating_add(cells.saturating_mul(measure_cell_bytes(fields)));
     Ok(bake.max(after))
 }
 
@@ -191,6 +229,8 @@ pub struct LevelReport {
     pub cell_width: f64,
     pub q: ErrorStats,
     pub speed: ErrorStats,
+    pub vorticity: ErrorStats,
+    pub lambda2: ErrorStats,
 }
 
 /// Everything measured at one resolution.
@@ -200,18 +240,27 @@ pub struct ResolutionReport {
     /// Finest cell width, world units.
     pub finest_width: f64,
     pub leaf_cells: u64,
-    /// 99th percentile of exact |Q| and speed at the leaf-cell centres.
+    /// 99th percentile of exact |Q|, speed, vorticity magnitude and |λ2| at the leaf-cell
+    /// centres.
     pub q_scale: f64,
     pub speed_scale: f64,
+    pub vorticity_scale: f64,
+    pub lambda2_scale: f64,
     /// Stored values at leaf-cell centres, all levels together.
     pub stored_q: ErrorStats,
     pub stored_speed: ErrorStats,
+    pub stored_vorticity: ErrorStats,
+    pub stored_lambda2: ErrorStats,
     pub levels: Vec<LevelReport>,
-    /// Reconstructed Q at random points in the data.
+    /// Reconstructed values at random points in the data.
     pub reconstructed_q: ErrorStats,
-    /// Reconstructed Q at random points within two coarse cells of a level boundary
+    pub reconstructed_vorticity: ErrorStats,
+    pub reconstructed_lambda2: ErrorStats,
+    /// Reconstructed values at random points within two coarse cells of a level boundary
     /// (no points for single-grid scenes).
     pub boundary_q: ErrorStats,
+    pub boundary_vorticity: ErrorStats,
+    pub boundary_lambda2: ErrorStats,
     pub surface: SurfaceReport,
 }
 
@@ -238,9 +287,18 @@ pub struct OrderReport {
     pub n0_fine: u32,
     pub stored_q_rms: f64,
     pub stored_q_max: f64,
-    pub stored_speed_rms: f64,
+    /// Orders of the fields besides Q: `None` when a field is not measured (`fields`).
+    pub stored_speed_rms: Option<f64>,
+    pub stored_vorticity_rms: Option<f64>,
+    pub stored_vorticity_max: Option<f64>,
+    pub stored_lambda2_rms: Option<f64>,
+    pub stored_lambda2_max: Option<f64>,
     pub reconstructed_q_rms: f64,
+    pub reconstructed_vorticity_rms: Option<f64>,
+    pub reconstructed_lambda2_rms: Option<f64>,
     pub boundary_q_rms: Option<f64>,
+    pub boundary_vorticity_rms: Option<f64>,
+    pub boundary_lambda2_rms: Option<f64>,
     /// Of the world-unit surface position error and of the normal angle (RMS); `None`
     /// when a resolution had no hits.
     pub surface_position_rms: Option<f64>,
@@ -313,64 +371,92 @@ fn measure(
         .into_iter()
         .map(AnyGrid::Vec3s)
         .collect();
+    let on = measured(&opts.fields)?;
+    let kinds = [
+        FieldKind::Q,
+        FieldKind::Speed,
+        FieldKind::Vorticity,
+        FieldKind::Lambda2,
+    ];
     let bopts = BakeOptions {
         stencil: opts.stencil,
+        fields: Some(
+            kinds
+                .into_iter()
+                .zip(on)
+                .filter_map(|(k, on)| on.then_some(k))
+                .collect(),
+        ),
         ..BakeOptions::default()
     };
     let (file, summary) = bake(grids, &bopts).map_err(|e| AccuracyError::Bake(n0, e))?;
-    let fq = field_index(&file, "q")?;
-    let fs = field_index(&file, "speed")?;
+    // The file's field of each measured quantity.
+    let mut fields: [Option<usize>; 4] = [None; 4];
+    for k in 0..MEASURED.len() {
+        if on[k] {
+            fields[k] = Some(field_index(&file, MEASURED[k])?);
+        }
+    }
+    let fq = field_index(&file, MEASURED[Q])?;
 
-    // Exact values at every leaf-cell centre, per brick (room for all of them at once:
-    // growing the list by doubling would need half as much again while it moves).
-    let mut cells: Vec<CellVal> = with_capacity(
-        format!("the exact values at {} leaf cells", summary.leaf_cells),
-        summary.leaf_cells as usize,
-    )
-    .map_err(|e| AccuracyError::Memory(n0, e))?;
+    // Errors at every leaf-cell centre, per level, brick after brick; the exact |value|s
+    // are kept for the percentiles that scale them (room for all of them at once: growing
+    // the lists by doubling would need half as much again while they move).
+    let cells = summary.leaf_cells as usize;
+    let mut magnitudes: Vec<Vec<f64>> = Vec::with_capacity(MEASURED.len());
+    for (name, on) in MEASURED.iter().zip(on) {
+        let room = if on { cells } else { 0 };
+        magnitudes.push(
+            with_capacity(
+                format!("the exact {name} at {} leaf cells", summary.leaf_cells),
+                room,
+            )
+            .map_err(|e| AccuracyError::Memory(n0, e))?,
+        );
+    }
+    let nlevels = file.levels.len();
+    let mut all: [Acc; 4] = Default::default();
+    let mut per_level: Vec<[Acc; 4]> = (0..nlevels).map(|_| Default::default()).collect();
+    let mut widths = vec![0.0; nlevels];
     for b in &file.bricks {
         let [nx, ny, nz] = b.dims.map(|d| d as usize);
+        let mut level = per_level.get_mut(b.level as usize);
+        if let Some(w) = widths.get_mut(b.level as usize) {
+            *w = b.cell_width;
+        }
         for z in 0..nz {
             for y in 0..ny {
                 for x in 0..nx {
                     let c = [x, y, z];
                     let p = [0, 1, 2].map(|a| b.origin[a] + c[a] as f64 * b.cell_width);
                     let i = b.first_value as usize + x + nx * (y + ny * z);
-                    cells.push(CellVal {
-                        level: b.level,
-                        width: b.cell_width,
-                        q: f64::from(file.fields[fq].values[i]),
-                        q_exact: flow.q(p),
-                        s: f64::from(file.fields[fs].values[i]),
-                        s_exact: analytic::speed(&flow.velocity(p)),
-                    });
+                    let exact = exact_values(&flow.exact(p));
+                    for (k, f) in fields.iter().enumerate() {
+                        let Some(f) = *f else { continue };
+                        let e = f64::from(file.fields[f].values[i]) - exact[k];
+                        all[k].add(e);
+                        if let Some(l) = level.as_deref_mut() {
+                            l[k].add(e);
+                        }
+                        magnitudes[k].push(exact[k].abs());
+                    }
                 }
             }
         }
     }
-    let q_scale = percentile_99(cells.iter().map(|c| c.q_exact.abs()).collect());
-    let speed_scale = percentile_99(cells.iter().map(|c| c.s_exact).collect());
-    let (mut all_q, mut all_s) = (Acc::default(), Acc::default());
-    let nlevels = file.levels.len();
-    let mut per_q: Vec<Acc> = (0..nlevels).map(|_| Acc::default()).collect();
-    let mut per_s: Vec<Acc> = (0..nlevels).map(|_| Acc::default()).collect();
-    let mut widths = vec![0.0; nlevels];
-    for c in &cells {
-        all_q.add(c.q - c.q_exact);
-        all_s.add(c.s - c.s_exact);
-        if let Some(l) = per_q.get_mut(c.level as usize) {
-            l.add(c.q - c.q_exact);
-            per_s[c.level as usize].add(c.s - c.s_exact);
-            widths[c.level as usize] = c.width;
-        }
-    }
+    let scales: Vec<f64> = magnitudes.into_iter().map(percentile_99).collect();
     let levels = (0..nlevels)
-        .filter(|&l| per_q[l].n > 0)
-        .map(|l| LevelReport {
-            level: l as u32,
-            cell_width: widths[l],
-            q: per_q[l].stats(q_scale),
-            speed: per_s[l].stats(speed_scale),
+        .filter(|&l| per_level[l][Q].n > 0)
+        .map(|l| {
+            let s = |k: usize| per_level[l][k].stats(scales[k]);
+            LevelReport {
+                level: l as u32,
+                cell_width: widths[l],
+                q: s(Q),
+                speed: s(SPEED),
+                vorticity: s(VORTICITY),
+                lambda2: s(LAMBDA2),
+            }
         })
         .collect();
 
@@ -378,22 +464,31 @@ fn measure(
     // are skipped and redrawn, up to a bounded number of tries).
     let mut rng = Rng(opts.seed.max(1).wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
     let (lo, hi) = (file.bounds.min, file.bounds.max);
-    let mut rec = Acc::default();
+    let mut rec: [Acc; 4] = Default::default();
+    let reconstruct_at = |p: [f64; 3], acc: &mut [Acc; 4]| {
+        if let Some(v) = reconstruct(&file, fq, p) {
+            let exact = exact_values(&flow.exact(p));
+            acc[Q].add(v - exact[Q]);
+            for k in RECONSTRUCTED.into_iter().filter(|&k| k != Q) {
+                if let Some(v) = fields[k].and_then(|f| reconstruct(&file, f, p)) {
+                    acc[k].add(v - exact[k]);
+                }
+            }
+        }
+    };
     let mut tries = 0usize;
-    while (rec.n as usize) < opts.points && tries < 20 * opts.points.max(1) {
+    while (rec[Q].n as usize) < opts.points && tries < 20 * opts.points.max(1) {
         tries += 1;
         let p = [0, 1, 2].map(|a| lo[a] + rng.next() * (hi[a] - lo[a]));
-        if let Some(v) = reconstruct(&file, fq, p) {
-            rec.add(v - flow.q(p));
-        }
+        reconstruct_at(p, &mut rec);
     }
     // Near level boundaries: a random point on a random face of a finer box, moved off
     // the face by up to two coarse cells either way.
     let bounds = level_boundaries(&opts.scene, n0, opts.levels)?;
-    let mut near = Acc::default();
+    let mut near: [Acc; 4] = Default::default();
     if !bounds.is_empty() {
         let mut tries = 0usize;
-        while (near.n as usize) < opts.points && tries < 20 * opts.points.max(1) {
+        while (near[Q].n as usize) < opts.points && tries < 20 * opts.points.max(1) {
             tries += 1;
             let k = ((rng.next() * bounds.len() as f64) as usize).min(bounds.len() - 1);
             let (b, w) = bounds[k];
@@ -402,23 +497,30 @@ fn measure(
             let mut p = [0, 1, 2].map(|a| b[a] + rng.next() * (b[a + 3] - b[a]));
             let face = if upper { b[axis + 3] } else { b[axis] };
             p[axis] = face + (2.0 * rng.next() - 1.0) * 2.0 * w;
-            if let Some(v) = reconstruct(&file, fq, p) {
-                near.add(v - flow.q(p));
-            }
+            reconstruct_at(p, &mut near);
         }
     }
     let surface = surface_errors(flow, &file, opts, iso, n0)?;
+    let stats = |acc: &[Acc; 4], k: usize| acc[k].stats(scales[k]);
     Ok(ResolutionReport {
         n0,
         finest_width: file.levels.first().map_or(0.0, |l| l.cell_width),
         leaf_cells: summary.leaf_cells,
-        q_scale,
-        speed_scale,
-        stored_q: all_q.stats(q_scale),
-        stored_speed: all_s.stats(speed_scale),
+        q_scale: scales[Q],
+        speed_scale: scales[SPEED],
+        vorticity_scale: scales[VORTICITY],
+        lambda2_scale: scales[LAMBDA2],
+        stored_q: stats(&all, Q),
+        stored_speed: stats(&all, SPEED),
+        stored_vorticity: stats(&all, VORTICITY),
+        stored_lambda2: stats(&all, LAMBDA2),
         levels,
-        reconstructed_q: rec.stats(q_scale),
-        boundary_q: near.stats(q_scale),
+        reconstructed_q: stats(&rec, Q),
+        reconstructed_vorticity: stats(&rec, VORTICITY),
+        reconstructed_lambda2: stats(&rec, LAMBDA2),
+        boundary_q: stats(&near, Q),
+        boundary_vorticity: stats(&near, VORTICITY),
+        boundary_lambda2: stats(&near, LAMBDA2),
         surface,
     })
 }
@@ -439,6 +541,7 @@ pub fn accuracy(
     if opts.n0.is_empty() {
         return Err(AccuracyError::NoResolutions);
     }
+    let nfields = measured(&opts.fields)?.iter().filter(|&&on| on).count() as u64;
     let iso = match opts.iso {
         Some(v) => v,
         None => default_iso(flow.as_ref(), opts)?,
@@ -446,7 +549,7 @@ pub fn accuracy(
     // Every resolution is checked before the first is sampled: a run that cannot finish
     // does not start.
     for &n0 in &opts.n0 {
-        let need = memory_needed(&opts.scene, n0, opts.levels)?;
+        let need = memory_needed(&opts.scene, n0, opts.levels, nfields)?;
         check_memory(
             format!(
                 "measuring scene \"{}\" (sampled, baked and compared in memory)",
@@ -469,15 +572,32 @@ pub fn accuracy(
         .map(|w| {
             let (a, b) = (w[0], w[1]);
             let o = |ea: f64, eb: f64| order(ea, eb, a.finest_width, b.finest_width);
+            // The order of errors measured at both resolutions (RMS, or max).
+            let both = |ea: &ErrorStats, eb: &ErrorStats| {
+                (ea.points > 0 && eb.points > 0).then(|| o(ea.rms, eb.rms))
+            };
+            let both_max = |ea: &ErrorStats, eb: &ErrorStats| {
+                (ea.points > 0 && eb.points > 0).then(|| o(ea.max, eb.max))
+            };
             OrderReport {
                 n0_coarse: a.n0,
                 n0_fine: b.n0,
                 stored_q_rms: o(a.stored_q.rms, b.stored_q.rms),
                 stored_q_max: o(a.stored_q.max, b.stored_q.max),
-                stored_speed_rms: o(a.stored_speed.rms, b.stored_speed.rms),
+                stored_speed_rms: both(&a.stored_speed, &b.stored_speed),
+                stored_vorticity_rms: both(&a.stored_vorticity, &b.stored_vorticity),
+                stored_vorticity_max: both_max(&a.stored_vorticity, &b.stored_vorticity),
+                stored_lambda2_rms: both(&a.stored_lambda2, &b.stored_lambda2),
+                stored_lambda2_max: both_max(&a.stored_lambda2, &b.stored_lambda2),
                 reconstructed_q_rms: o(a.reconstructed_q.rms, b.reconstructed_q.rms),
-                boundary_q_rms: (a.boundary_q.points > 0 && b.boundary_q.points > 0)
-                    .then(|| o(a.boundary_q.rms, b.boundary_q.rms)),
+                reconstructed_vorticity_rms: both(
+                    &a.reconstructed_vorticity,
+                    &b.reconstructed_vorticity,
+                ),
+                reconstructed_lambda2_rms: both(&a.reconstructed_lambda2, &b.reconstructed_lambda2),
+                boundary_q_rms: both(&a.boundary_q, &b.boundary_q),
+                boundary_vorticity_rms: both(&a.boundary_vorticity, &b.boundary_vorticity),
+                boundary_lambda2_rms: both(&a.boundary_lambda2, &b.boundary_lambda2),
                 surface_position_rms: (a.surface.hits > 0 && b.surface.hits > 0)
                     .then(|| o(a.surface.position.rms, b.surface.position.rms)),
                 normal_angle_rms: (a.surface.hits > 0 && b.surface.hits > 0)

@@ -2,14 +2,16 @@
 
 use super::*;
 
-/// The relative RMS errors (stored Q, stored speed, reconstructed Q, Q near level
-/// boundaries, and the iso-surface position of `exact` hits in finest cells) against the
-/// finest cell width, both axes logarithmic.
+/// The relative RMS errors (stored Q, speed, vorticity and λ2, reconstructed Q, Q near
+/// level boundaries, and the iso-surface position of `exact` hits in finest cells) against
+/// the finest cell width, both axes logarithmic.
 pub(crate) fn chart(report: &AccuracyReport) -> LogLogChart {
     type Pick = fn(&ResolutionReport) -> &ErrorStats;
-    let series: [(&str, Pick, [u8; 3]); 5] = [
+    let series: [(&str, Pick, [u8; 3]); 7] = [
         ("stored Q", |r| &r.stored_q, [31, 119, 180]),
         ("stored speed", |r| &r.stored_speed, [255, 127, 14]),
+        ("stored vorticity", |r| &r.stored_vorticity, [140, 86, 75]),
+        ("stored lambda2", |r| &r.stored_lambda2, [227, 119, 194]),
         ("reconstructed Q", |r| &r.reconstructed_q, [44, 160, 44]),
         ("Q near level boundaries", |r| &r.boundary_q, [214, 39, 40]),
         (

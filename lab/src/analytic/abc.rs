@@ -79,4 +79,41 @@ mod tests {
             }
         }
     }
+
+    /// The textbook ABC flow (A = B = C = 1, period 2π) is a Beltrami flow with ω = u, so
+    /// its vorticity magnitude is its speed and its normalised helicity 1; mirrored (k < 0)
+    /// ω = −u and the helicity is −1. The measures are the bake's, on the exact gradient.
+    #[test]
+    fn abc_vorticity_equals_velocity_and_helicity_is_plus_or_minus_one() {
+        let unit = Abc {
+            a: 1.0,
+            b: 1.0,
+            c: 1.0,
+            k: 1.0,
+            amplitude: 1.0,
+        };
+        let mirrored = Abc { k: -1.0, ..unit };
+        let mut rng = Rng::new(13);
+        for _ in 0..200 {
+            let p = rng.point([-PI; 3], [PI; 3]);
+            let u = unit.velocity(p);
+            let w = preprocess::measures::vorticity(&unit.gradient(p));
+            for i in 0..3 {
+                assert!((w[i] - u[i]).abs() < 1e-14, "{p:?}: ω {w:?} u {u:?}");
+            }
+            let s = super::super::speed(&u);
+            assert!((unit.vorticity(p) - s).abs() < 1e-14);
+            assert!(
+                (unit.helicity(p) - 1.0).abs() < 1e-14,
+                "{}",
+                unit.helicity(p)
+            );
+            assert!((mirrored.helicity(p) + 1.0).abs() < 1e-14);
+            // The lab's scene: ω = k u with k = π.
+            let f = Abc::sample_scene();
+            let s = super::super::speed(&f.velocity(p));
+            assert!((f.vorticity(p) - f.k * s).abs() < 1e-13);
+            assert!((f.helicity(p) - 1.0).abs() < 1e-13);
+        }
+    }
 }

@@ -1,8 +1,10 @@
-//! Closed-form flows with exact velocity gradients (and so exact Q).
+//! Closed-form flows with exact velocity gradients (and so exact Q, λ2, vorticity and
+//! helicity).
 //!
 //! These are the ground truth for accuracy tests and the source of the synthetic VDB scenes
 //! written by `qbricks-lab synth` (see [`crate::synth`]). Every flow gives its velocity and
-//! its velocity gradient in closed form at any point; Q follows from the gradient.
+//! its velocity gradient in closed form at any point; Q, λ2, the vorticity and the helicity
+//! follow from the gradient through [`preprocess::measures`], the functions the bake uses.
 //!
 //! | scene name | flow | what it is for |
 //! |---|---|---|
@@ -11,6 +13,7 @@
 //! | `lamb-oseen` | [`LambOseen`] | a straight Gaussian vortex; Q known in closed form |
 //! | `burgers` | [`Burgers`] | Lamb–Oseen plus axisymmetric strain; Q = Q_Lamb–Oseen − ¾α² |
 //! | `abc` | [`Abc`] | Arnold–Beltrami–Childress flow (vorticity = k · velocity) |
+//! | `lamb-oseen-nested`, `burgers-nested`, `abc-nested` | the same flows on nested boxes | accuracy across level boundaries |
 //! | `ring-plume` | [`RingPlume`] per frame | a rising vortex ring with a smoke plume: a small frame sequence |
 
 // Tensor formulas read best with explicit indices.
@@ -37,7 +40,32 @@ pub trait Flow: Send + Sync {
     fn gradient(&self, p: [f64; 3]) -> Gradient;
     /// Q-criterion at `p`.
     fn q(&self, p: [f64; 3]) -> f64 {
-        q_from_gradient(&self.gradient(p))
+        measures::q(&self.gradient(p))
+    }
+    /// Vorticity magnitude `|∇ × u|` at `p`.
+    fn vorticity(&self, p: [f64; 3]) -> f64 {
+        measures::vorticity_magnitude(&self.gradient(p))
+    }
+    /// λ2 at `p`: the middle eigenvalue of `S² + Ω²`, negative in vortex cores.
+    fn lambda2(&self, p: [f64; 3]) -> f64 {
+        measures::lambda2(&self.gradient(p))
+    }
+    /// Normalised helicity `u · ω / (|u| |ω|)` at `p`.
+    fn helicity(&self, p: [f64; 3]) -> f64 {
+        measures::helicity(&self.velocity(p), &self.gradient(p))
+    }
+    /// Every exact measure at `p` from one velocity and one gradient evaluation (the wake's
+    /// cost a sum over all its vortex particles each).
+    fn exact(&self, p: [f64; 3]) -> Exact {
+        let u = self.velocity(p);
+        let g = self.gradient(p);
+        Exact {
+            q: measures::q(&g),
+            speed: speed(&u),
+            vorticity: measures::vorticity_magnitude(&g),
+            lambda2: measures::lambda2(&g),
+            helicity: measures::helicity(&u, &g),
+        }
     }
     /// Whether the velocity is smooth (at least C²) in the ball of `radius` around `p`, so
     /// that finite-difference stencils of that reach converge there. Accuracy tests use it
@@ -47,24 +75,40 @@ pub trait Flow: Send + Sync {
     }
 }
 
-use preprocess::derive::q_from_gradient;
-/// The exact Q and speed of a flow use the same formulas as the baked fields, so a
-/// difference between them is the discretisation's, never a second formula's.
+/// The exact values of the baked fields at a point ([`Flow::exact`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Exact {
+    pub q: f64,
+    pub speed: f64,
+    pub vorticity: f64,
+    pub lambda2: f64,
+    pub helicity: f64,
+}
+
+/// The exact Q, λ2, vorticity, helicity and speed of a flow use the same formulas as the
+/// baked fields (on the closed-form gradient instead of the stencil's), so a difference
+/// between them is the discretisation's, never a second formula's.
 pub use preprocess::derive::speed;
+use preprocess::measures;
+#[cfg(test)]
+use preprocess::measures::q as q_from_gradient;
 
 /// Names accepted by [`scene`], in documentation order.
-pub(crate) const SCENE_NAMES: [&str; 6] = [
+pub(crate) const SCENE_NAMES: [&str; 9] = [
     "wake",
     "wake-single",
     "lamb-oseen",
     "burgers",
     "abc",
     "ring-plume",
+    "lamb-oseen-nested",
+    "burgers-nested",
+    "abc-nested",
 ];
 
-/// The flow of a named scene (`wake`, `wake-single`, `lamb-oseen`, `burgers`, `abc`), or
-/// `None` for an unknown name. `wake` and `wake-single` are the same flow; they differ only
-/// in how [`crate::synth`] samples it.
+/// The flow of a named scene ([`SCENE_NAMES`]), or `None` for an unknown name. `wake` and
+/// `wake-single` are the same flow, and so are `lamb-oseen` and `lamb-oseen-nested` (and
+/// the other `-nested` scenes); they differ only in how [`crate::synth`] samples it.
 pub fn scene(name: &str) -> Option<Box<dyn Flow + Send + Sync>> {
     scene_at(name, 1)
 }
@@ -77,9 +121,9 @@ pub(crate) fn scene_at(name: &str, frame: u64) -> Option<Box<dyn Flow + Send + S
     }
     match name {
         "wake" | "wake-single" => Some(Box::new(Wake::sample_scene())),
-        "lamb-oseen" => Some(Box::new(LambOseen::sample_scene())),
-        "burgers" => Some(Box::new(Burgers::sample_scene())),
-        "abc" => Some(Box::new(Abc::sample_scene())),
+        "lamb-oseen" | "lamb-oseen-nested" => Some(Box::new(LambOseen::sample_scene())),
+        "burgers" | "burgers-nested" => Some(Box::new(Burgers::sample_scene())),
+        "abc" | "abc-nested" => Some(Box::new(Abc::sample_scene())),
         "ring-plume" => Some(Box::new(RingPlume::frame(1))),
         _ => None,
     }

@@ -142,6 +142,55 @@ mod tests {
         }
     }
 
+    /// Lamb–Oseen: ω_z = (1/r) d(r u_θ)/dr = 2 ω₀ exp(−r²/r_c²); in a plane flow λ2 = −Q;
+    /// u ⟂ ω, so no helicity.
+    #[test]
+    fn lamb_oseen_vorticity_lambda2_and_helicity_in_closed_form() {
+        let f = LambOseen::sample_scene();
+        let c = f.core_radius * f.core_radius;
+        let w0 = f.circulation / (2.0 * PI * c);
+        let mut rng = super::super::testutil::Rng::new(6);
+        for _ in 0..200 {
+            let p = rng.point([-1.0; 3], [1.0; 3]);
+            let s = p[0] * p[0] + p[1] * p[1];
+            let wz = 2.0 * w0 * (-s / c).exp();
+            assert!((f.vorticity(p) - wz).abs() < 1e-12, "{p:?}");
+            assert!((f.lambda2(p) + f.q_exact(p)).abs() < 1e-7, "{p:?}");
+            assert_eq!(f.helicity(p), 0.0);
+        }
+        // On the axis: solid-body rotation, λ2 = −ω₀², vorticity 2ω₀, zero velocity.
+        let axis = [0.0, 0.0, 0.4];
+        assert!((f.lambda2(axis) + w0 * w0).abs() < 1e-12);
+        assert!((f.vorticity(axis) - 2.0 * w0).abs() < 1e-12);
+        assert_eq!(f.helicity(axis), 0.0);
+    }
+
+    /// Burgers: the strain is irrotational (same vorticity as the swirl); on the axis S and Ω
+    /// commute, S² + Ω² = diag(α²/4 − ω₀², α²/4 − ω₀², α²) and λ2 = α²/4 − ω₀²; the axial
+    /// flow along ω gives helicity sign(z) on the axis.
+    #[test]
+    fn burgers_vorticity_lambda2_and_helicity_in_closed_form() {
+        let f = Burgers::sample_scene();
+        let c = f.swirl.core_radius * f.swirl.core_radius;
+        let w0 = f.swirl.circulation / (2.0 * PI * c);
+        let a = f.strain;
+        let mut rng = super::super::testutil::Rng::new(8);
+        for _ in 0..100 {
+            let p = rng.point([-1.0; 3], [1.0; 3]);
+            assert!((f.vorticity(p) - f.swirl.vorticity(p)).abs() < 1e-12);
+            let h = f.helicity(p);
+            assert!((-1.0..=1.0).contains(&h) && h * p[2] >= 0.0, "{p:?}: {h}");
+        }
+        for z in [-0.5, 0.3] {
+            let p = [0.0, 0.0, z];
+            assert!((f.lambda2(p) - (0.25 * a * a - w0 * w0)).abs() < 1e-12);
+            assert!((f.helicity(p) - z.signum()).abs() < 1e-12);
+        }
+        assert_eq!(f.helicity([0.0; 3]), 0.0);
+        // Far from the core the strain wins: λ2 > 0.
+        assert!(f.lambda2([0.9, 0.0, 0.0]) > 0.0);
+    }
+
     #[test]
     fn burgers_q_is_shifted_by_three_quarters_alpha_squared() {
         let f = Burgers::sample_scene();

@@ -15,6 +15,13 @@ const UNIT_DOMAIN: Aabb = Aabb {
     min: [-1.0, -1.0, -1.0],
     max: [1.0, 1.0, 1.0],
 };
+/// The finest box of the `-nested` unit-domain scenes: the middle half of the domain per
+/// axis, so that level boundaries cross the vortex of `lamb-oseen-nested` and
+/// `burgers-nested` (its z faces cut the core, its x and y faces lie at 2 r_c).
+const UNIT_CORE: Aabb = Aabb {
+    min: [-0.5, -0.5, -0.5],
+    max: [0.5, 0.5, 0.5],
+};
 
 /// One grid of a scene layout: its name, voxel size and active index box (half-open).
 #[derive(Debug, Clone, PartialEq)]
@@ -62,10 +69,11 @@ impl GridLayout {
 
 /// The grids (finest first) that [`scene_grids`] fills, without sampling anything.
 pub fn scene_layout(scene: &str, n0: u32, levels: u32) -> Result<Vec<GridLayout>, SynthError> {
-    let (domain, multi) = match scene {
-        "wake" => (WAKE_DOMAIN, true),
-        "wake-single" => (WAKE_DOMAIN, false),
-        "lamb-oseen" | "burgers" | "abc" | "ring-plume" => (UNIT_DOMAIN, false),
+    let (domain, core, multi) = match scene {
+        "wake" => (WAKE_DOMAIN, WAKE_CORE, true),
+        "wake-single" => (WAKE_DOMAIN, WAKE_CORE, false),
+        "lamb-oseen" | "burgers" | "abc" | "ring-plume" => (UNIT_DOMAIN, UNIT_CORE, false),
+        "lamb-oseen-nested" | "burgers-nested" | "abc-nested" => (UNIT_DOMAIN, UNIT_CORE, true),
         _ => {
             return Err(SynthError::UnknownScene {
                 name: scene.to_string(),
@@ -99,8 +107,8 @@ pub fn scene_layout(scene: &str, n0: u32, levels: u32) -> Result<Vec<GridLayout>
             let mut lo = [0i64; 3];
             let mut hi = [0i64; 3];
             for a in 0..3 {
-                let bmin = domain.min[a] + t * (WAKE_CORE.min[a] - domain.min[a]);
-                let bmax = domain.max[a] + t * (WAKE_CORE.max[a] - domain.max[a]);
+                let bmin = domain.min[a] + t * (core.min[a] - domain.min[a]);
+                let bmax = domain.max[a] + t * (core.max[a] - domain.max[a]);
                 lo[a] = 2 * (bmin / parent + eps).floor() as i64;
                 hi[a] = 2 * (bmax / parent - eps).ceil() as i64;
             }

@@ -14,6 +14,9 @@
 //!   (sphere and ring train), snapped outward to the next coarser level's cells so that
 //!   boxes nest exactly. Grids are named `vel_l0` (finest) … `vel_l{levels-1}` (coarsest)
 //!   and returned in that order.
+//! * `lamb-oseen-nested`, `burgers-nested`, `abc-nested`: those flows on `levels` nested
+//!   boxes as for `wake`, between the domain [-1, 1]³ and the core box [-0.5, 0.5]³
+//!   (`n0` voxels along an axis of the coarsest), for accuracy across level boundaries.
 //! * `wake-single`, `lamb-oseen`, `burgers`, `abc`: one grid named `vel` over the scene
 //!   domain (`wake-single`: the `wake` domain; the others: [-1, 1]³) with `n0` voxels along
 //!   the longest axis; `levels` is ignored.

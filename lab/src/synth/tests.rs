@@ -70,6 +70,25 @@ fn layouts_nest_for_any_n0_and_level_count() {
 }
 
 #[test]
+fn nested_unit_scenes_shrink_to_the_middle_half() {
+    for scene in ["lamb-oseen-nested", "burgers-nested", "abc-nested"] {
+        let l = scene_layout(scene, 16, 2).expect("layout");
+        assert_eq!(
+            l.iter().map(|g| g.name.as_str()).collect::<Vec<_>>(),
+            ["vel_l0", "vel_l1"]
+        );
+        // Coarse: [-1, 1]³ in 16 cells; fine: [-0.5, 0.5]³ in 16 cells of half the width.
+        assert_eq!((l[1].lo, l[1].hi), ([-8; 3], [8; 3]));
+        assert!((l[0].voxel_size - 0.0625).abs() < 1e-15);
+        assert_eq!((l[0].lo, l[0].hi), ([-8; 3], [8; 3]));
+        assert_eq!(scene_layout(scene, 16, 3).expect("layout").len(), 3);
+        assert_eq!(scene_grids(scene, 8, 2).expect("grids").len(), 2);
+    }
+    // The plain scenes stay one grid whatever the level count.
+    assert_eq!(scene_layout("abc", 16, 3).expect("layout").len(), 1);
+}
+
+#[test]
 fn grids_hold_exact_velocities_at_voxel_centres() {
     let grids = scene_grids("wake", 16, 2).expect("grids");
     let layouts = scene_layout("wake", 16, 2).expect("layout");

@@ -92,7 +92,18 @@ fn accuracy_prints_every_key_and_plots_a_png() {
     assert_eq!(res.len(), 2);
     let stats = ["points", "max", "rms", "max_rel", "rms_rel"];
     for r in res {
-        for key in ["stored_q", "stored_speed", "reconstructed_q", "boundary_q"] {
+        for key in [
+            "stored_q",
+            "stored_speed",
+            "reconstructed_q",
+            "boundary_q",
+            "stored_vorticity",
+            "stored_lambda2",
+            "reconstructed_vorticity",
+            "reconstructed_lambda2",
+            "boundary_vorticity",
+            "boundary_lambda2",
+        ] {
             for s in stats {
                 assert!(r[key][s].is_number(), "{key}.{s} missing: {r}");
             }
@@ -113,7 +124,15 @@ fn accuracy_prints_every_key_and_plots_a_png() {
     }
     let orders = v["orders"].as_array().expect("orders");
     assert_eq!(orders.len(), 1);
-    for key in ["stored_q_rms", "stored_q_max", "reconstructed_q_rms"] {
+    for key in [
+        "stored_q_rms",
+        "stored_q_max",
+        "reconstructed_q_rms",
+        "stored_vorticity_rms",
+        "stored_lambda2_rms",
+        "stored_lambda2_max",
+        "boundary_lambda2_rms",
+    ] {
         assert!(orders[0][key].is_number(), "{key}: {}", orders[0]);
     }
     // Null when a resolution has no surface hits (the n0-8 wake may have none).

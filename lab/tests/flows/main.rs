@@ -10,6 +10,7 @@ extern crate preprocess as qbricks_preprocess;
 mod common;
 
 mod fields;
+mod measures;
 mod sequence;
 mod split;
 mod staggered;

@@ -10,8 +10,9 @@ use files::limits::{self, LimitError};
 use rayon::prelude::*;
 
 use crate::bricks::BrickBox;
-use crate::derive::{gradient, q_from_gradient, speed, VelocityField};
+use crate::derive::{gradient, speed, VelocityField};
 use crate::fields::FieldKind;
+use crate::measures;
 
 use super::extra::ExtraGrid;
 use super::{BakeOptions, Bricks, Cells, Input};
@@ -26,8 +27,9 @@ pub(super) struct FieldValues {
 }
 
 /// The value of every field at every cell of every brick, derived from the velocity (Q,
-/// speed, velocity components) or resampled from an extra scalar grid; a scalar grid baked
-/// on its own is its only field. Cells of a brick that are not leaf cells read as zero.
+/// vorticity, λ2 and helicity from one gradient per cell, speed, velocity components) or
+/// resampled from an extra scalar grid; a scalar grid baked on its own is its only field.
+/// Cells of a brick that are not leaf cells read as zero.
 pub(super) fn derive_fields(
     cells: &Cells,
     bricks: &Bricks,
@@ -40,6 +42,7 @@ pub(super) fn derive_fields(
                 .clone()
                 .unwrap_or(vec![FieldKind::Q, FieldKind::Speed]);
             let names: Vec<String> = kinds.iter().flat_map(FieldKind::names).collect();
+            let needs_gradient = kinds.iter().any(FieldKind::needs_gradient);
             let field = VelocityField {
                 sets,
                 values: vals,
@@ -62,19 +65,32 @@ pub(super) fn derive_fields(
                 let mut hits = vec![0u64; kinds.len()];
                 b.for_each_cell(set, |i, ijk, slot| {
                     let u = slot.map(|s| v[s]).unwrap_or_default();
+                    // One gradient for every measure made from it.
+                    let g = match slot.filter(|&s| needs_gradient && set.is_active(s)) {
+                        Some(s) => gradient(&field, b.set, ijk, s, opts.stencil),
+                        None => [[0.0; 3]; 3],
+                    };
                     let mut f = 0;
                     for (ki, (k, extra)) in kinds.iter().zip(&extras).enumerate() {
                         match k {
                             FieldKind::Q => {
-                                let g = match slot.filter(|&s| set.is_active(s)) {
-                                    Some(s) => gradient(&field, b.set, ijk, s, opts.stencil),
-                                    None => [[0.0; 3]; 3],
-                                };
-                                out[f][i] = q_from_gradient(&g) as f32;
+                                out[f][i] = measures::q(&g) as f32;
                                 f += 1;
                             }
                             FieldKind::Speed => {
                                 out[f][i] = speed(&u) as f32;
+                                f += 1;
+                            }
+                            FieldKind::Vorticity => {
+                                out[f][i] = measures::vorticity_magnitude(&g) as f32;
+                                f += 1;
+                            }
+                            FieldKind::Lambda2 => {
+                                out[f][i] = measures::lambda2(&g) as f32;
+                                f += 1;
+                            }
+                            FieldKind::Helicity => {
+                                out[f][i] = measures::helicity(&u, &g) as f32;
                                 f += 1;
                             }
                             FieldKind::Velocity => {

@@ -111,8 +111,8 @@ pub struct BakeSummary {
     pub regions: u64,
     pub kd_nodes: u64,
     pub nonfinite: u64,
-    /// Baked values (derived or resampled) that were not finite as f32 (overflow of Q or
-    /// speed from huge velocities, huge doubles); stored clamped, see [`clamp_nonfinite`].
+    /// Baked values (derived or resampled) that were not finite as f32 (overflow of Q, λ2,
+    /// vorticity or speed from huge velocities, huge doubles); stored clamped, see [`clamp_nonfinite`].
     pub nonfinite_derived: u64,
     pub fields: Vec<FieldSummary>,
     /// Non-fatal problems (non-finite values replaced, …), one line each.

@@ -149,14 +149,26 @@ fn default_background() -> [f32; 3] {
     DEFAULT_BACKGROUND
 }
 
+/// Fields whose vortex cores are their *negative* values: λ2 (`qbricks-bake --fields
+/// lambda2`), the middle eigenvalue of S² + Ω². Their default iso value mirrors Q's.
+pub(crate) const NEGATIVE_CORE_FIELDS: [&str; 1] = ["lambda2"];
+
 /// The iso value and dvr band width a field starts with: 10 % of its positive maximum
-/// (where the vortex cores of Q stand out), else the middle of its range; σ at 8 % of the
-/// iso value as in the seed report, never zero.
+/// (where the vortex cores of Q stand out), for a field of [`NEGATIVE_CORE_FIELDS`] 10 % of
+/// its negative minimum (the same rule on the negated field), else the middle of its range;
+/// σ at 8 % of the iso value as in the seed report, never zero. Other fields keep Q's rule
+/// even when their negative side is the larger (Q's strain regions often are).
 pub(crate) fn default_iso(f: &FieldRange) -> (f64, f64) {
     let (iso, span) = {
         let (lo, hi) = crate::colormap::finite_range(f.min, f.max);
         let (lo, hi) = (f64::from(lo), f64::from(hi));
-        let iso = if hi > 0.0 && lo < 0.1 * hi {
+        let iso = if NEGATIVE_CORE_FIELDS.contains(&f.name.as_str()) {
+            if lo < 0.0 && hi > 0.1 * lo {
+                0.1 * lo
+            } else {
+                0.5 * (lo + hi)
+            }
+        } else if hi > 0.0 && lo < 0.1 * hi {
             0.1 * hi
         } else {
             0.5 * (lo + hi)
@@ -369,6 +381,34 @@ mod tests {
                 max: 0.08,
             },
         ]
+    }
+
+    /// λ2 marks vortex cores with negative values: its default iso is 10 % of its minimum,
+    /// as Q's is of its maximum; Q keeps its rule however negative its minimum, and a
+    /// λ2 range without negative values takes the middle.
+    #[test]
+    fn lambda2_defaults_to_a_tenth_of_its_negative_minimum() {
+        let range = |name: &str, min: f32, max: f32| FieldRange {
+            name: name.into(),
+            min,
+            max,
+        };
+        let (iso, sigma) = default_iso(&range("lambda2", -0.5, 0.04));
+        assert!((iso + 0.05).abs() < 1e-7 && (sigma - 0.004).abs() < 1e-7);
+        assert_eq!(default_iso(&range("lambda2", -0.5, 0.0)).0, 0.1 * -0.5f64);
+        let (iso, _) = default_iso(&range("q", -0.5, 0.04));
+        assert!((iso - 0.004).abs() < 1e-7);
+        assert_eq!(
+            default_iso(&range("lambda2", 0.2, 0.4)).0,
+            0.5 * (0.2f32 as f64 + 0.4f32 as f64)
+        );
+        // As the view's iso field (λ2 the only field), and by name, not by shape.
+        let s = ViewState::default_for([0.0; 3], [1.0; 3], &[range("lambda2", -0.5, 0.04)]);
+        s.validate().expect("valid");
+        assert_eq!(s.iso_field, "lambda2");
+        assert!((s.iso + 0.05).abs() < 1e-7);
+        let (iso, _) = default_iso(&range("vorticity", 0.0, 1.4));
+        assert!((iso - 0.14).abs() < 1e-7);
     }
 
     #[test]

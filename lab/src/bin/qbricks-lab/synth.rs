@@ -24,7 +24,8 @@ pub enum CompressionArg {
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// Scene: wake (nested boxes), wake-single, lamb-oseen, burgers or abc.
+    /// Scene: wake (nested boxes), wake-single, lamb-oseen, burgers, abc, ring-plume, or
+    /// lamb-oseen-nested, burgers-nested, abc-nested (nested boxes).
     pub scene: String,
     /// Output VDB file (written atomically).
     #[arg(short, long)]
@@ -32,7 +33,8 @@ pub struct Args {
     /// Voxels along the longest axis of the coarsest grid.
     #[arg(long, default_value_t = 64)]
     pub n0: u32,
-    /// Number of nested levels, each refined by 2 (wake only; single-grid scenes ignore it).
+    /// Number of nested levels, each refined by 2 (wake and the -nested scenes; single-grid
+    /// scenes ignore it).
     #[arg(long, default_value_t = 3)]
     pub levels: u32,
     /// Node-value compression.

@@ -53,8 +53,9 @@ pub struct Args {
     /// name, or X for three scalar component grids X.x/X.y/X.z, X_x/X_y/X_z or Xx/Xy/Xz.
     #[arg(long, value_name = "NAME")]
     pub velocity: Vec<String>,
-    /// Fields, comma separated: q, speed, velocity (three fields velocity_x/y/z), or the
-    /// name of any scalar grid of the file (resampled onto the velocity's leaf cells).
+    /// Fields, comma separated: q, speed, vorticity (|curl u|), lambda2 (negative in
+    /// vortex cores), helicity (u·ω/(|u||ω|)), velocity (three fields velocity_x/y/z), or
+    /// the name of any scalar grid of the file (resampled onto the velocity's leaf cells).
     /// Default: q,speed. A scalar grid baked on its own (no velocity) takes no field list.
     #[arg(long, value_delimiter = ',')]
     pub fields: Option<Vec<String>>,
