@@ -124,30 +124,43 @@ fn order_around(mut points: Vec<[f64; 3]>, n: &[f64; 3]) -> Vec<[f64; 3]> {
 }
 
 impl Plane {
-    /// The plane's position along its unit normal: `n̂·origin` (the plane must pass
+    /// The direction [`Plane::offset`] is measured along: the unit normal, turned round
+    /// when its largest component is negative, so that `z>0.3` and `z<0.3` both lie at
+    /// 0.3 and flipping a plane leaves its offset alone (the plane must pass
     /// [`Plane::check`]).
+    pub fn direction(&self) -> [f64; 3] {
+        let n = self.unit_normal();
+        let largest = (0..3).fold(0, |b, a| if n[a].abs() > n[b].abs() { a } else { b });
+        if n[largest] < 0.0 {
+            n.map(|x| -x)
+        } else {
+            n
+        }
+    }
+
+    /// The plane's position along its normal: `d·origin` for the [`Plane::direction`] `d`.
     pub fn offset(&self) -> f64 {
-        dot(&self.unit_normal(), &self.origin)
+        dot(&self.direction(), &self.origin)
     }
 
     /// The plane moved along its normal to position `offset` ([`Plane::offset`]); the
     /// normal, and the origin's place within the plane, stay.
     pub fn with_offset(&self, offset: f64) -> Plane {
-        let n = self.unit_normal();
+        let d = self.direction();
         let by = offset - self.offset();
         Plane {
-            origin: std::array::from_fn(|a| self.origin[a] + by * n[a]),
+            origin: std::array::from_fn(|a| self.origin[a] + by * d[a]),
             normal: self.normal,
         }
     }
 
     /// The positions along the plane's normal ([`Plane::offset`]) at which it meets the
-    /// box `lo..hi`: from the box's corner furthest behind it to the one furthest ahead.
+    /// box `lo..hi`: from one of the box's corners furthest from it to the other.
     pub fn offset_range(&self, lo: [f64; 3], hi: [f64; 3]) -> (f64, f64) {
-        let n = self.unit_normal();
+        let d = self.direction();
         let (mut a, mut b) = (0.0, 0.0);
         for k in 0..3 {
-            let (x, y) = (n[k] * lo[k], n[k] * hi[k]);
+            let (x, y) = (d[k] * lo[k], d[k] * hi[k]);
             a += x.min(y);
             b += x.max(y);
         }
@@ -341,12 +354,17 @@ mod tests {
 
     #[test]
     fn a_plane_moves_along_its_normal_over_the_box() {
+        // Measured along +z whichever way the normal points, so flipping keeps it.
         let p = plane([0.2, 0.3, 0.4], [0.0, 0.0, -2.0]);
-        assert!((p.offset() + 0.4).abs() < 1e-15);
+        assert_eq!(p.direction(), [0.0, 0.0, 1.0]);
+        assert!((p.offset() - 0.4).abs() < 1e-15);
+        assert_eq!(p.flipped().offset(), p.offset());
         let moved = p.with_offset(0.5);
-        assert!(close(&moved.origin, &[0.2, 0.3, -0.5]));
+        assert!(close(&moved.origin, &[0.2, 0.3, 0.5]));
         assert_eq!(moved.normal, p.normal);
         assert_eq!(p.offset_range(LO, HI), (-1.0, 1.0));
+        let q = plane([0.0; 3], [0.2, -0.9, 0.1]);
+        assert!(q.direction()[1] > 0.0 && q.direction()[0] < 0.0);
         let oblique = plane([0.0; 3], [1.0, 1.0, 0.0]);
         let (a, b) = oblique.offset_range(LO, [1.0, 3.0, 1.0]);
         let r = 0.5f64.sqrt();
