@@ -17,6 +17,8 @@ pub(crate) const OPACITY_TIP: &str = "1 hides what lies behind the surface; less
     surfaces inside it.";
 pub(crate) const COLOUR_TIP: &str = "Off: the surface takes the colour map's colours. On: one \
     colour of its own (the button beside it).";
+pub(crate) const VALUE_TIP: &str = "Where the surface lies: the iso field's value on it (the \
+    first surface's is also the middle of the dvr band).";
 pub(crate) const ADD_TIP: &str = "Another surface of the iso field at half the last one's \
     value, translucent, so it shows as a shell around the ones inside it.";
 
@@ -63,11 +65,14 @@ pub(crate) fn show(
         ui.horizontal(|ui| {
             if i == 0 {
                 let slider = widgets::iso_slider(&mut iso, f.min, f.max, controls.iso_log);
-                changed |= ui.add(slider.text(value_label(0))).changed();
+                changed |= ui
+                    .add(slider.text(value_label(0)))
+                    .on_hover_text(VALUE_TIP)
+                    .changed();
             } else {
                 let v = &mut st.more_isos[i - 1].value;
                 let slider = widgets::iso_slider(v, f.min, f.max, controls.iso_log);
-                ui.add(slider.text(value_label(i)));
+                ui.add(slider.text(value_label(i))).on_hover_text(VALUE_TIP);
             }
             if n > 1
                 && ui
