@@ -12,7 +12,9 @@ use super::{dot, HalfSpace, Plane};
 /// around it; empty when the plane misses the box or only touches an edge or a corner.
 /// A plane along a face of the box gives that face.
 pub fn box_section(plane: &Plane, lo: [f64; 3], hi: [f64; 3]) -> Vec<[f64; 3]> {
-    if plane.check().is_err() || (0..3).any(|a| !(lo[a] <= hi[a])) {
+    // A box whose sides are all at least zero (NaN is none).
+    let a_box = (0..3).all(|a| lo[a] <= hi[a]);
+    if plane.check().is_err() || !a_box {
         return Vec::new();
     }
     let h = HalfSpace::new(plane, [0.0; 3]);
