@@ -141,7 +141,7 @@ impl Accel {
 /// How many accelerations an [`AccelCache`] keeps: a view and a few it flips between (an
 /// iso value dragged back and forth, the preview and the full frame share one).
 /// Each iso-surface of a view has one, so it keeps a view's every surface too.
-const KEEP: usize = 4 + crate::view_state::MAX_ISO_SURFACES;
+pub(crate) const KEEP: usize = 4 + crate::view_state::MAX_ISO_SURFACES;
 
 /// The accelerations of the last few views of one volume, newest last, for a renderer
 /// that renders one view after another. Owned by that renderer's thread (no lock); a
