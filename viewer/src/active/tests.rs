@@ -132,7 +132,7 @@ fn the_active_walk_gives_the_file_walks_segments_bit_for_bit() {
 /// accelerations keeps one per key: asking again returns the same tree.
 #[test]
 fn no_region_holds_the_value_so_the_tree_is_empty_and_trees_are_kept() {
-    use crate::accel::{AccelCache, AccelKey};
+    use crate::accel::{AccelCache, AccelKey, KEEP};
     let f = |p: [f64; 3]| p[0] + 0.5 * p[1];
     let file = testvol::nested(4, [0.0; 3], &[("f", &f)], 2);
     let view = testvol::open(&file).expect("opens");
@@ -165,7 +165,7 @@ fn no_region_holds_the_value_so_the_tree_is_empty_and_trees_are_kept() {
     let a = accel(0, 3.0);
     assert!(a.active_tree(&vol).expect("field 0").walk.root.is_some());
     assert!(std::sync::Arc::ptr_eq(&a, &accel(0, 3.0)));
-    for i in 0..crate::accel::KEEP {
+    for i in 0..KEEP {
         accel(0, 10.0 + i as f64);
     }
     // As many newer values as the cache keeps pushed the first one out: it is built anew.

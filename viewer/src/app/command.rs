@@ -32,10 +32,27 @@ pub(crate) enum AppCommand {
     RemoveMesh(usize),
     HideMesh(usize),
     ShowMesh(usize),
+    /// Add an iso-surface ([`crate::view_state::ViewState::add_surface`]), or remove the
+    /// one at this index (0: the first).
+    AddSurface,
+    RemoveSurface(usize),
+    /// Add a clip plane or slice through the pivot, across the axis the view looks along
+    /// most ([`crate::planes::Plane::facing_view`]), or remove the one at this index.
+    AddPlane(Cut),
+    RemovePlane(Cut, usize),
     /// Go back to the view before the last change, or forward again to one undone
     /// (see [`super::history`]).
     Undo,
     Redo,
     /// Show or hide the list of keys and mouse bindings.
     Help,
+}
+
+/// Which list of planes a command is about.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Cut {
+    /// `clip`: planes that keep the side their normal points to.
+    Clip,
+    /// `slices`: planes coloured by the colour field.
+    Slice,
 }

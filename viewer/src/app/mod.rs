@@ -12,12 +12,13 @@
 //! panel asks for (`command`); `document` the open data, `view` the window's own view
 //! settings, `frames` the renderer and its images, `dialogs` the file dialogs, `picking`
 //! the values under the cursor, `history` undo and redo of the view, `keys` the table of
-//! key and mouse bindings; `menu`, `panel`, `canvas`, `status`, `help` and `widgets`
-//! draw; the rest (`navigation`, `player`, `script`, `options`) is state and rules without
+//! key and mouse bindings; `menu`, `panel` (with its `surfaces` and `cuts`), `canvas`,
+//! `status`, `help` and `widgets` draw; the rest (`navigation`, `player`, `script`, `options`) is state and rules without
 //! egui where it can be.
 
 mod canvas;
 mod command;
+mod cuts;
 mod dialogs;
 mod document;
 mod frames;
@@ -32,6 +33,7 @@ mod picking;
 mod player;
 mod script;
 mod status;
+mod surfaces;
 #[cfg(test)]
 mod tests;
 mod view;

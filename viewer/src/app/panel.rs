@@ -1,16 +1,19 @@
 //! The side panel. Every control edits the window's `ViewState`, so what the panel shows
 //! is what `render --state` renders: plain settings in place, and the changes that follow
 //! a rule (a new iso or colour field, an iso value, framing the data, the lights, files
-//! and meshes) as [`AppCommand`]s, which the window handles in one place, with the rules
-//! the command line uses.
+//! and meshes, adding and removing surfaces and planes) as [`AppCommand`]s, which the
+//! window handles in one place, with the rules the command line uses. The surfaces and
+//! the planes have files of their own (`surfaces`, `cuts`).
 
 use eframe::egui::{self, Color32, RichText};
 
 use super::command::AppCommand;
+use super::cuts;
 use super::dialogs::DialogPurpose;
 use super::document::Doc;
 use super::navigation;
 use super::player::Player;
+use super::surfaces;
 use super::view::ViewControls;
 use super::widgets;
 use crate::camera::Projection;
@@ -70,6 +73,13 @@ pub(crate) fn show(p: Panel<'_>, ui: &mut egui::Ui) -> Vec<AppCommand> {
     colours(doc, p.state, p.controls, &mut out, ui);
     ui.separator();
     overlays(p.state, ui);
+    ui.separator();
+    cuts::show(
+        crate::overlay::data_bounds(doc.dataset.volume()),
+        p.state,
+        &mut out,
+        ui,
+    );
     ui.separator();
     scene(p.state, p.controls, &mut out, ui);
     ui.separator();
@@ -180,33 +190,7 @@ fn volume(
         }));
     }
     if let Some(f) = doc.field(&st.iso_field) {
-        let mut iso = st.iso;
-        let mut changed = widgets::iso_histogram(ui, &f.histogram, f.min, f.max, &mut iso);
-        let (lo, hi) = (f64::from(f.min), f64::from(f.max));
-        let slider = egui::Slider::new(&mut iso, lo.min(hi)..=hi.max(lo)).text("iso value");
-        // Q spans decades: on a linear slider the small positive values that show the
-        // vortex cores' edges sit within a pixel of zero. The symmetric-log slider gives
-        // each decade down to 1e-4 of the range the same room, on both sides of zero.
-        let slider = if controls.iso_log {
-            let smallest = 1e-4 * lo.abs().max(hi.abs());
-            slider
-                .logarithmic(true)
-                .smallest_positive(if smallest > 0.0 { smallest } else { 1e-6 })
-        } else {
-            slider
-        };
-        changed |= ui.add(slider).changed();
-        ui.checkbox(&mut controls.iso_log, "log scale")
-            .on_hover_text(
-                "iso slider in decades on both sides of zero, so small values are in reach",
-            );
-        if changed {
-            // The dvr band follows the iso value, as for a new view on the command line.
-            out.push(AppCommand::View(ViewCommand::Iso {
-                value: iso,
-                band_follows: true,
-            }));
-        }
+        surfaces::show(f, st, controls, out, ui);
     }
     // The same warning `render` prints: an empty picture should say why.
     if let Some(w) = st.iso_outside_range(&doc.dataset.volume().fields) {

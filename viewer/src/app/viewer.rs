@@ -9,7 +9,7 @@ use eframe::egui;
 use format::sequence::FramePattern;
 
 use super::canvas::{self, Canvas};
-use super::command::AppCommand;
+use super::command::{AppCommand, Cut};
 use super::dialogs::{self, DialogPurpose, Dialogs};
 use super::document::{self, Doc, Document, DEFAULT_FILE};
 use super::frames::Frames;
@@ -27,6 +27,7 @@ use super::status::status_text;
 use super::view::{self, ViewControls};
 use crate::film;
 use crate::mesh::MeshInstance;
+use crate::planes::{Plane, Slice, MAX_CLIP_PLANES, MAX_SLICES};
 use crate::progressive::Progressive;
 use crate::view_state::{FieldRange, ViewCommand, ViewState};
 
@@ -396,6 +397,20 @@ impl ViewerApp {
                 self.state.meshes.push(m);
             }
             AppCommand::RemoveMesh(_) | AppCommand::HideMesh(_) | AppCommand::ShowMesh(_) => {}
+            AppCommand::AddSurface => {
+                self.state.add_surface();
+            }
+            AppCommand::RemoveSurface(i) => {
+                self.state.remove_surface(i);
+            }
+            AppCommand::AddPlane(cut) => self.add_plane(cut),
+            AppCommand::RemovePlane(Cut::Clip, i) if i < self.state.clip.len() => {
+                self.state.clip.remove(i);
+            }
+            AppCommand::RemovePlane(Cut::Slice, i) if i < self.state.slices.len() => {
+                self.state.slices.remove(i);
+            }
+            AppCommand::RemovePlane(..) => {}
             AppCommand::Undo => {
                 let back = self.history.undo(&self.snapshot());
                 self.restore(back);
@@ -405,6 +420,26 @@ impl ViewerApp {
                 self.restore(forward);
             }
             AppCommand::Help => self.help_open = !self.help_open,
+        }
+    }
+
+    /// Adds a clip plane or slice (up to the library's limits) through the pivot, or the
+    /// point of the data's box nearest it, across the axis the view looks along most.
+    fn add_plane(&mut self, cut: Cut) {
+        let Some(doc) = &self.document.doc else {
+            return;
+        };
+        let (lo, hi) = crate::overlay::data_bounds(doc.dataset.volume());
+        let at: [f64; 3] = std::array::from_fn(|a| self.pivot[a].max(lo[a]).min(hi[a]));
+        let cam = &self.state.camera;
+        let forward: [f64; 3] = std::array::from_fn(|a| cam.look_at[a] - cam.eye[a]);
+        let plane = Plane::facing_view(at, forward);
+        match cut {
+            Cut::Clip if self.state.clip.len() < MAX_CLIP_PLANES => self.state.clip.push(plane),
+            Cut::Slice if self.state.slices.len() < MAX_SLICES => {
+                self.state.slices.push(Slice::new(plane));
+            }
+            Cut::Clip | Cut::Slice => {}
         }
     }
 
@@ -446,10 +481,16 @@ impl ViewerApp {
 
     /// The menu bar; what was chosen in it is handled once it is drawn.
     fn menu(&mut self, ui: &mut egui::Ui) {
+        let st = &self.state;
+        let has_data = self.document.doc.is_some();
         let m = MenuState {
             can_undo: self.history.can_undo(),
             can_redo: self.history.can_redo(),
-            has_data: self.document.doc.is_some(),
+            has_data,
+            can_add_surface: st.mode == crate::transfer::Mode::Iso
+                && st.surfaces().len() < crate::view_state::MAX_ISO_SURFACES,
+            can_add_clip: has_data && st.clip.len() < MAX_CLIP_PLANES,
+            can_add_slice: has_data && st.slices.len() < MAX_SLICES,
         };
         for c in menu::show(&m, ui) {
             self.handle(c);

@@ -1,12 +1,16 @@
-//! Two panel widgets over a field's histogram: the iso value picker and the colour-map
-//! editor. Counts are drawn on a log scale (a few cells near the extremes would vanish on
-//! a linear one).
+//! Panel widgets for values of a field: the iso value picker over the field's histogram,
+//! the iso value slider, and the colour-map editor over its histogram. Counts are drawn
+//! on a log scale (a few cells near the extremes would vanish on a linear one).
 
 use eframe::egui::{self, Color32, Pos2, Rect, Sense, Stroke, Vec2};
 
 use crate::colormap::{ColorMap, ControlPoint};
 
 const HEIGHT: f32 = 64.0;
+
+/// The low end of the opacity sliders (surfaces, slices): at 1 % a surface is all but
+/// invisible, and an opacity of 0 is none (the view state refuses it).
+pub(crate) const MIN_OPACITY: f64 = 0.01;
 
 fn to_color32(c: [f32; 3]) -> Color32 {
     let [r, g, b] = c.map(|v| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8);
@@ -50,14 +54,15 @@ fn bars(painter: &egui::Painter, rect: Rect, histogram: &[u64]) {
     }
 }
 
-/// Histogram of the iso field with the iso value marked; a click or drag sets the value.
-/// Returns whether the value changed.
+/// Histogram of the iso field with the iso value marked (and the other surfaces' values
+/// `others`, fainter); a click or drag sets the value. Returns whether the value changed.
 pub(crate) fn iso_histogram(
     ui: &mut egui::Ui,
     histogram: &[u64],
     lo: f32,
     hi: f32,
     iso: &mut f64,
+    others: &[f64],
 ) -> bool {
     let width = ui.available_width().max(60.0);
     let (rect, response) =
@@ -65,6 +70,13 @@ pub(crate) fn iso_histogram(
     let painter = ui.painter_at(rect);
     painter.rect_filled(rect, 2.0, Color32::from_gray(30));
     bars(&painter, rect, histogram);
+    for &v in others {
+        let x = x_of(rect, v as f32, lo, hi);
+        painter.line_segment(
+            [Pos2::new(x, rect.top()), Pos2::new(x, rect.bottom())],
+            Stroke::new(1.0, Color32::from_rgba_unmultiplied(255, 200, 60, 140)),
+        );
+    }
     let x = x_of(rect, *iso as f32, lo, hi);
     painter.line_segment(
         [Pos2::new(x, rect.top()), Pos2::new(x, rect.bottom())],
@@ -78,6 +90,23 @@ pub(crate) fn iso_histogram(
         }
     }
     changed
+}
+
+/// A slider of an iso value over the field's range `lo..=hi`. Q spans decades: on a linear
+/// slider the small positive values that show the vortex cores' edges sit within a pixel
+/// of zero. With `log` the slider is symmetric-log: each decade down to 1e-4 of the range
+/// gets the same room, on both sides of zero.
+pub(crate) fn iso_slider(value: &mut f64, lo: f32, hi: f32, log: bool) -> egui::Slider<'_> {
+    let (lo, hi) = (f64::from(lo), f64::from(hi));
+    let slider = egui::Slider::new(value, lo.min(hi)..=hi.max(lo));
+    if log {
+        let smallest = 1e-4 * lo.abs().max(hi.abs());
+        slider
+            .logarithmic(true)
+            .smallest_positive(if smallest > 0.0 { smallest } else { 1e-6 })
+    } else {
+        slider
+    }
 }
 
 /// The colour map as a bar over the colour field's histogram. Click on the bar to add a

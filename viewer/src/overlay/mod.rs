@@ -8,7 +8,8 @@
 //! image (a unit of `min(width, height) / 480` pixels), so the legend reads the same at
 //! 640×480 and at 4K. Each overlay keeps to its own part of the picture: the legend on
 //! the right, the triad bottom left, the scale bar bottom right, the title top left; the
-//! box is drawn where the data is, hidden behind surfaces in front of it.
+//! box is drawn where the data is, hidden behind surfaces in front of it, with the
+//! outlines of the view's clip planes and slices where they cross it.
 
 mod axes;
 pub mod canvas;
@@ -25,6 +26,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::camera::RayGen;
 use crate::colormap::ColorMap;
+use crate::planes::{Plane, Slice};
 use canvas::Canvas;
 pub use picture::{annotate, data_bounds, picture};
 
@@ -33,7 +35,7 @@ pub use picture::{annotate, data_bounds, picture};
 pub struct Overlays {
     pub legend: bool,
     pub axes: bool,
-    /// The data's outline box.
+    /// The data's outline box (and where the clip planes and slices cross it).
     pub outline: bool,
     pub scale: bool,
     pub title: bool,
@@ -169,6 +171,10 @@ pub struct OverlayInfo<'a> {
     pub pivot: [f64; 3],
     /// The data's box (world), for the outline.
     pub bounds: Option<([f64; 3], [f64; 3])>,
+    /// The view's clip planes and slices, outlined where they cross the box (with the
+    /// box overlay).
+    pub clip: &'a [Plane],
+    pub slices: &'a [Slice],
     /// Per pixel (row-major), the ray parameter of the first surface, infinite where
     /// there is none: the outline is hidden behind surfaces. `None`: drawn on top.
     pub depth: Option<&'a [f32]>,
@@ -221,6 +227,16 @@ pub fn draw(rgb8: &mut [u8], width: u32, height: u32, which: &Overlays, info: &O
     if which.outline {
         if let Some((lo, hi)) = info.bounds {
             outline::draw(&mut canvas, &style, &info.rays, lo, hi, info.depth);
+            outline::planes(
+                &mut canvas,
+                &style,
+                &info.rays,
+                lo,
+                hi,
+                info.clip,
+                info.slices,
+                info.depth,
+            );
         }
     }
     if which.axes {
@@ -264,18 +280,37 @@ mod tests {
         depth: Option<&[f32]>,
         projection: Projection,
     ) -> Vec<u8> {
-        let cam = Camera {
+        with_planes(which, w, h, depth, projection, &[], &[])
+    }
+
+    fn camera(projection: Projection) -> Camera {
+        Camera {
             eye: [3.0, -4.0, 2.5],
             look_at: [0.0, 0.0, 0.0],
             up: [0.0, 0.0, 1.0],
             projection,
-        };
+        }
+    }
+
+    /// [`picture`] of a view with clip planes and slices.
+    fn with_planes(
+        which: Overlays,
+        w: u32,
+        h: u32,
+        depth: Option<&[f32]>,
+        projection: Projection,
+        clip: &[Plane],
+        slices: &[Slice],
+    ) -> Vec<u8> {
+        let cam = camera(projection);
         let map = ColorMap::default_for_range("speed", 0.0, 0.09);
         let mut px = vec![60u8; 3 * (w * h) as usize];
         let info = OverlayInfo {
             rays: cam.ray_generator(w, h),
             pivot: cam.look_at,
             bounds: Some(([-1.0, -0.5, -0.5], [1.0, 0.5, 0.5])),
+            clip,
+            slices,
             depth,
             legend: Some(LegendInfo {
                 colormap: &map,
@@ -391,6 +426,59 @@ mod tests {
                 .filter(|&&i| (i as u32 % w) > w / 2 + 2)
                 .count()
         );
+    }
+
+    /// With the box overlay, each clip plane and slice is outlined along the polygon where
+    /// it crosses the box, cut to what the clip planes keep; a plane beside the box adds
+    /// nothing, and without the box overlay no plane is drawn.
+    #[test]
+    fn planes_are_outlined_where_they_cross_the_box() {
+        let (w, h) = (640u32, 480u32);
+        let persp = Projection::Perspective { fov_deg: 35.0 };
+        let just_box: Overlays = "box".parse().expect("box");
+        let plane = |s: &str| -> Plane { s.parse().expect("plane") };
+        let slice = Slice::new(plane("x>0"));
+        let bare = picture(Overlays::NONE, w, h, None, persp);
+        let boxed = picture(just_box, w, h, None, persp);
+        let sliced = with_planes(just_box, w, h, None, persp, &[], &[slice]);
+        let added = changed(&boxed, &sliced);
+        assert!(added.len() > 100, "the slice drew {} pixels", added.len());
+        // Every pixel added lies by an edge of the square x = 0, |y|, |z| ≤ 0.5.
+        let rays = camera(persp).ray_generator(w, h);
+        let square = [
+            [0.0, -0.5, -0.5],
+            [0.0, 0.5, -0.5],
+            [0.0, 0.5, 0.5],
+            [0.0, -0.5, 0.5],
+        ];
+        let ends: Vec<(f64, f64)> = square
+            .iter()
+            .map(|&p| rays.project(p).map(|(x, y, _)| (x, y)).expect("in front"))
+            .collect();
+        let near_edge = |i: usize| {
+            let (px, py) = ((i as u32 % w) as f64 + 0.5, (i as u32 / w) as f64 + 0.5);
+            (0..4).any(|k| {
+                let ((ax, ay), (bx, by)) = (ends[k], ends[(k + 1) % 4]);
+                let (dx, dy) = (bx - ax, by - ay);
+                let t = (((px - ax) * dx + (py - ay) * dy) / (dx * dx + dy * dy)).clamp(0.0, 1.0);
+                (ax + t * dx - px).hypot(ay + t * dy - py) < 3.0
+            })
+        };
+        assert!(added.iter().all(|&i| near_edge(i)), "pixels off the square");
+        // A clip plane is outlined too; one beside the box is not.
+        let clipped = with_planes(just_box, w, h, None, persp, &[plane("x<0.5")], &[]);
+        assert!(changed(&boxed, &clipped).len() > 100);
+        let beside = with_planes(just_box, w, h, None, persp, &[plane("x>5")], &[]);
+        assert_eq!(beside, boxed);
+        // A slice in the part a clip plane removes is not outlined.
+        let keep_right = [plane("x>0.5")];
+        assert_eq!(
+            with_planes(just_box, w, h, None, persp, &keep_right, &[slice]),
+            with_planes(just_box, w, h, None, persp, &keep_right, &[])
+        );
+        // Without the box overlay, nothing.
+        let none = with_planes(Overlays::NONE, w, h, None, persp, &keep_right, &[slice]);
+        assert_eq!(none, bare);
     }
 
     /// Sizes follow the picture: the legend's text is about as large relative to a 4K

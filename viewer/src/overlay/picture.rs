@@ -42,6 +42,8 @@ pub fn annotate(
         rays: state.camera.ray_generator(width, height),
         pivot: state.camera.look_at,
         bounds,
+        clip: &state.clip,
+        slices: &state.slices,
         depth,
         legend: Some(LegendInfo {
             colormap: &state.colormap,

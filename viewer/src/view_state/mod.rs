@@ -130,6 +130,10 @@ fn is_one(x: &f64) -> bool {
 /// Most iso-surfaces in one view (`iso` and `more_isos` together).
 pub const MAX_ISO_SURFACES: usize = 8;
 
+/// Opacity of a surface added by [`ViewState::add_surface`]: enough to see it, little
+/// enough to see through it.
+pub const NEW_SURFACE_OPACITY: f64 = 0.4;
+
 /// One iso-surface of the iso field: its value, opacity and (optionally) a fixed colour
 /// instead of the colour map's.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -354,6 +358,39 @@ impl ViewState {
         self.more_isos = more.to_vec();
     }
 
+    /// Adds an iso-surface at half the last one's value, translucent
+    /// ([`NEW_SURFACE_OPACITY`]) so the surfaces inside it show: with the default Q
+    /// value, a shell around the vortex cores. `false` (and nothing added) when the view
+    /// has [`MAX_ISO_SURFACES`] already.
+    pub fn add_surface(&mut self) -> bool {
+        if self.more_isos.len() + 1 >= MAX_ISO_SURFACES {
+            return false;
+        }
+        let last = self.more_isos.last().map_or(self.iso, |s| s.value);
+        self.more_isos.push(IsoSurface {
+            value: 0.5 * last,
+            opacity: NEW_SURFACE_OPACITY,
+            colour: None,
+        });
+        true
+    }
+
+    /// Removes iso-surface `index` (0: the first, `iso`, whose place the next one takes);
+    /// `false` (and nothing removed) for the last one left or an index past the end.
+    pub fn remove_surface(&mut self, index: usize) -> bool {
+        let mut all = self.surfaces();
+        if all.len() < 2 || index >= all.len() {
+            return false;
+        }
+        all.remove(index);
+        if index == 0 {
+            self.set_surfaces(&all);
+        } else {
+            self.more_isos.remove(index - 1);
+        }
+        true
+    }
+
     /// Sets the iso value and keeps the dvr band's width at 8 % of it, as in the seed
     /// report (σ 0.004 at iso 0.05); an iso value of 0 keeps the current width.
     pub fn set_iso(&mut self, iso: f64) {
@@ -515,6 +552,37 @@ mod tests {
         assert_eq!(s.iso_outside_range(&fields()), None);
         s.iso_field = "nope".into();
         assert_eq!(s.iso_outside_range(&fields()), None);
+    }
+
+    /// Surfaces are added at half the last value, translucent, up to the limit; removing
+    /// the first makes the next one the first; the last one left stays.
+    #[test]
+    fn surfaces_are_added_and_removed() {
+        let mut s = ViewState::default_for([0.0; 3], [1.0; 3], &fields());
+        let iso = s.iso;
+        assert!(s.add_surface());
+        assert_eq!(
+            s.more_isos,
+            vec![IsoSurface {
+                value: 0.5 * iso,
+                opacity: NEW_SURFACE_OPACITY,
+                colour: None
+            }]
+        );
+        assert!(s.add_surface());
+        assert_eq!(s.more_isos[1].value, 0.25 * iso);
+        while s.add_surface() {}
+        assert_eq!(s.surfaces().len(), MAX_ISO_SURFACES);
+        s.validate().expect("valid with every surface");
+        assert!(!s.remove_surface(MAX_ISO_SURFACES));
+        assert!(s.remove_surface(2));
+        assert_eq!(s.more_isos[1].value, 0.125 * iso);
+        assert!(s.remove_surface(0));
+        assert_eq!((s.iso, s.iso_opacity), (0.5 * iso, NEW_SURFACE_OPACITY));
+        assert!((s.transfer.sigma - 0.08 * s.iso).abs() < 1e-15);
+        while s.remove_surface(0) {}
+        assert_eq!(s.surfaces().len(), 1);
+        assert!(!s.remove_surface(0));
     }
 
     #[test]

@@ -6,8 +6,14 @@
 //! normal points to). A clip keeps the side its normal points to. Rays meet planes
 //! analytically: a clip plane shortens a ray's interval before any walk starts (so
 //! empty-space skipping is untouched), and a slice is a single point along each ray.
+//!
+//! `section`: the polygon where a plane crosses the data's box (what the overlays
+//! outline) and a plane's position along its normal (what the window's sliders move).
 
 use serde::{Deserialize, Serialize};
+
+mod section;
+pub use section::{box_section, clip_polygon, clipped_section};
 
 /// Most clip planes in one view: six make any box.
 pub const MAX_CLIP_PLANES: usize = 6;
