@@ -39,8 +39,13 @@ def _flag_value(value: Any) -> str:
         return value
     if isinstance(value, (list, tuple, np.ndarray)):
         return ",".join(_flag_value(v) for v in value)
-    if isinstance(value, float):
-        return repr(value)
+    if isinstance(value, (bool, np.bool_)):
+        return str(bool(value)).lower()
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    if isinstance(value, (float, np.floating)):
+        # The shortest text that reads back as the same double (numpy's repr is not it).
+        return repr(float(value))
     return str(value)
 
 
@@ -53,6 +58,8 @@ def _flags(view: Mapping[str, Any]) -> list:
         flag = "--" + _FLAG_NAMES.get(key, key).replace("_", "-")
         if value is True:
             flags.append(flag)
+        elif key == "overlays" and not isinstance(value, str) and len(value) == 0:
+            flags += [flag, "none"]
         elif key in ("clip", "slices", "meshes"):
             items = [value] if isinstance(value, str) else list(value)
             for item in items:

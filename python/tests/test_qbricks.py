@@ -45,6 +45,15 @@ def test_render_flags_equal_cli(ds, cli, tmp_path):
     np.testing.assert_array_equal(img.array[:, :, :3], read_png(out))
 
 
+def test_keyword_values(ds):
+    """numpy numbers and arrays, tuples and empty lists read as the CLI's text would."""
+    a = ds.state(eye=np.array([3.0, 2.0, 1.5]), look_at=(np.float32(0), 0, 0), fov=np.int64(35),
+                 colour_range=(np.float64(0.0), 0.05), overlays=[], spp=np.uint8(2))
+    b = ds.state(eye="3,2,1.5", look_at="0,0,0", fov=35, colour_range="0,0.05",
+                 overlays="none", spp=2)
+    assert a == b
+
+
 def test_state_round_trip(ds):
     s = ds.state(width=64, height=48, iso=1.5)
     assert s["width"] == 64 and s["iso"] == 1.5
