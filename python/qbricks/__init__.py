@@ -209,6 +209,29 @@ class Dataset:
         pts = np.ascontiguousarray(pts)
         return self._ds.probe(pts, field)
 
+    def probe_plane(
+        self,
+        plane: str,
+        *,
+        resolution: Union[None, int, str, Tuple[int, int]] = None,
+        fields: Union[None, str, Sequence[str]] = None,
+    ) -> Dict[str, Any]:
+        """Every field (or those named in ``fields``) on a regular grid of a plane, as
+        ``qbricks-view probe --plane PLANE --resolution RES`` samples it. ``plane``: the
+        CLI's syntax ("OX,OY,OZ:UX,UY,UZ:VX,VY,VZ", or an axis and a value such as "z=0",
+        see docs/cli.md); ``resolution``: N (samples along the longer side) or (NU, NV).
+        Returns ``{field: (NV, NU) float32 array (NaN outside the data), …, "origin",
+        "u", "v" (the resolved patch: a corner and two edges), "outside" (samples outside
+        the data)}``; row j, column i is the point origin + (i + 0.5)/NU·u + (j + 0.5)/NV·v."""
+        res = None if resolution is None else _flag_value(resolution)
+        names = None
+        if fields is not None:
+            names = fields.split(",") if isinstance(fields, str) else list(fields)
+        values, field_names, origin, u, v, outside = self._ds.probe_plane(plane, res, names)
+        out: Dict[str, Any] = {name: values[:, :, k] for k, name in enumerate(field_names)}
+        out.update(origin=tuple(origin), u=tuple(u), v=tuple(v), outside=outside)
+        return out
+
     def __repr__(self) -> str:
         return f"<qbricks.Dataset {self.path!r} fields={list(self.fields)}>"
 

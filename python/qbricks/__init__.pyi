@@ -78,6 +78,14 @@ class Dataset:
     ) -> Image: ...
     def probe(self, points: npt.ArrayLike, *, field: Optional[str] = ...) -> Dict[str, npt.NDArray[np.float64]]: ...
 
+    def probe_plane(
+        self,
+        plane: str,
+        *,
+        resolution: Union[None, int, str, Tuple[int, int]] = ...,
+        fields: Union[None, str, Sequence[str]] = ...,
+    ) -> Dict[str, Any]: ...
+
 def open(path: PathLike, *, checksum: bool = ...) -> Dataset: ...
 def bake(
     src: PathLike,

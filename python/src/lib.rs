@@ -337,6 +337,84 @@ impl Dataset {
         )
     }
 
+    /// Every field (or those of `fields`) sampled on a plane as `qbricks-view probe --plane
+    /// SPEC --resolution RES` does: returns (values (NV, NU, F) float32, field names, origin,
+    /// u, v, samples outside). The GIL is released meanwhile.
+    #[pyo3(signature = (plane, resolution=None, fields=None))]
+    #[allow(clippy::type_complexity)]
+    fn probe_plane<'py>(
+        &self,
+        py: Python<'py>,
+        plane: String,
+        resolution: Option<String>,
+        fields: Option<Vec<String>>,
+    ) -> PyResult<(
+        Bound<'py, PyAny>,
+        Vec<String>,
+        [f64; 3],
+        [f64; 3],
+        [f64; 3],
+        u64,
+    )> {
+        use viewer::probe::plane::{self as pl, PlaneSpec, ResolutionSpec};
+        let ds = Arc::clone(&self.inner);
+        let path = self.path.clone();
+        let samples = py.allow_threads(move || {
+            guarded(|| {
+                let spec = PlaneSpec::parse(&plane).map_err(|e| anyhow::anyhow!("plane: {e}"))?;
+                let res = match &resolution {
+                    Some(r) => {
+                        ResolutionSpec::parse(r).map_err(|e| anyhow::anyhow!("resolution: {e}"))?
+                    }
+                    None => ResolutionSpec::default(),
+                };
+                let vol = ds.volume();
+                if vol.fields.is_empty() {
+                    anyhow::bail!("{}: the file has no fields", path.display());
+                }
+                let fields: Vec<usize> = match &fields {
+                    None => (0..vol.fields.len()).collect(),
+                    Some(names) => {
+                        let mut out = Vec::new();
+                        for name in names {
+                            let f = vol
+                                .field_index(name.trim())
+                                .map_err(|e| e.named_by("fields"))?;
+                            if out.contains(&f) {
+                                anyhow::bail!("fields: {:?} is named twice", name.trim());
+                            }
+                            out.push(f);
+                        }
+                        out
+                    }
+                };
+                let b = &ds.view().file().bounds;
+                let plane = spec
+                    .resolve(b.min.map(|x| x.to_native()), b.max.map(|x| x.to_native()))
+                    .map_err(|e| anyhow::anyhow!("plane: {e}"))?;
+                let res = res.resolve(&plane)?;
+                pl::check_memory(res, fields.len())?;
+                Ok(pl::sample(vol, &plane, res, &fields)?)
+            })
+        })?;
+        let (nu, nv, nf) = (
+            samples.resolution.nu as usize,
+            samples.resolution.nv as usize,
+            samples.fields.len(),
+        );
+        let values = PyArray1::from_vec(py, samples.values)
+            .reshape([nv, nu, nf])?
+            .into_any();
+        Ok((
+            values,
+            samples.fields,
+            samples.plane.origin,
+            samples.plane.u,
+            samples.plane.v,
+            samples.outside,
+        ))
+    }
+
     /// Every field at `points` ((N, 3) float64, world coordinates; NaN outside the data),
     /// the gradient of `field` (default: `q`, else the first) and the shading normal, as
     /// `qbricks-view probe` reports them.

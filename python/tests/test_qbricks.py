@@ -198,3 +198,18 @@ def test_ctrl_c_interrupts_render(ds):
     timer.join()
     assert stopped < 10, stopped
     assert ds.render(width=16, height=16).array.shape == (16, 16, 4)
+
+
+def test_probe_plane_equals_cli(ds, cli, tmp_path):
+    out = tmp_path / "plane.npy"
+    cli("qbricks-view", "probe", SAMPLE, "--plane", "z=0.1", "--resolution", "40,24",
+        "--fields", "speed,q", "-o", out)
+    expected = np.load(out)
+    got = ds.probe_plane("z=0.1", resolution=(40, 24), fields=["speed", "q"])
+    assert expected.shape == (24, 40, 2) and got["speed"].shape == (24, 40)
+    np.testing.assert_array_equal(np.stack([got["speed"], got["q"]], axis=2), expected)
+    assert got["outside"] == int(np.isnan(expected[:, :, 0]).sum())
+    everything = ds.probe_plane("z=0.1", resolution=40)
+    assert set(ds.fields) <= set(everything)
+    with pytest.raises(ValueError, match="plane"):
+        ds.probe_plane("nonsense")
