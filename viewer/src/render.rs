@@ -208,6 +208,18 @@ impl Counts {
 
 /// Renders the whole image on the current rayon pool.
 pub fn render(scene: &Scene) -> Frame {
+    render_under(scene, &CancelToken::new()).0
+}
+
+/// [`render`] under `cancel`: `None` when it was cancelled before every tile was done
+/// (the Python module's Ctrl-C).
+pub fn render_cancellable(scene: &Scene, cancel: &CancelToken) -> Option<Frame> {
+    let (frame, done) = render_under(scene, cancel);
+    done.then_some(frame)
+}
+
+/// The frame, and whether every tile of it was rendered (not cancelled).
+fn render_under(scene: &Scene, cancel: &CancelToken) -> (Frame, bool) {
     let (w, h) = (scene.state.width, scene.state.height);
     let acc = Mutex::new((Film::new(w, h), Counts::default()));
     let sink = |r: TileResult| {
@@ -216,15 +228,15 @@ pub fn render(scene: &Scene) -> Frame {
         g.0.add(&r);
         g.1.add(&r);
     };
-    render_tiles(
+    let done = render_tiles(
         scene,
         &tiles(w, h),
         0..scene.state.spp.max(1),
-        &CancelToken::new(),
+        cancel,
         &sink,
     );
     let (film, counts) = acc.into_inner().unwrap_or_else(|e| e.into_inner());
-    Frame {
+    let frame = Frame {
         width: w,
         height: h,
         rgb: film.resolve(),
@@ -234,7 +246,8 @@ pub fn render(scene: &Scene) -> Frame {
         stats: counts.stats,
         rays: counts.rays,
         hits: counts.hits,
-    }
+    };
+    (frame, done)
 }
 
 /// A persistent pool of render threads (building a pool costs more than a small frame).
@@ -259,6 +272,11 @@ impl Renderer {
     /// [`render`] on this pool.
     pub fn render(&self, scene: &Scene) -> Frame {
         self.pool.install(|| render(scene))
+    }
+
+    /// [`render_cancellable`] on this pool.
+    pub fn render_cancellable(&self, scene: &Scene, cancel: &CancelToken) -> Option<Frame> {
+        self.pool.install(|| render_cancellable(scene, cancel))
     }
 
     /// `--colour-range visible`: renders `state` once (one sample per pixel, enough to

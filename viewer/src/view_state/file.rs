@@ -60,7 +60,7 @@ fn found_bytes(size: Option<u64>) -> String {
 
 impl ViewState {
     /// Parses and validates JSON text; `path` only names the source in errors.
-    pub(crate) fn from_json(path: &Path, text: &str) -> Result<ViewState, ViewStateError> {
+    pub fn from_json(path: &Path, text: &str) -> Result<ViewState, ViewStateError> {
         let state: ViewState =
             serde_json::from_str(text).map_err(|error| ViewStateError::Parse {
                 path: path.to_path_buf(),

@@ -1,0 +1,215 @@
+"""The Python module against the CLIs: same pictures, same probes, same errors."""
+
+import json
+import math
+import shutil
+import threading
+import time
+from importlib import metadata
+
+import numpy as np
+import pytest
+
+import qbricks
+from conftest import SAMPLE, SAMPLE_VDB
+from png import read_png
+
+VIEW = dict(width=160, height=120, overlays="legend,axes,title,box", colormap="magma")
+
+
+def test_render_equals_cli(ds, cli, tmp_path):
+    out, saved = tmp_path / "cli.png", tmp_path / "state.json"
+    cli("qbricks-view", "render", SAMPLE, "-o", out, "--width", 160, "--height", 120,
+        "--overlays", "legend,axes,title,box", "--colormap", "magma", "--save-state", saved)
+    expected = read_png(out)
+    img = ds.render(**VIEW)
+    assert img.array.shape == (120, 160, 4) and img.array.dtype == np.uint8
+    assert (img.array[:, :, 3] == 255).all()
+    np.testing.assert_array_equal(img.array[:, :, :3], expected)
+    # The effective state is the one the CLI saves, and rendering from it (a path or a
+    # dict) gives the same picture.
+    assert img.state == json.loads(saved.read_text())
+    np.testing.assert_array_equal(ds.render(saved).array, img.array)
+    np.testing.assert_array_equal(ds.render(img.state).array, img.array)
+
+
+def test_render_flags_equal_cli(ds, cli, tmp_path):
+    """Camera, iso list, clip planes and slices pass through as the CLI's flags."""
+    out = tmp_path / "cli.png"
+    args = ["--width", 96, "--height", 64, "--iso", "0.5,2", "--eye", "3,2,1.5",
+            "--look-at", "0,0,0", "--fov", 35, "--clip", "x>-0.5", "--slice", "0,0,0:0,0,1",
+            "--overlays", "none"]
+    cli("qbricks-view", "render", SAMPLE, "-o", out, *args)
+    img = ds.render(width=96, height=64, iso=[0.5, 2], eye=(3, 2, 1.5), look_at=[0, 0, 0],
+                    fov=35, clip=["x>-0.5"], slices=[((0, 0, 0), (0, 0, 1))], overlays="none")
+    np.testing.assert_array_equal(img.array[:, :, :3], read_png(out))
+
+
+def test_keyword_values(ds):
+    """numpy numbers and arrays, tuples and empty lists read as the CLI's text would."""
+    a = ds.state(eye=np.array([3.0, 2.0, 1.5]), look_at=(np.float32(0), 0, 0), fov=np.int64(35),
+                 colour_range=(np.float64(0.0), 0.05), overlays=[], spp=np.uint8(2))
+    b = ds.state(eye="3,2,1.5", look_at="0,0,0", fov=35, colour_range="0,0.05",
+                 overlays="none", spp=2)
+    assert a == b
+
+
+def test_state_round_trip(ds):
+    s = ds.state(width=64, height=48, iso=1.5)
+    assert s["width"] == 64 and s["iso"] == 1.5
+    # A state given back comes back unchanged, and renders as the flags did.
+    assert ds.state(s) == s
+    a, b = ds.render(s), ds.render(width=64, height=48, iso=1.5)
+    assert a.state == s
+    np.testing.assert_array_equal(a.array, b.array)
+    # A flag over a state changes only what it names.
+    t = ds.state(s, spp=2)
+    assert t["spp"] == 2 and {k: v for k, v in t.items() if k != "spp"} == {
+        k: v for k, v in s.items() if k != "spp"}
+
+
+def test_depth_and_png(ds, tmp_path):
+    img = ds.render(width=48, height=32, depth=True)
+    assert img.depth.shape == (32, 48) and img.depth.dtype == np.float32
+    assert np.isfinite(img.depth).any()
+    img.save(tmp_path / "a.png")
+    np.testing.assert_array_equal(read_png(tmp_path / "a.png"), img.array[:, :, :3])
+    assert img._repr_png_().startswith(b"\x89PNG")
+
+
+def test_probe_equals_cli(ds, cli, tmp_path):
+    (lo, hi) = ds.bounds
+    rng = np.random.default_rng(7)
+    pts = rng.uniform(np.array(lo) - 0.2, np.array(hi) + 0.2, size=(200, 3))
+    csv = tmp_path / "p.csv"
+    csv.write_text("x,y,z\n" + "".join(f"{float(x)!r},{float(y)!r},{float(z)!r}\n"
+                                        for x, y, z in pts))
+    text = cli("qbricks-view", "probe", SAMPLE, "--points", csv).decode()
+    lines = text.strip().split("\n")
+    header = lines[0].split(",")
+    rows = np.array([[float(v) for v in l.split(",")] for l in lines[1:]])
+    got = ds.probe(pts)
+    for name in ds.fields:
+        np.testing.assert_array_equal(got[name], rows[:, header.index(name)])
+    g = [i for i, h in enumerate(header) if h.startswith("d")][:3]
+    np.testing.assert_array_equal(got["gradient"], rows[:, g])
+    n = [header.index(f"normal_{a}") for a in "xyz"]
+    np.testing.assert_array_equal(got["normal"], rows[:, n])
+    outside = ~((pts >= lo) & (pts <= hi)).all(axis=1)
+    assert outside.any() and np.isnan(got["q"][outside]).all()
+
+
+def test_info_and_histogram(ds, cli):
+    info = json.loads(cli("qbricks-view", "info", SAMPLE, "--json"))
+    mine = ds.info()
+    assert {k: mine[k] for k in info} == info
+    assert list(ds.fields) == [f["name"] for f in info["fields"]]
+    counts, edges = ds.histogram("q")
+    assert len(edges) == len(counts) + 1 and counts.sum() > 0
+    assert (edges[0], edges[-1]) == pytest.approx(ds.fields["q"])
+
+
+def test_errors(ds, tmp_path):
+    with pytest.raises(FileNotFoundError, match="nope.qbk"):
+        qbricks.open(tmp_path / "nope.qbk")
+    bad = tmp_path / "bad.qbk"
+    bad.write_bytes(SAMPLE.read_bytes()[:100000])
+    with pytest.raises(qbricks.FormatError, match="bad.qbk: .*truncated"):
+        qbricks.open(bad)
+    assert issubclass(qbricks.FormatError, ValueError)
+    with pytest.raises(ValueError, match="nofield"):
+        ds.render(width=8, height=8, colour_field="nofield")
+    with pytest.raises(ValueError, match="strategy"):
+        ds.render(strategy="bogus")
+    with pytest.raises(ValueError):
+        ds.probe(np.zeros((3, 2)))
+    with pytest.raises(FileNotFoundError):
+        ds.render(tmp_path / "missing-state.json")
+
+
+def test_gil_released_during_render(ds):
+    ticks = []
+    stop = threading.Event()
+
+    def count():
+        while not stop.is_set():
+            ticks.append(time.perf_counter())
+            time.sleep(0.001)
+
+    t = threading.Thread(target=count)
+    t.start()
+    try:
+        t0 = time.perf_counter()
+        ds.render(width=512, height=512, spp=4, threads=1)
+        t1 = time.perf_counter()
+    finally:
+        stop.set()
+        t.join()
+    during = [x for x in ticks if t0 < x < t1]
+    assert t1 - t0 > 0.05, "render too fast to tell"
+    # The other thread ran throughout the render, not only before and after.
+    assert len(during) >= 10
+
+
+def test_dataset_outlives_nothing(tmp_path):
+    """Results are copies: they stay valid after the dataset (and its map) is gone."""
+    path = tmp_path / "copy.qbk"
+    shutil.copy(SAMPLE, path)
+    ds = qbricks.open(path)
+    img = ds.render(width=32, height=24)
+    p = ds.probe([[0.0, 0.0, 0.0]])
+    del ds
+    path.unlink()
+    assert img.array.sum() > 0 and p["q"].shape == (1,)
+
+
+def test_bake_equals_cli(cli, tmp_path):
+    summary = qbricks.bake(SAMPLE_VDB, tmp_path / "py.qbk", fields="q,speed,vorticity")
+    cli_summary = json.loads(cli("qbricks-bake", "bake", SAMPLE_VDB, "-o", tmp_path / "cli.qbk",
+                                 "--fields", "q,speed,vorticity", "--json"))
+    for k in ("seconds", "output"):
+        summary.pop(k), cli_summary.pop(k)
+    summary.pop("warnings")
+    assert summary == cli_summary
+    assert (tmp_path / "py.qbk").read_bytes() == (tmp_path / "cli.qbk").read_bytes()
+    assert list(qbricks.open(tmp_path / "py.qbk").fields) == ["q", "speed", "vorticity"]
+    with pytest.raises(FileNotFoundError):
+        qbricks.bake(tmp_path / "missing.vdb")
+
+
+def test_wheel_is_abi3():
+    wheel = metadata.distribution("qbricks").read_text("WHEEL")
+    tags = [l.split(":", 1)[1].strip() for l in wheel.splitlines() if l.startswith("Tag:")]
+    assert tags and all(t.startswith("cp39-abi3-") for t in tags), tags
+
+
+def test_ctrl_c_interrupts_render(ds):
+    """Ctrl-C (here `_thread.interrupt_main`, which raises SIGINT's KeyboardInterrupt in
+    the main thread) stops a long render: KeyboardInterrupt soon, no crash, and the
+    dataset still renders afterwards."""
+    import _thread
+
+    timer = threading.Timer(0.3, _thread.interrupt_main)
+    timer.start()
+    t0 = time.perf_counter()
+    with pytest.raises(KeyboardInterrupt):
+        ds.render(width=2048, height=2048, spp=64, threads=1)
+    stopped = time.perf_counter() - t0
+    timer.join()
+    assert stopped < 10, stopped
+    assert ds.render(width=16, height=16).array.shape == (16, 16, 4)
+
+
+def test_probe_plane_equals_cli(ds, cli, tmp_path):
+    out = tmp_path / "plane.npy"
+    cli("qbricks-view", "probe", SAMPLE, "--plane", "z=0.1", "--resolution", "40,24",
+        "--fields", "speed,q", "-o", out)
+    expected = np.load(out)
+    got = ds.probe_plane("z=0.1", resolution=(40, 24), fields=["speed", "q"])
+    assert expected.shape == (24, 40, 2) and got["speed"].shape == (24, 40)
+    np.testing.assert_array_equal(np.stack([got["speed"], got["q"]], axis=2), expected)
+    assert got["outside"] == int(np.isnan(expected[:, :, 0]).sum())
+    everything = ds.probe_plane("z=0.1", resolution=40)
+    assert set(ds.fields) <= set(everything)
+    with pytest.raises(ValueError, match="plane"):
+        ds.probe_plane("nonsense")
