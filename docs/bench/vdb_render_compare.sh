@@ -6,7 +6,11 @@
 #
 #   docs/bench/vdb_render_compare.sh [WORKDIR=/tmp/vdb_compare] [REPEAT=3] [THREADS=2]
 #
-# 1. synth + bake the wake at n0 128 (skipped when WORKDIR already holds them);
+# FILE=independent runs it on issue 33's independent layout
+# (docs/bench/layouts/independent.json) instead of the n0-128 wake (FILE=wake128, the
+# default).
+#
+# 1. synth + bake the file (skipped when WORKDIR already holds them);
 # 2. resample the bake's Q onto one uniform grid at the finest cell width
 #    (examples/qbk_to_vdb.rs): q.vdb (−Q) and fog.vdb (a 0→1 ramp of Q over the band);
 # 3. vdb_tool -iso2ls: the Q = ISO surface as a narrow-band level set (timed on its own);
@@ -21,10 +25,12 @@ REPEAT=${2:-3}
 THREADS=${3:-2}
 ISO=0.05
 ROOT=$(pwd)
+FILE=${FILE:-wake128}
 BAKE="$ROOT/target/release/qbricks-bake"
 VIEW="$ROOT/target/release/qbricks-view"
+LAB="$ROOT/target/release/qbricks-lab"
 EXPORT="$ROOT/target/release/examples/qbk_to_vdb"
-for exe in "$BAKE" "$VIEW" "$EXPORT"; do
+for exe in "$BAKE" "$VIEW" "$LAB" "$EXPORT"; do
     [[ -x $exe ]] || { echo "missing $exe: cargo build --release --workspace --examples" >&2; exit 2; }
 done
 for tool in vdb_render vdb_tool; do
@@ -40,19 +46,23 @@ EYE=3.5,-4.5,2; LOOK=2.3,0,0; UP=0,0,1; FOV=30; RES=1024
 QB_CAM=(--eye $EYE --look-at $LOOK --up $UP --fov $FOV --width $RES --height $RES --iso $ISO)
 VDB_CAM=(-res ${RES}x${RES} -translate $EYE -lookat $LOOK -up $UP -fov $FOV -cpus $THREADS)
 
-if [[ ! -f wake128.qbk ]]; then
-    "$BAKE" synth wake -o wake128.vdb --n0 128 --levels 3
-    "$BAKE" bake wake128.vdb -o wake128.qbk
+if [[ ! -f $FILE.qbk ]]; then
+    case $FILE in
+        wake128) "$LAB" synth wake -o wake128.vdb --n0 128 --levels 3 ;;
+        independent) "$LAB" synth wake -o independent.vdb --boxes "$ROOT/docs/bench/layouts/independent.json" ;;
+        *) echo "FILE=$FILE: expected wake128 or independent" >&2; exit 2 ;;
+    esac
+    "$BAKE" bake "$FILE.vdb" -o "$FILE.qbk"
 fi
 echo "load before: $(uptime)"
 t0=$(date +%s.%N)
-"$EXPORT" wake128.qbk q.vdb fog.vdb --iso $ISO
+"$EXPORT" "$FILE.qbk" q.vdb fog.vdb --iso $ISO
 echo "resample to uniform grid: $(echo "$(date +%s.%N) - $t0" | bc) s"
 t0=$(date +%s.%N)
 vdb_tool -quiet -read q.vdb -iso2ls iso=-$ISO width=3 -write ls.vdb
 echo "vdb_tool -iso2ls (read, convert, write): $(echo "$(date +%s.%N) - $t0" | bc) s"
 
-qb_ms() { "$VIEW" render wake128.qbk "${QB_CAM[@]}" --threads "$THREADS" --json "$@" |
+qb_ms() { "$VIEW" render "$FILE.qbk" "${QB_CAM[@]}" --threads "$THREADS" --json "$@" |
     grep -o '"ms":[0-9.]*' | cut -d: -f2 | xargs printf '%.0f'; }
 vdb_ms() { vdb_render "$@" "${VDB_CAM[@]}" -v 2>&1 |
     awk '/ray-tracing/ {r=1} r && /completed in/ {print $(NF-1) * 1000; exit}'; }

@@ -1,6 +1,7 @@
 //! Where a scene's grids are: the world-aligned boxes of every level (see the module docs of
 //! [`super`]), and the memory they would take, checked before anything is sampled.
 
+use super::boxes::LATTICE_EPS;
 use super::*;
 
 pub(super) const WAKE_DOMAIN: Aabb = Aabb {
@@ -23,7 +24,56 @@ const UNIT_CORE: Aabb = Aabb {
     max: [0.5, 0.5, 0.5],
 };
 
-/// One grid of a scene layout: its name, voxel size and active index box (half-open).
+/// Most levels of a scene (`--levels`, and the boxes of a layout).
+pub(crate) const MAX_LEVELS: u32 = 10;
+
+/// Most cells along an axis of a box: the bound of `--n0` (cells along the longest axis of
+/// the coarsest grid), and of every axis of every box of a layout.
+pub(crate) const MAX_CELLS_PER_AXIS: u32 = 1 << 16;
+
+/// What a memory error names: the request, and how to make it smaller.
+pub(crate) struct Request {
+    pub what: String,
+    pub hint: &'static str,
+}
+
+impl Request {
+    /// A scene laid out by `--n0` and `--levels`.
+    pub(crate) fn n0(scene: &str, n0: u32) -> Request {
+        Request {
+            what: format!("scene {scene:?} with n0 {n0}"),
+            hint: "use a smaller --n0 or fewer --levels",
+        }
+    }
+
+    /// A scene on the `boxes` boxes of a layout file.
+    pub(crate) fn boxes(scene: &str, boxes: usize) -> Request {
+        Request {
+            what: format!("scene {scene:?} on {boxes} nested box(es)"),
+            hint: "use smaller boxes, coarser cells or fewer levels",
+        }
+    }
+}
+
+/// A ball of solid: the voxels whose centres lie strictly inside it are left inactive, as a
+/// solver leaves an obstacle's cells out of what it writes.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Obstacle {
+    pub centre: [f64; 3],
+    pub radius: f64,
+}
+
+impl Obstacle {
+    /// Whether `p` lies strictly inside.
+    pub fn contains(&self, p: [f64; 3]) -> bool {
+        let d2: f64 = (0..3).map(|a| (p[a] - self.centre[a]).powi(2)).sum();
+        d2 < self.radius * self.radius
+    }
+}
+
+/// One grid of a scene layout: its name, voxel size, active index box (half-open) and the
+/// obstacles whose voxels are not active.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GridLayout {
     pub name: String,
@@ -32,17 +82,28 @@ pub struct GridLayout {
     pub lo: [i64; 3],
     /// One past the last active voxel index per axis.
     pub hi: [i64; 3],
+    /// Voxels of the box whose centres lie inside one of these are inactive (empty for
+    /// every `--n0` layout; see [`super::BoxLayout::obstacles`]).
+    pub obstacles: Vec<Obstacle>,
 }
 
 impl GridLayout {
-    /// Active voxels in the box, saturating at `u64::MAX` (an allowed `--n0` with ten levels
-    /// has a finest box of 2^75 voxels, which a plain product would overflow).
+    /// Whether voxel `ijk` is active: inside the box and in no obstacle.
+    pub(crate) fn is_active(&self, ijk: [i64; 3]) -> bool {
+        (0..3).all(|a| ijk[a] >= self.lo[a] && ijk[a] < self.hi[a])
+            && !self.obstacles.iter().any(|o| o.contains(self.centre(ijk)))
+    }
+
+    /// Voxels in the box (obstacles not subtracted), saturating at `u64::MAX` (an allowed
+    /// `--n0` with ten levels has a finest box of 2^75 voxels, which a plain product would
+    /// overflow).
     pub(crate) fn voxel_count(&self) -> u64 {
         saturating_product((0..3).map(|a| self.hi[a].saturating_sub(self.lo[a])))
     }
 
-    /// Leaves [`sample_grid`] allocates for this box (every 8³ block the box touches),
-    /// saturating at `u64::MAX`.
+    /// Leaves [`sample_grid`] allocates for this box (every 8³ block the box touches; with
+    /// obstacles an upper bound, since blocks with no active voxel are dropped), saturating
+    /// at `u64::MAX`.
     pub(crate) fn leaf_count(&self) -> u64 {
         let d = i64::from(LEAF_DIM);
         saturating_product((0..3).map(|a| {
@@ -80,9 +141,9 @@ pub fn scene_layout(scene: &str, n0: u32, levels: u32) -> Result<Vec<GridLayout>
             })
         }
     };
-    check_range("n0", n0, 2, 1 << 16)?;
+    check_range("n0", n0, 2, MAX_CELLS_PER_AXIS)?;
     let levels = if multi {
-        check_range("levels", levels, 1, 10)?;
+        check_range("levels", levels, 1, MAX_LEVELS)?;
         levels
     } else {
         1
@@ -91,7 +152,7 @@ pub fn scene_layout(scene: &str, n0: u32, levels: u32) -> Result<Vec<GridLayout>
         .map(|a| domain.max[a] - domain.min[a])
         .fold(0.0, f64::max);
     let coarse = extent / f64::from(n0);
-    let eps = 1e-9;
+    let eps = LATTICE_EPS;
     // Coarsest first; `c` counts levels from the coarsest.
     let mut out: Vec<GridLayout> = Vec::with_capacity(levels as usize);
     for c in 0..levels {
@@ -127,10 +188,11 @@ pub fn scene_layout(scene: &str, n0: u32, levels: u32) -> Result<Vec<GridLayout>
             voxel_size: h,
             lo,
             hi,
+            obstacles: Vec::new(),
         });
     }
     out.reverse();
-    check_memory(scene, n0, &out, false)?;
+    check_memory(&Request::n0(scene, n0), &out, false)?;
     Ok(out)
 }
 
@@ -142,8 +204,7 @@ fn saturating_product(extents: impl Iterator<Item = i64>) -> u64 {
 /// [`MAX_LEAF_BYTES`], whatever the machine, before anything is sampled. Returns the leaf
 /// count and bytes.
 pub(crate) fn check_memory(
-    scene: &str,
-    n0: u32,
+    request: &Request,
     layouts: &[GridLayout],
     speed_grids: bool,
 ) -> Result<(u64, u64), SynthError> {
@@ -154,12 +215,12 @@ pub(crate) fn check_memory(
     let bytes = leaves.saturating_mul(per_leaf);
     if bytes > MAX_LEAF_BYTES {
         return Err(SynthError::TooLarge {
-            name: scene.to_string(),
-            n0,
+            what: request.what.clone(),
             grids: layouts.len(),
             leaves,
             bytes,
             limit: MAX_LEAF_BYTES,
+            hint: request.hint,
         });
     }
     Ok((leaves, bytes))
@@ -169,21 +230,24 @@ pub(crate) fn check_memory(
 /// grids) against the shared memory limit ([`files::limits::check_memory`]), which depends
 /// on the machine and `ulimit -v`.
 pub(super) fn check_write_memory(
-    scene: &str,
-    n0: u32,
+    request: &Request,
     layouts: &[GridLayout],
     speed_grids: bool,
 ) -> Result<(), SynthError> {
-    let (leaves, bytes) = check_memory(scene, n0, layouts, speed_grids)?;
+    let (leaves, bytes) = check_memory(request, layouts, speed_grids)?;
     let (num, den) = PEAK_PER_LEAF_BYTE;
     limits::check_memory(
         format!(
-            "scene {scene:?} with n0 {n0} in {} grid(s) ({leaves} leaves, sampled and written)",
+            "{} in {} grid(s) ({leaves} leaves, sampled and written)",
+            request.what,
             layouts.len()
         ),
         bytes.saturating_mul(num) / den,
     )
-    .map_err(SynthError::Memory)
+    .map_err(|error| SynthError::Memory {
+        error,
+        hint: request.hint,
+    })
 }
 
 fn check_range(what: &'static str, found: u32, min: u32, max: u32) -> Result<(), SynthError> {

@@ -17,13 +17,18 @@
 //! * `lamb-oseen-nested`, `burgers-nested`, `abc-nested`: those flows on `levels` nested
 //!   boxes as for `wake`, between the domain [-1, 1]³ and the core box [-0.5, 0.5]³
 //!   (`n0` voxels along an axis of the coarsest), for accuracy across level boundaries.
+//! * any scene on the boxes of a layout file (`--boxes`, [`BoxLayout`]): the boxes as
+//!   given, coarsest first in the file, each halving the cell width; grids named `vel_l0`
+//!   (finest) … and returned in that order, as for `wake`; voxels inside the layout's
+//!   obstacles (balls) are inactive on every level. `--n0` and `--levels` do not apply.
 //! * `wake-single`, `lamb-oseen`, `burgers`, `abc`: one grid named `vel` over the scene
 //!   domain (`wake-single`: the `wake` domain; the others: [-1, 1]³) with `n0` voxels along
 //!   the longest axis; `levels` is ignored.
 //!
-//! Every voxel whose centre lies in a grid's box is active and holds the exact velocity at
-//! its centre (f32); leaves at box edges have partial active masks, inactive voxels hold the
-//! background (0, 0, 0). No tiles are written. Results are deterministic.
+//! Every voxel whose centre lies in a grid's box (and in none of a layout's obstacles) is
+//! active and holds the exact velocity at its centre (f32); leaves at box edges have partial
+//! active masks, inactive voxels hold the background (0, 0, 0), and blocks with no active
+//! voxel are not stored. No tiles are written. Results are deterministic.
 
 use format::Aabb;
 use rayon::prelude::*;
@@ -33,15 +38,18 @@ use files::limits::{self, LimitError};
 
 use crate::analytic::{self, Flow};
 
+mod boxes;
 mod layout;
 #[cfg(test)]
 mod tests;
 mod write;
 
+pub use boxes::{BoxLayout, LayoutError, LevelBox, Side, MAX_LAYOUT_BYTES, MAX_OBSTACLES};
 use layout::check_write_memory;
+pub(crate) use layout::Request;
 #[cfg(test)]
 use layout::{check_memory, WAKE_CORE, WAKE_DOMAIN};
-pub use layout::{scene_layout, GridLayout};
+pub use layout::{scene_layout, GridLayout, Obstacle};
 use preprocess::bake::memory::leaf_bytes;
 use preprocess::grid::{leaf_offset, AnyGrid, Grid, Leaf, Transform, Vec3, LEAF_DIM, LEAF_VOXELS};
 use preprocess::vdb::write::{
@@ -76,24 +84,31 @@ pub enum SynthError {
         max: u32,
         found: u32,
     },
-    /// Over [`MAX_LEAF_BYTES`], whatever the machine.
+    /// Over [`MAX_LEAF_BYTES`], whatever the machine. `what` names the request
+    /// (`scene "wake" with n0 128`), `hint` how to make it smaller.
     #[error(
-        "scene {name:?} with n0 {n0} in {grids} grid(s) needs {leaves} leaves ({} MiB of grid memory), more than the limit of {} MiB; use a smaller --n0 or fewer --levels",
+        "{what} in {grids} grid(s) needs {leaves} leaves ({} MiB of grid memory), more than the limit of {} MiB; {hint}",
         bytes >> 20,
         limit >> 20
     )]
     TooLarge {
-        name: String,
-        n0: u32,
+        what: String,
         grids: usize,
         leaves: u64,
         bytes: u64,
         limit: u64,
+        hint: &'static str,
     },
     /// Within [`MAX_LEAF_BYTES`] but over what this machine (or `ulimit -v`) leaves: the
     /// shared limit of every command.
-    #[error("{0}; use a smaller --n0 or fewer --levels")]
-    Memory(LimitError),
+    #[error("{error}; {hint}")]
+    Memory {
+        error: LimitError,
+        hint: &'static str,
+    },
+    /// A `--boxes` layout that cannot be sampled.
+    #[error(transparent)]
+    Layout(#[from] LayoutError),
 }
 
 /// Samples scene `scene` onto its grids (see the module docs for the layout), finest first.
@@ -111,6 +126,17 @@ pub fn scene_grids_with(
     frame: u64,
 ) -> Result<Vec<Grid<Vec3>>, SynthError> {
     let layouts = scene_layout(scene, n0, levels)?;
+    sample_scene(scene, &layouts, staggered, frame)
+}
+
+/// Samples scene `scene` (at `frame`) onto `layouts`, in their order; with `staggered`, as
+/// MAC grids (see [`sample_grid_with`]).
+pub fn sample_scene(
+    scene: &str,
+    layouts: &[GridLayout],
+    staggered: bool,
+    frame: u64,
+) -> Result<Vec<Grid<Vec3>>, SynthError> {
     let flow = analytic::scene_at(scene, frame).ok_or_else(|| SynthError::UnknownScene {
         name: scene.to_string(),
     })?;
@@ -156,6 +182,9 @@ pub(crate) fn sample_grid_with(
     let leaves = origins
         .par_iter()
         .map(|&origin| sample_leaf(flow, layout, origin, staggered))
+        // Only a block inside an obstacle has no active voxel: not stored, as OpenVDB
+        // prunes it.
+        .filter(|leaf| leaf.active != [0; 8])
         .collect();
     Grid {
         name: layout.name.clone(),
@@ -190,6 +219,9 @@ fn sample_leaf(
                 if !inside(2, k) {
                     continue;
                 }
+                if !layout.is_active([i, j, k]) {
+                    continue;
+                }
                 let n = leaf_offset(x, y, z);
                 let p = layout.centre([i, j, k]);
                 values[n] = if staggered {
@@ -220,7 +252,6 @@ pub(crate) fn sample_scalar(
     layout: &GridLayout,
     f: impl Fn([f64; 3]) -> f64 + Sync,
 ) -> Grid<f32> {
-    let inside = |a: usize, v: i64| v >= layout.lo[a] && v < layout.hi[a];
     let leaves = leaf_origins(layout)
         .par_iter()
         .map(|&o| {
@@ -231,7 +262,7 @@ pub(crate) fn sample_scalar(
                     o[1] + ((n >> 3) & 7) as i64,
                     o[2] + (n & 7) as i64,
                 ];
-                if !(0..3).all(|a| inside(a, ijk[a])) {
+                if !layout.is_active(ijk) {
                     return 0.0;
                 }
                 active[n >> 6] |= 1u64 << (n & 63);
@@ -243,6 +274,7 @@ pub(crate) fn sample_scalar(
                 values,
             }
         })
+        .filter(|leaf| leaf.active != [0; 8])
         .collect();
     Grid {
         name: name.to_string(),

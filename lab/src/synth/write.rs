@@ -17,6 +17,31 @@ pub struct SynthOptions {
     pub staggered: bool,
     /// Frame (1-based) of a time-dependent scene (`ring-plume`); ignored by the others.
     pub frame: u64,
+    /// Sample the scene on these nested boxes instead of the layout `n0` and `levels` make
+    /// (which are then ignored).
+    pub boxes: Option<BoxLayout>,
+}
+
+impl SynthOptions {
+    /// The grids to sample, finest first, and what a memory error calls the request.
+    fn layouts(&self) -> Result<(Vec<GridLayout>, Request), SynthError> {
+        match &self.boxes {
+            None => Ok((
+                scene_layout(&self.scene, self.n0, self.levels)?,
+                Request::n0(&self.scene, self.n0),
+            )),
+            Some(b) => {
+                if analytic::scene(&self.scene).is_none() {
+                    return Err(SynthError::UnknownScene {
+                        name: self.scene.clone(),
+                    });
+                }
+                let grids = b.grids(&self.scene)?;
+                let request = Request::boxes(&self.scene, grids.len());
+                Ok((grids, request))
+            }
+        }
+    }
 }
 
 /// One written grid, for the command's summary.
@@ -33,20 +58,15 @@ pub struct GridSummary {
 ///
 /// Grid metadata besides what the writer always adds: `scene` (string), `level` (int32,
 /// 0 = finest), `origin` (vec3d, world-space minimum corner of the grid's box) and
-/// `dx` (double, voxel size). File metadata: `scene`, `n0`, `levels`.
+/// `dx` (double, voxel size). File metadata: `scene`, `levels`, and `n0` or, on the boxes
+/// of a layout, `boxes` (the layout as compact JSON).
 pub fn write_scene(
     path: &std::path::Path,
     opts: &SynthOptions,
 ) -> Result<(Vec<GridSummary>, u64), SynthError> {
-    let layouts = scene_layout(&opts.scene, opts.n0, opts.levels)?;
-    check_write_memory(&opts.scene, opts.n0, &layouts, opts.speed_grids)?;
-    let velocity = scene_grids_with(
-        &opts.scene,
-        opts.n0,
-        opts.levels,
-        opts.staggered,
-        opts.frame,
-    )?;
+    let (layouts, request) = opts.layouts()?;
+    check_write_memory(&request, &layouts, opts.speed_grids)?;
+    let velocity = sample_scene(&opts.scene, &layouts, opts.staggered, opts.frame)?;
     let mut grids: Vec<AnyGrid> = Vec::new();
     let mut metadata: Vec<MetaMap> = Vec::new();
     let mut summary = Vec::new();
@@ -76,7 +96,7 @@ pub fn write_scene(
         metadata.push(m);
     }
     let speed: Vec<Grid<f32>> = if opts.speed_grids && opts.staggered {
-        let mut centred = scene_grids(&opts.scene, opts.n0, opts.levels)?;
+        let mut centred = sample_scene(&opts.scene, &layouts, false, opts.frame)?;
         for (c, v) in centred.iter_mut().zip(&velocity) {
             c.name.clone_from(&v.name);
         }
@@ -121,12 +141,24 @@ pub fn write_scene(
     options
         .file_metadata
         .insert("scene".into(), MetaValue::String(opts.scene.clone()));
-    options
-        .file_metadata
-        .insert("n0".into(), MetaValue::Int32(opts.n0 as i32));
-    options
-        .file_metadata
-        .insert("levels".into(), MetaValue::Int32(opts.levels as i32));
+    match &opts.boxes {
+        None => {
+            options
+                .file_metadata
+                .insert("n0".into(), MetaValue::Int32(opts.n0 as i32));
+            options
+                .file_metadata
+                .insert("levels".into(), MetaValue::Int32(opts.levels as i32));
+        }
+        Some(b) => {
+            options
+                .file_metadata
+                .insert("boxes".into(), MetaValue::String(b.to_json()));
+            options
+                .file_metadata
+                .insert("levels".into(), MetaValue::Int32(layouts.len() as i32));
+        }
+    }
     if opts.scene == "ring-plume" {
         options.file_metadata.insert(
             "frame".into(),

@@ -69,6 +69,115 @@ fn synth_bad_input_exits_2_with_one_line() {
     assert!(!std::path::Path::new(out).exists());
 }
 
+/// A small layout: `docs/bench/layouts/independent.json` with cells 8× wider.
+const SMALL_LAYOUT: &str = r#"{"boxes": [
+    {"cell": 0.5,   "min": [-2, -2, -2],          "max": [6, 2, 2]},
+    {"cell": 0.25,  "min": [-1, -1.25, -1.25],    "max": [4, 1.25, 1.25]},
+    {"cell": 0.125, "min": [-0.75, -0.75, -0.75], "max": [2, 0.75, 0.75]}]}"#;
+
+#[test]
+fn synth_on_a_layout_writes_its_boxes() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let layout = dir.path().join("small.json");
+    std::fs::write(&layout, SMALL_LAYOUT).expect("layout");
+    let out = dir.path().join("b.vdb");
+    let o = run(&[
+        "synth",
+        "wake",
+        "--boxes",
+        layout.to_str().expect("utf-8 path"),
+        "-o",
+        out.to_str().expect("utf-8 path"),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = String::from_utf8_lossy(&o.stdout);
+    // Finest first: 22×12×12, 20×10×10 and 16×8×8 cells.
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines.len(), 4, "{text}");
+    for (line, (name, cells)) in lines.iter().zip([
+        ("vel_l0", 22 * 12 * 12),
+        ("vel_l1", 20 * 10 * 10),
+        ("vel_l2", 16 * 8 * 8),
+    ]) {
+        assert!(line.starts_with(name), "{text}");
+        assert!(
+            line.contains(&format!("active voxels {cells:>10}")),
+            "{text}"
+        );
+    }
+    assert!(out.exists());
+}
+
+#[test]
+fn synth_bad_layouts_exit_2_with_one_line_naming_the_file() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join("x.vdb");
+    let out = out.to_str().expect("utf-8 path");
+    let file = |name: &str, text: &str| {
+        let p = dir.path().join(name);
+        std::fs::write(&p, text).expect("layout");
+        p.to_str().expect("utf-8 path").to_string()
+    };
+    let off = file("off.json", &SMALL_LAYOUT.replace("[4, 1.25", "[4.1, 1.25"));
+    let nest = file("nest.json", &SMALL_LAYOUT.replace("[2, 0.75", "[4.5, 0.75"));
+    let json = file("json.json", "{\"boxes\": [");
+    let missing = dir.path().join("none.json");
+    let missing = missing.to_str().expect("utf-8 path");
+    let cases: Vec<(Vec<&str>, String)> = vec![
+        (
+            vec!["synth", "wake", "--boxes", &off, "-o", out],
+            format!("qbricks-lab: {off}: boxes[1]: x max 4.1 does not lie on the box's cells"),
+        ),
+        (
+            vec!["synth", "wake", "--boxes", &nest, "-o", out],
+            format!("qbricks-lab: {nest}: boxes[2]: x max 4.5 is outside boxes[1]"),
+        ),
+        (
+            vec!["synth", "wake", "--boxes", &json, "-o", out],
+            format!("qbricks-lab: {json}: not a box layout: EOF while parsing"),
+        ),
+        (
+            vec!["synth", "wake", "--boxes", missing, "-o", out],
+            format!("qbricks-lab: {missing}: "),
+        ),
+        (
+            vec!["synth", "nope", "--boxes", &nest, "-o", out],
+            format!("qbricks-lab: {nest}: boxes[2]"),
+        ),
+        (
+            vec!["synth", "wake", "--boxes", &off, "-o", &off],
+            "qbricks-lab: ".to_string(),
+        ),
+    ];
+    for (args, start) in cases {
+        let o = run(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
+        assert!(
+            err.starts_with(&start),
+            "{args:?}: {err}\nexpected: {start}"
+        );
+    }
+    // The layout file named as the output is refused before anything is written.
+    assert_eq!(
+        std::fs::read_to_string(&off).expect("layout kept"),
+        SMALL_LAYOUT.replace("[4, 1.25", "[4.1, 1.25")
+    );
+    assert!(!std::path::Path::new(out).exists());
+    // A good layout of an unknown scene names the scene.
+    let good = file("good.json", SMALL_LAYOUT);
+    let o = run(&["synth", "vortex-street", "--boxes", &good, "-o", out]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("unknown scene \"vortex-street\""), "{err}");
+    // A layout replaces --n0 and --levels: giving both is a usage error.
+    let o = run(&["synth", "wake", "--boxes", &good, "--n0", "16", "-o", out]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("cannot be used with"), "{err}");
+}
+
 #[test]
 fn accuracy_prints_every_key_and_plots_a_png() {
     let dir = tempfile::tempdir().expect("tempdir");

@@ -9,6 +9,7 @@ extern crate preprocess as qbricks_preprocess;
 #[path = "../common/mod.rs"]
 mod common;
 
+mod boxes;
 mod cache;
 mod openvdb;
 mod roundtrip;

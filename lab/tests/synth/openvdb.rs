@@ -373,6 +373,7 @@ fn write_scene_output_reads_back_in_pyopenvdb() {
             speed_grids: false,
             staggered: false,
             frame: 1,
+            boxes: None,
         };
         write_scene(&path, &opts).expect("write");
         let want = scene_grids(scene, 12, 3).expect("grids");
@@ -500,6 +501,7 @@ fn vdb_print_lists_every_grid_type_we_write() {
         speed_grids: true,
         staggered: false,
         frame: 1,
+        boxes: None,
     };
     let (summary, _) = write_scene(&path, &opts).expect("write");
     let listed = vdb_print(&path);
@@ -529,6 +531,7 @@ fn writer_is_deterministic_and_atomic() {
         speed_grids: true,
         staggered: false,
         frame: 1,
+        boxes: None,
     };
     let a = dir.path().join("a.vdb");
     let b = dir.path().join("b.vdb");

@@ -75,6 +75,7 @@ fn write_scene_metadata_reads_back() {
         speed_grids: true,
         staggered: false,
         frame: 1,
+        boxes: None,
     };
     let (summary, _) = write_scene(&path, &opts).expect("write");
     let file = VdbFile::open(&path).expect("open");

@@ -19,6 +19,7 @@ fn options() -> SynthOptions {
         speed_grids: false,
         staggered: false,
         frame: 1,
+        boxes: None,
     }
 }
 

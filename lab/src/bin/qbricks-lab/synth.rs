@@ -7,8 +7,10 @@ use std::io::Write;
 
 use anyhow::Context;
 use clap::ValueEnum;
+use files::guard::Guard;
+use files::input::{read_whole, Limits};
 use files::output::QuietStdout;
-use lab::synth::{write_scene, SynthOptions};
+use lab::synth::{write_scene, BoxLayout, SynthOptions, MAX_LAYOUT_BYTES};
 use preprocess::sequence::FramePattern;
 use preprocess::vdb::write::Compression;
 
@@ -37,6 +39,12 @@ pub struct Args {
     /// scenes ignore it).
     #[arg(long, default_value_t = 3)]
     pub levels: u32,
+    /// Sample the scene on the nested boxes of this JSON layout file instead of --n0 and
+    /// --levels: {"boxes": [{"cell": W, "min": [x, y, z], "max": [x, y, z]}, …]},
+    /// coarsest first, each box halving the cell width and inside the one before
+    /// (docs/bench/layouts/ has examples).
+    #[arg(long, value_name = "FILE.json", conflicts_with_all = ["n0", "levels"])]
+    pub boxes: Option<PathBuf>,
     /// Node-value compression.
     #[arg(long, value_enum, default_value_t = CompressionArg::Zip)]
     pub compression: CompressionArg,
@@ -70,6 +78,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             args.output.display()
         ),
     };
+    let boxes = match &args.boxes {
+        None => None,
+        Some(file) => {
+            let mut guard = Guard::new();
+            guard.input("--boxes file", file);
+            for (_, path) in &outputs {
+                guard.output("output", path);
+            }
+            guard.check()?;
+            let layout = read_layout(file)?;
+            // Checked here, so that a refusal names the file.
+            layout
+                .grids(&args.scene)
+                .with_context(|| format!("{}", file.display()))?;
+            Some(layout)
+        }
+    };
     let mut out = QuietStdout::new();
     for (frame, path) in outputs {
         let start = Instant::now();
@@ -85,6 +110,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             speed_grids: args.float,
             staggered: args.staggered,
             frame,
+            boxes: boxes.clone(),
         };
         let (grids, bytes) =
             write_scene(&path, &opts).with_context(|| format!("synth {}", args.scene))?;
@@ -107,4 +133,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         )?;
     }
     Ok(())
+}
+
+/// Reads and parses a `--boxes` layout file (checked against the scene when it is sampled).
+fn read_layout(file: &std::path::Path) -> anyhow::Result<BoxLayout> {
+    let bytes = read_whole(file, Limits::both(MAX_LAYOUT_BYTES))?;
+    let text = std::str::from_utf8(&bytes)
+        .map_err(|e| anyhow::anyhow!("{}: not UTF-8 text: {e}", file.display()))?;
+    BoxLayout::from_json(text).map_err(|e| anyhow::anyhow!("{}: {e}", file.display()))
 }
