@@ -104,6 +104,7 @@ fn cli_bakes_the_vortex_measures_with_the_ranges_of_the_flow() {
         speed_grids: false,
         staggered: false,
         frame: 1,
+        boxes: None,
     };
     write_scene(&vdb, &synth).unwrap();
     let qbk = dir.path().join("burgers.qbk");
