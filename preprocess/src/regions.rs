@@ -87,9 +87,17 @@ fn node(sup: &[Aabb], b: Aabb, ids: Vec<u32>) -> RegionTree {
     }
 }
 
+/// Differences of balance (distance to the middle over the box's extent) below this are
+/// taken for rounding: far from the origin a coordinate's spacing is up to 2^26 · 2^-52 ≈
+/// 1.5e-8 of a finest cell (see `MAX_BAKE_REACH_LOG2`), so in a box one cell wide rounding
+/// moves a balance by at most that. Split positions lie half a finest cell apart or more,
+/// so only in boxes wider than 500 000 finest cells are two real positions this close,
+/// and then the tie-break (not the partition's correctness) is all that changes.
+const BALANCE_TIE: f64 = 1e-6;
+
 /// Plane (axis, coordinate) among the support boundaries strictly inside `b` with the
 /// lowest `cut − shared` (see the module docs); ties go to the plane nearest the middle,
-/// then to the lower axis.
+/// then to the lower axis and coordinate.
 fn choose_split(sup: &[Aabb], b: &Aabb, ids: &[u32]) -> Option<(u8, f64)> {
     let mut best: Option<(usize, f64, u8, f64)> = None;
     let mut mins = Vec::with_capacity(ids.len());
@@ -118,9 +126,13 @@ fn choose_split(sup: &[Aabb], b: &Aabb, ids: &[u32]) -> Option<(u8, f64)> {
                 - maxs.partition_point(|&m| m < v);
             let bal = (v - mid).abs() / ext;
             let cost = cost + ids.len() - shared.min(ids.len());
+            // Balances that differ by rounding only are a tie, kept by the first plane
+            // (lowest axis, then lowest coordinate): which of two planes symmetric about
+            // the middle rounds nearer it depends on where the data lies, and the tree
+            // must not.
             let better = match best {
                 None => true,
-                Some((c, bb, _, _)) => cost < c || (cost == c && bal < bb),
+                Some((c, bb, _, _)) => cost < c || (cost == c && bal < bb - BALANCE_TIE),
             };
             if better {
                 best = Some((cost, bal, a as u8, v));
