@@ -214,9 +214,11 @@ pub struct Brick {
     pub level: u32,
 }
 
-/// An active brick region: a box (its KD leaf's cell) in which the set of overlapping
-/// supports is constant. Its finest level (the local sampling unit) is the finest of its
-/// bricks' levels.
+/// An active brick region: a box (its KD leaf's cell) listing every brick whose support
+/// overlaps it. Mostly the set of supports holding a point is the same all over the box;
+/// where many small supports cross, the baker merges their regions (see
+/// `preprocess::regions`), and a listed brick may then add nothing in part of the box. Its
+/// finest level (the local sampling unit) is the finest of its bricks' levels.
 #[derive(Archive, Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
 #[rkyv(derive(Debug))]
 pub struct Region {

@@ -1,14 +1,33 @@
-//! Active brick regions: boxes partitioning the union of brick supports such that the set
-//! of overlapping supports is constant inside each box.
+//! Active brick regions: boxes partitioning the union of brick supports, each listing every
+//! brick whose support overlaps it.
 //!
-//! Built by recursive splitting at support boundaries (a KD-style build), so the KD-tree
-//! over the regions falls out of the recursion ([`crate::kdtree`] serialises it). A node
-//! whose box has no support boundary strictly inside is a region: every support that
-//! overlaps it covers it. Otherwise it splits at the boundary plane with the lowest cost
-//! `cut − shared`: `cut` supports straddle the plane (each is fragmented by it), `shared`
-//! supports have a face on it (the plane is a cut the partition needs anyway). Ties go to
-//! the plane nearest the middle of the box. On the synthetic wake this gives about 23%
-//! fewer regions than minimising `cut` alone (4491 instead of 5849 for 238 bricks).
+//! Built in two passes. First by recursive splitting at support boundaries (a KD-style
+//! build), so the KD-tree over the regions falls out of the recursion ([`crate::kdtree`]
+//! serialises it). A node whose box has no support boundary strictly inside is a region:
+//! every support that overlaps it covers it. Otherwise it splits at the boundary plane with
+//! the lowest cost `cut − shared`: `cut` supports straddle the plane (each is fragmented by
+//! it), `shared` supports have a face on it (the plane is a cut the partition needs anyway).
+//! Ties go to the plane nearest the middle of the box. On the synthetic wake this gives
+//! about 23% fewer regions than minimising `cut` alone (4491 instead of 5849 for 238
+//! bricks).
+//!
+//! That partition has one region per distinct overlap of supports, which is what a ray
+//! needs where bricks are large, and far too much where many small supports of several
+//! levels cross (next to an obstacle whose cells are inactive on every level, where thin
+//! shells of partly covered coarse cells lie over small fine bricks): there a ray crosses
+//! dozens of regions of a few bricks each. So the second pass ([`merge`]) replaces a
+//! subtree by one region, listing the union of its regions' bricks, wherever that costs a
+//! ray less: a region costs `A·s` for the walk to it and the segment (A its surface area,
+//! which a random ray's chance of crossing it is proportional to; `s` a length, see
+//! [`build`]) plus `V·n` for sampling it (V its volume, which the ray's expected path in it
+//! is proportional to; n its bricks, each of which a sample visits), an inner node `A·s`.
+//! Subtrees holding empty space are never merged, so the regions still cover the union of
+//! the supports exactly, and a region's bricks are still exactly the supports that overlap
+//! its box; only the set of supports *containing a point* may now change inside a region.
+//! The reconstruction does not mind (a brick whose tents are zero at a point adds nothing
+//! there), the value ranges stay exact over the cells that can contribute to the region,
+//! and every brick's lattice is among the region's, so `exact` still cuts every plane
+//! where the reconstruction stops being one cubic.
 
 use format::Aabb;
 
@@ -28,15 +47,142 @@ pub(crate) enum RegionTree {
     },
 }
 
-/// Builds the region tree over `supports` (indexed by brick id). Returns the union box of
-/// all supports (None when there are none) and the tree.
-pub(crate) fn build(supports: &[Aabb]) -> (Option<Aabb>, RegionTree) {
+/// A region's walk and segment cost as a length of path through one brick's samples, in
+/// finest cell widths (`s` of the module docs over the finest width). Measured on issue
+/// 33's benchmark files: see `merge`'s tests and BENCHMARKS.md.
+pub(crate) const SEGMENT_COST_CELLS: f64 = 0.5;
+
+/// Builds the region tree over `supports` (indexed by brick id), merging subtrees where a
+/// region costs `segment` (a length) per crossing (see the module docs; 0 keeps one region
+/// per overlap). Returns the union box of all supports (None when there are none) and the
+/// tree.
+pub(crate) fn build(supports: &[Aabb], segment: f64) -> (Option<Aabb>, RegionTree) {
     let Some(first) = supports.first() else {
         return (None, RegionTree::Empty);
     };
     let bounds = supports.iter().fold(*first, |acc, s| acc.union(*s));
     let ids: Vec<u32> = (0..supports.len() as u32).collect();
-    (Some(bounds), node(supports, bounds, ids))
+    let tree = node(supports, bounds, ids);
+    let tree = if segment > 0.0 {
+        merge(tree, bounds, segment).0
+    } else {
+        tree
+    };
+    (Some(bounds), tree)
+}
+
+/// Surface area (the whole surface: only ratios matter).
+fn area(b: &Aabb) -> f64 {
+    2.0 * b.half_area()
+}
+
+fn volume(b: &Aabb) -> f64 {
+    (0..3).map(|a| (b.max[a] - b.min[a]).max(0.0)).product()
+}
+
+/// What [`merge`] returns for a subtree: the subtree, its cost, and the sorted union of its
+/// regions' bricks when it holds no empty space (None: it may not be merged).
+type Merged = (RegionTree, f64, Option<Vec<u32>>);
+
+/// Replaces every subtree of `t` (whose box is `b`) that holds no empty space by one region
+/// when that costs less (see the module docs); bottom-up, so each subtree is compared with
+/// the best of its own subtrees.
+fn merge(t: RegionTree, b: Aabb, segment: f64) -> Merged {
+    match t {
+        RegionTree::Empty => (RegionTree::Empty, 0.0, None),
+        RegionTree::Region { bounds, bricks } => {
+            let cost = area(&bounds) * segment + volume(&bounds) * bricks.len() as f64;
+            let union = bricks.clone();
+            (RegionTree::Region { bounds, bricks }, cost, Some(union))
+        }
+        RegionTree::Split {
+            axis,
+            split,
+            left,
+            right,
+        } => {
+            let a = axis as usize;
+            let (mut lb, mut rb) = (b, b);
+            lb.max[a] = split;
+            rb.min[a] = split;
+            let ((lt, lc, lu), (rt, rc, ru)) = if PARALLEL_MIN_MERGE <= count_regions(&left) {
+                rayon::join(|| merge(*left, lb, segment), || merge(*right, rb, segment))
+            } else {
+                (merge(*left, lb, segment), merge(*right, rb, segment))
+            };
+            let split_cost = area(&b) * segment + lc + rc;
+            let tree = RegionTree::Split {
+                axis,
+                split,
+                left: Box::new(lt),
+                right: Box::new(rt),
+            };
+            let (Some(lu), Some(ru)) = (lu, ru) else {
+                return (tree, split_cost, None);
+            };
+            let union = sorted_union(&lu, &ru);
+            let leaf_cost = area(&b) * segment + volume(&b) * union.len() as f64;
+            if leaf_cost <= split_cost {
+                let bricks = union.clone();
+                (
+                    RegionTree::Region { bounds: b, bricks },
+                    leaf_cost,
+                    Some(union),
+                )
+            } else {
+                (tree, split_cost, Some(union))
+            }
+        }
+    }
+}
+
+/// Below this many regions a subtree is merged on the current thread.
+const PARALLEL_MIN_MERGE: usize = 256;
+
+/// Regions of `t`, counted up to [`PARALLEL_MIN_MERGE`] (enough to decide on a thread).
+fn count_regions(t: &RegionTree) -> usize {
+    let mut n = 0;
+    let mut todo = vec![t];
+    while let Some(t) = todo.pop() {
+        match t {
+            RegionTree::Empty => {}
+            RegionTree::Region { .. } => n += 1,
+            RegionTree::Split { left, right, .. } => {
+                if n >= PARALLEL_MIN_MERGE {
+                    break;
+                }
+                todo.push(left);
+                todo.push(right);
+            }
+        }
+    }
+    n
+}
+
+/// The union of two sorted lists of ids, sorted.
+fn sorted_union(a: &[u32], b: &[u32]) -> Vec<u32> {
+    let mut out = Vec::with_capacity(a.len() + b.len());
+    let (mut i, mut j) = (0, 0);
+    while i < a.len() && j < b.len() {
+        match a[i].cmp(&b[j]) {
+            std::cmp::Ordering::Less => {
+                out.push(a[i]);
+                i += 1;
+            }
+            std::cmp::Ordering::Greater => {
+                out.push(b[j]);
+                j += 1;
+            }
+            std::cmp::Ordering::Equal => {
+                out.push(a[i]);
+                i += 1;
+                j += 1;
+            }
+        }
+    }
+    out.extend_from_slice(&a[i..]);
+    out.extend_from_slice(&b[j..]);
+    out
 }
 
 /// Below this many supports a node recurses on the current thread.
@@ -87,9 +233,17 @@ fn node(sup: &[Aabb], b: Aabb, ids: Vec<u32>) -> RegionTree {
     }
 }
 
+/// Differences of balance (distance to the middle over the box's extent) below this are
+/// taken for rounding: far from the origin a coordinate's spacing is up to 2^26 · 2^-52 ≈
+/// 1.5e-8 of a finest cell (see `MAX_BAKE_REACH_LOG2`), so in a box one cell wide rounding
+/// moves a balance by at most that. Split positions lie half a finest cell apart or more,
+/// so only in boxes wider than 500 000 finest cells are two real positions this close,
+/// and then the tie-break (not the partition's correctness) is all that changes.
+const BALANCE_TIE: f64 = 1e-6;
+
 /// Plane (axis, coordinate) among the support boundaries strictly inside `b` with the
 /// lowest `cut − shared` (see the module docs); ties go to the plane nearest the middle,
-/// then to the lower axis.
+/// then to the lower axis and coordinate.
 fn choose_split(sup: &[Aabb], b: &Aabb, ids: &[u32]) -> Option<(u8, f64)> {
     let mut best: Option<(usize, f64, u8, f64)> = None;
     let mut mins = Vec::with_capacity(ids.len());
@@ -118,9 +272,13 @@ fn choose_split(sup: &[Aabb], b: &Aabb, ids: &[u32]) -> Option<(u8, f64)> {
                 - maxs.partition_point(|&m| m < v);
             let bal = (v - mid).abs() / ext;
             let cost = cost + ids.len() - shared.min(ids.len());
+            // Balances that differ by rounding only are a tie, kept by the first plane
+            // (lowest axis, then lowest coordinate): which of two planes symmetric about
+            // the middle rounds nearer it depends on where the data lies, and the tree
+            // must not.
             let better = match best {
                 None => true,
-                Some((c, bb, _, _)) => cost < c || (cost == c && bal < bb),
+                Some((c, bb, _, _)) => cost < c || (cost == c && bal < bb - BALANCE_TIE),
             };
             if better {
                 best = Some((cost, bal, a as u8, v));
@@ -207,8 +365,9 @@ mod tests {
         fn regions_partition_supports(
             sup in layout(),
             pts in prop::collection::vec((0.0f64..1.0, 0.0f64..1.0, 0.0f64..1.0), 32),
+            segment in prop_oneof![Just(0.0), Just(0.5), Just(4.0)],
         ) {
-            let (bounds, tree) = build(&sup);
+            let (bounds, tree) = build(&sup, segment);
             let bounds = bounds.expect("non-empty");
             let regs = leaves(&tree);
             // Disjoint.
@@ -227,6 +386,13 @@ mod tests {
                 prop_assert_eq!(&brute, &bricks.to_vec());
                 for a in 0..3 {
                     prop_assert!(b.min[a] >= bounds.min[a] && b.max[a] <= bounds.max[a]);
+                }
+                // Unmerged, one region per overlap: every support it lists covers it.
+                if segment == 0.0 {
+                    for &i in bricks.iter() {
+                        let s = &sup[i as usize];
+                        prop_assert!((0..3).all(|a| s.min[a] <= b.min[a] && s.max[a] >= b.max[a]));
+                    }
                 }
             }
             for (i, s) in sup.iter().enumerate() {
@@ -255,13 +421,50 @@ mod tests {
         }
     }
 
+    /// Many small supports of three lattices crossing each other (as next to an obstacle,
+    /// where partly covered coarse cells lie over small fine bricks): merged into far fewer
+    /// regions, each listing exactly the supports that overlap it, with the empty space
+    /// between two such clusters left out; one region per overlap without merging.
+    #[test]
+    fn crossing_small_supports_merge_but_empty_space_stays_out() {
+        let mut sup = Vec::new();
+        for cluster in [0.0, 40.0] {
+            for k in 0..40 {
+                let w = [1.0, 2.0, 4.0][k % 3];
+                let o = [0, 1, 2].map(|a| cluster + ((k * (a + 3) * 7) % 13) as f64 * 0.5);
+                sup.push(Aabb {
+                    min: o.map(|v| v - w),
+                    max: o.map(|v| v + w * (1 + k % 2) as f64),
+                });
+            }
+        }
+        let (_, exact) = build(&sup, 0.0);
+        let (bounds, merged) = build(&sup, 0.5);
+        let (exact, merged) = (leaves(&exact), leaves(&merged));
+        assert!(
+            merged.len() * 4 < exact.len(),
+            "{} regions merged from {}",
+            merged.len(),
+            exact.len()
+        );
+        let bounds = bounds.expect("supports");
+        for (b, bricks) in &merged {
+            let brute: Vec<u32> = (0..sup.len() as u32)
+                .filter(|&i| sup[i as usize].overlaps(b))
+                .collect();
+            assert_eq!(&brute, bricks);
+            // No region reaches into the gap between the clusters (x from 14 to 36).
+            assert!(b.max[0] <= 14.0 || b.min[0] >= 36.0, "{b:?} in {bounds:?}");
+        }
+    }
+
     #[test]
     fn single_support_is_one_region() {
         let s = Aabb {
             min: [0.0; 3],
             max: [1.0, 2.0, 3.0],
         };
-        let (_, t) = build(&[s]);
+        let (_, t) = build(&[s], 0.5);
         assert_eq!(
             t,
             RegionTree::Region {

@@ -557,7 +557,8 @@ fn clamp_fields(
 }
 
 /// Region stage: the bricks' supports, snapped so that neighbouring lattices agree (see
-/// [`snapped_supports`]), split into regions (see [`regions::build`]). Returns the union of
+/// [`snapped_supports`]), split into regions and merged where many small ones would cost
+/// rays more (see [`regions::build`]). Returns the union of
 /// the supports and the region tree.
 fn build_regions(
     sets: &[CellSet],
@@ -565,7 +566,7 @@ fn build_regions(
     finest: f64,
 ) -> (Option<Aabb>, regions::RegionTree) {
     let supports = snapped_supports(sets, &bricks.boxes, finest);
-    regions::build(&supports)
+    regions::build(&supports, regions::SEGMENT_COST_CELLS * finest)
 }
 
 /// The region tree as the file stores it.
