@@ -28,14 +28,15 @@ use rayon::prelude::*;
 
 use crate::cells::{CellSet, BLOCK_CELLS};
 
-/// Gradient stencil at grid edges and next to missing cells.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Default)]
+/// Gradient stencil at grid edges and next to missing cells (`--stencil`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Default, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
 pub enum Stencil {
-    /// One-sided differences at edges.
+    /// Central differences; one-sided at grid edges and next to missing cells.
     #[default]
     Central,
-    /// Neighbour velocity from the reconstructed multi-level field at edges.
+    /// Central differences; at grid edges the neighbour velocity comes from the
+    /// reconstructed multi-level field.
     CrossLevel,
 }
 

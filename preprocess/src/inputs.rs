@@ -16,15 +16,16 @@ use crate::error::field_grid_not_found;
 use crate::grid::{AnyGrid, Grid, Leaf, Transform, LEAF_DIM, LEAF_VOXELS};
 use crate::vdb::{GridDescriptor, ValueType, VdbError, VdbFile};
 
-/// Where the velocity components of vec3 grids sit.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// Where the velocity components of vec3 grids sit (`--layout`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
 pub enum Layout {
     /// From each grid's class: `staggered` grids are MAC grids, others cell-centred.
     #[default]
     Auto,
-    /// Cell-centred, whatever the class says.
+    /// Every vec3 grid holds velocities at cell centres, whatever its class says.
+    #[value(alias = "centered")]
     Centred,
-    /// MAC grids, whatever the class says.
+    /// Every vec3 grid is a MAC grid (component c on the lower face along axis c).
     Staggered,
 }
 

@@ -16,5 +16,6 @@ pub mod measures;
 pub mod nonfinite;
 pub mod reconstruct;
 pub mod regions;
+pub mod request;
 pub mod sequence;
 pub mod vdb;

@@ -389,8 +389,17 @@ pub enum Aov {
     Value,
 }
 
-/// Distance along the ray and colour of an AOV pixel that hit the surface.
-type AovPixel = Option<(f64, [f32; 3])>;
+/// What an AOV pixel's centre ray found at the first surface point.
+#[derive(Debug, Clone, Copy)]
+struct AovHit {
+    /// Distance along the ray.
+    t: f64,
+    normal: [f64; 3],
+    /// The finest level contributing there.
+    level: Option<u32>,
+    /// The colour field's value there.
+    value: Option<f64>,
+}
 
 const LEVEL_COLOURS: [[f32; 3]; 6] = [
     [0.9, 0.2, 0.2],
@@ -401,9 +410,113 @@ const LEVEL_COLOURS: [[f32; 3]; 6] = [
     [0.3, 0.85, 0.9],
 ];
 
-/// Renders the `aov` buffer of the view (misses show the background). In dvr mode the
-/// surface is the iso value's, found with `exact`.
-pub fn render_aov(scene: &Scene, aov: Aov) -> Frame {
+/// The first surface point of each pixel's centre ray, row-major (`None`: no surface): what
+/// every debug buffer (`--aov`) is made of, as a picture or as numbers.
+pub struct AovTrace {
+    width: u32,
+    height: u32,
+    hits: Vec<Option<AovHit>>,
+}
+
+impl AovTrace {
+    /// Traces the view's centre rays. In dvr mode the surface is the iso value's, found
+    /// with `exact`.
+    pub fn new(scene: &Scene) -> AovTrace {
+        AovTrace {
+            width: scene.state.width,
+            height: scene.state.height,
+            hits: aov_hits(scene),
+        }
+    }
+
+    /// The `aov` buffer as a picture of `scene` (misses show its background).
+    pub fn picture(&self, scene: &Scene, aov: Aov) -> Frame {
+        let (w, h) = (self.width, self.height);
+        let pixels = &self.hits;
+        let ts = pixels.iter().flatten().map(|p| p.t);
+        let (tmin, tmax) = ts.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), t| {
+            (a.min(t), b.max(t))
+        });
+        let span = (tmax - tmin).max(1e-300);
+        let mut hits = 0;
+        let mut pixel_hits = Vec::with_capacity(pixels.len());
+        let mut depth = Vec::with_capacity(pixels.len());
+        let rgb = pixels
+            .iter()
+            .map(|px| match px {
+                Some(p) => {
+                    hits += 1;
+                    pixel_hits.push(1);
+                    depth.push(p.t as f32);
+                    match aov {
+                        Aov::Normal => p.normal.map(|v| (0.5 + 0.5 * v) as f32),
+                        Aov::Depth => [(1.0 - 0.85 * (p.t - tmin) / span) as f32; 3],
+                        Aov::Level => p.level.map_or([0.5; 3], |l| {
+                            LEVEL_COLOURS.get(l as usize).copied().unwrap_or([0.6; 3])
+                        }),
+                        Aov::Value => p
+                            .value
+                            .map_or([0.8; 3], |v| scene.state.colormap.colour(v as f32)),
+                    }
+                }
+                None => {
+                    pixel_hits.push(0);
+                    depth.push(f32::INFINITY);
+                    scene.state.background
+                }
+            })
+            .collect();
+        let surface_values = vec![f32::NAN; depth.len()];
+        Frame {
+            width: w,
+            height: h,
+            rgb,
+            stats: Stats::default(),
+            rays: u64::from(w) * u64::from(h),
+            hits,
+            pixel_hits,
+            depth,
+            surface_values,
+        }
+    }
+
+    pub fn values(&self, aov: Aov) -> AovValues {
+        let channels = if aov == Aov::Normal { 3 } else { 1 };
+        let mut values = Vec::with_capacity(self.hits.len() * channels);
+        for px in &self.hits {
+            match (aov, px) {
+                (Aov::Normal, Some(p)) => values.extend(p.normal.map(|v| v as f32)),
+                (Aov::Normal, None) => values.extend([f32::NAN; 3]),
+                (Aov::Depth, p) => values.push(p.map_or(f32::INFINITY, |p| p.t as f32)),
+                (Aov::Level, p) => {
+                    values.push(p.and_then(|p| p.level).map_or(f32::NAN, |l| l as f32))
+                }
+                (Aov::Value, p) => {
+                    values.push(p.and_then(|p| p.value).map_or(f32::NAN, |v| v as f32))
+                }
+            }
+        }
+        AovValues {
+            width: self.width,
+            height: self.height,
+            channels,
+            values,
+        }
+    }
+}
+
+/// The `aov` buffer of the view as numbers, for analysis (the Python module's `aov=`):
+/// per pixel, row-major, `channels` values at the first surface point of its centre ray —
+/// the unit normal (3), the distance along the ray (1, infinite on a miss), the finest
+/// level there (1) or the colour field's value (1); NaN on a miss otherwise.
+pub struct AovValues {
+    pub width: u32,
+    pub height: u32,
+    pub channels: usize,
+    pub values: Vec<f32>,
+}
+
+fn aov_hits(scene: &Scene) -> Vec<Option<AovHit>> {
     let mut iso_scene = Scene {
         vol: scene.vol,
         state: scene.state,
@@ -422,7 +535,8 @@ pub fn render_aov(scene: &Scene, aov: Aov) -> Frame {
         iso_scene.params.strategy = Strategy::Exact;
     }
     let (w, h) = (scene.state.width, scene.state.height);
-    let rows: Vec<Vec<AovPixel>> = (0..h)
+    let vol = scene.vol;
+    let rows: Vec<Vec<Option<AovHit>>> = (0..h)
         .into_par_iter()
         .map(|y| {
             let mut caster = RayCaster::new(&iso_scene);
@@ -430,72 +544,32 @@ pub fn render_aov(scene: &Scene, aov: Aov) -> Frame {
                 .map(|x| {
                     let (ray, jit) = caster.camera_ray(x, y, 0);
                     let s = caster.surface(&ray, jit)?;
-                    let t = (s.world - ray.origin).dot(ray.dir);
-                    let c = match aov {
-                        Aov::Normal => s.normal.to_array().map(|v| (0.5 + 0.5 * v) as f32),
-                        Aov::Depth => [0.0; 3],
-                        Aov::Level => {
-                            let vol = scene.vol;
-                            let level = vol.region_at(s.local).and_then(|r| {
-                                vol.region_brick_ids(r as usize)
-                                    .iter()
-                                    .map(|b| vol.brick(b.to_native()).level)
-                                    .min()
-                            });
-                            level.map_or([0.5; 3], |l| {
-                                LEVEL_COLOURS.get(l as usize).copied().unwrap_or([0.6; 3])
-                            })
-                        }
-                        Aov::Value => match (scene.params.colour_field, s.eval) {
-                            (Some(_), Some(e)) => scene.state.colormap.colour(e.colour as f32),
-                            _ => [0.8; 3],
-                        },
+                    let level = vol.region_at(s.local).and_then(|r| {
+                        vol.region_brick_ids(r as usize)
+                            .iter()
+                            .map(|b| vol.brick(b.to_native()).level)
+                            .min()
+                    });
+                    let value = match (scene.params.colour_field, s.eval) {
+                        (Some(_), Some(e)) => Some(e.colour),
+                        _ => None,
                     };
-                    Some((t, c))
+                    Some(AovHit {
+                        t: (s.world - ray.origin).dot(ray.dir),
+                        normal: s.normal.to_array(),
+                        level,
+                        value,
+                    })
                 })
                 .collect()
         })
         .collect();
-    let ts = rows.iter().flatten().flatten().map(|(t, _)| *t);
-    let (tmin, tmax) = ts.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), t| {
-        (a.min(t), b.max(t))
-    });
-    let span = (tmax - tmin).max(1e-300);
-    let mut hits = 0;
-    let mut pixel_hits = Vec::with_capacity(w as usize * h as usize);
-    let mut depth = Vec::with_capacity(w as usize * h as usize);
-    let rgb = rows
-        .into_iter()
-        .flatten()
-        .map(|px| match px {
-            Some((t, c)) => {
-                hits += 1;
-                pixel_hits.push(1);
-                depth.push(t as f32);
-                match aov {
-                    Aov::Depth => [(1.0 - 0.85 * (t - tmin) / span) as f32; 3],
-                    _ => c,
-                }
-            }
-            None => {
-                pixel_hits.push(0);
-                depth.push(f32::INFINITY);
-                scene.state.background
-            }
-        })
-        .collect();
-    let surface_values = vec![f32::NAN; depth.len()];
-    Frame {
-        width: w,
-        height: h,
-        rgb,
-        stats: Stats::default(),
-        rays: u64::from(w) * u64::from(h),
-        hits,
-        pixel_hits,
-        depth,
-        surface_values,
-    }
+    rows.into_iter().flatten().collect()
+}
+
+/// Renders the `aov` buffer of the view as a picture (misses show the background).
+pub fn render_aov(scene: &Scene, aov: Aov) -> Frame {
+    AovTrace::new(scene).picture(scene, aov)
 }
 
 /// What `--pixel` reports about one pixel.

@@ -247,3 +247,68 @@ fn aov_buffers_show_normals_and_levels() {
         .collect();
     assert_eq!(colours.len(), 2, "{colours:?}");
 }
+
+/// The buffers as numbers (`AovTrace::values`, the Python module's `aov=`) hold what the
+/// pictures show: on the sphere f = |p − c| = 11 with f as colour field, the value at each
+/// hit is the iso value, normals are unit and are the picture's, levels are the two boxes'.
+#[test]
+fn aov_values_are_the_pictures_numbers() {
+    use qbricks_viewer::render::{Aov, AovTrace};
+    let file = testvol::nested(16, [0.0; 3], &[("f", &dist)], 8);
+    let view = testvol::open(&file).expect("open");
+    let vol = Volume::new(&view).expect("volume");
+    let meshes = Meshes::empty();
+    let mut st = ViewState::default_for_volume(&vol);
+    st.iso_field = "f".into();
+    st.iso = 11.0;
+    st.colormap.field = "f".into();
+    st.width = 48;
+    st.height = 40;
+    st.camera.look_at = C;
+    st.camera.eye = [36.0, -10.0, 30.0];
+    let scene = Scene::new(&vol, &st, &meshes).expect("scene");
+    let trace = AovTrace::new(&scene);
+    let n_px = 48 * 40;
+    let depth = trace.values(Aov::Depth);
+    assert_eq!((depth.width, depth.height, depth.channels), (48, 40, 1));
+    let hit: Vec<bool> = depth.values.iter().map(|t| t.is_finite()).collect();
+    let hits = hit.iter().filter(|h| **h).count();
+    assert!(hits > 300 && hits < n_px, "{hits}");
+    let picture = trace.picture(&scene, Aov::Normal);
+    for (i, t) in depth.values.iter().enumerate() {
+        // The picture's depth is the same distance.
+        assert_eq!(t.to_bits(), picture.depth[i].to_bits());
+    }
+    let normal = trace.values(Aov::Normal);
+    assert_eq!(normal.values.len(), 3 * n_px);
+    for (i, n) in normal.values.chunks(3).enumerate() {
+        if !hit[i] {
+            assert!(n.iter().all(|v| v.is_nan()));
+            continue;
+        }
+        let v = DVec3::new(n[0].into(), n[1].into(), n[2].into());
+        assert!((v.length() - 1.0).abs() < 1e-5, "{v}");
+        let shown = picture.rgb[i];
+        for k in 0..3 {
+            assert!((shown[k] - (0.5 + 0.5 * n[k])).abs() < 1e-6);
+        }
+    }
+    let value = trace.values(Aov::Value);
+    for (i, v) in value.values.iter().enumerate() {
+        match hit[i] {
+            true => assert!(
+                (v - 11.0).abs() < 0.05,
+                "value {v} at the iso surface f = 11"
+            ),
+            false => assert!(v.is_nan()),
+        }
+    }
+    let levels: std::collections::BTreeSet<u32> = trace
+        .values(Aov::Level)
+        .values
+        .iter()
+        .filter(|l| !l.is_nan())
+        .map(|l| *l as u32)
+        .collect();
+    assert_eq!(levels, [0, 1].into(), "the sphere crosses both boxes");
+}

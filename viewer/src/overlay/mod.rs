@@ -28,7 +28,7 @@ use crate::camera::RayGen;
 use crate::colormap::ColorMap;
 use crate::planes::{Plane, Slice};
 use canvas::Canvas;
-pub use picture::{annotate, data_bounds, picture};
+pub use picture::{annotate, data_bounds, figure, file_title, picture};
 
 /// Which overlays a picture carries.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -76,3 +76,20 @@ pub fn picture(
     );
     rgb8
 }
+
+/// The 8-bit picture a render of `vol` writes: [`picture`] with the data's box, or, for
+/// an `aov` debug buffer, its pixels alone (a buffer is for reading values, not a figure).
+pub fn figure(frame: &Frame, state: &ViewState, vol: &Volume, aov: bool, title: &str) -> Vec<u8> {
+    if aov {
+        return to_rgb8(&frame.rgb);
+    }
+    picture(frame, state, Some(data_bounds(vol)), Some(title))
+}
+
+/// The default title of a file's picture: its name.
+pub fn file_title(path: &std::path::Path) -> String {
+    path.file_name().map_or_else(
+        || path.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    )
+}

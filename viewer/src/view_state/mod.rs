@@ -19,12 +19,14 @@ pub use crate::transfer::{Band, Mode};
 mod command;
 mod file;
 mod overrides;
+mod resolve;
 mod size;
 mod validate;
 pub use crate::fields::UnknownField;
 pub use command::ViewCommand;
 pub use file::ViewStateError;
 pub use overrides::{IsoValues, OverrideError, Overrides, SurfaceColour};
+pub use resolve::{ResolveError, ResolvedView};
 pub use size::{parse_size, SizeError};
 pub use validate::InvalidViewState;
 

@@ -2,40 +2,17 @@
 //! `qbricks_preprocess::bake`.
 
 use std::io::{IsTerminal, Write};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
-use anyhow::Context;
-use clap::ValueEnum;
 use files::output::QuietStdout;
 use indicatif::{ProgressBar, ProgressStyle};
-use qbricks_preprocess::bake::{bake_with_progress, BakeOptions, BakeSummary, DEFAULT_MAX_BRICK};
-use qbricks_preprocess::sequence::FramePattern;
-
+use qbricks_preprocess::bake::DEFAULT_MAX_BRICK;
 use qbricks_preprocess::derive::Stencil;
-use qbricks_preprocess::fields::FieldKind;
-use qbricks_preprocess::inputs::{read_inputs, Layout, ReadError, ReadOptions};
-use qbricks_preprocess::vdb::VdbFile;
-
-#[derive(Clone, Copy, ValueEnum)]
-pub enum StencilArg {
-    /// Central differences; one-sided at grid edges and next to missing cells.
-    Central,
-    /// Central differences; at grid edges the neighbour velocity comes from the
-    /// reconstructed multi-level field.
-    CrossLevel,
-}
-
-#[derive(Clone, Copy, ValueEnum)]
-pub enum LayoutArg {
-    /// From each grid's class: `staggered` grids are MAC grids, others cell-centred.
-    Auto,
-    /// Every vec3 grid holds velocities at cell centres, whatever its class says.
-    Centred,
-    /// Every vec3 grid is a MAC grid (component c on the lower face along axis c).
-    Staggered,
-}
+use qbricks_preprocess::inputs::Layout;
+use qbricks_preprocess::request::{bake_file, default_output, summary_json, BakePlan, BakeRequest};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -60,11 +37,11 @@ pub struct Args {
     #[arg(long, value_delimiter = ',')]
     pub fields: Option<Vec<String>>,
     /// Velocity gradient stencil at grid edges and next to missing cells.
-    #[arg(long, value_enum, default_value_t = StencilArg::Central)]
-    pub stencil: StencilArg,
+    #[arg(long, value_enum, default_value_t = Stencil::Central)]
+    pub stencil: Stencil,
     /// Where velocity components sit: auto (from the grid class), centred or staggered.
-    #[arg(long, value_enum, default_value_t = LayoutArg::Auto)]
-    pub layout: LayoutArg,
+    #[arg(long, value_enum, default_value_t = Layout::Auto)]
+    pub layout: Layout,
     /// Largest brick edge in cells.
     #[arg(long, default_value_t = DEFAULT_MAX_BRICK)]
     pub max_brick: u32,
@@ -91,68 +68,28 @@ pub struct Args {
 pub struct Plan {
     pub start: Instant,
     pub output: PathBuf,
-    pub read: ReadOptions,
-    pub opts: BakeOptions,
-}
-
-/// The input's frame pattern when it names a sequence (a placeholder, and no file of that
-/// very name: a file with `#` in its name is one file).
-pub fn frame_pattern(args: &Args) -> anyhow::Result<Option<FramePattern>> {
-    Ok(FramePattern::parse(&args.input)?.filter(|_| !args.input.exists()))
+    pub bake: BakePlan,
 }
 
 /// Checks the arguments and builds the options every bake of this run uses.
 pub fn plan(args: &Args) -> anyhow::Result<Plan> {
-    let start = Instant::now();
-    let output = args
-        .output
-        .clone()
-        .unwrap_or_else(|| args.input.with_extension("qbk"));
-    let fields = match &args.fields {
-        None => None,
-        Some(list) => Some(
-            list.iter()
-                .map(|s| {
-                    FieldKind::parse_or_grid(s)
-                        .ok_or_else(|| anyhow::anyhow!("--fields: empty field name"))
-                })
-                .collect::<anyhow::Result<Vec<_>>>()?,
-        ),
-    };
-    let extra: Vec<String> = fields
-        .iter()
-        .flatten()
-        .filter_map(|k| match k {
-            FieldKind::Scalar(n) => Some(n.clone()),
-            _ => None,
-        })
-        .collect();
-    let read = ReadOptions {
+    let request = BakeRequest {
+        fields: args.fields.clone(),
         grids: args.grids.clone(),
         velocity: args.velocity.clone(),
-        layout: match args.layout {
-            LayoutArg::Auto => Layout::Auto,
-            LayoutArg::Centred => Layout::Centred,
-            LayoutArg::Staggered => Layout::Staggered,
-        },
-        extra,
-    };
-    let opts = BakeOptions {
-        grids: args.grids.clone(),
-        fields,
-        stencil: match args.stencil {
-            StencilArg::Central => Stencil::Central,
-            StencilArg::CrossLevel => Stencil::CrossLevel,
-        },
+        layout: args.layout,
+        stencil: args.stencil,
         max_brick: args.max_brick,
         strict: args.strict,
-        ..BakeOptions::default()
+        threads: None,
     };
     Ok(Plan {
-        start,
-        output,
-        read,
-        opts,
+        start: Instant::now(),
+        output: args
+            .output
+            .clone()
+            .unwrap_or_else(|| default_output(&args.input)),
+        bake: request.plan()?,
     })
 }
 
@@ -161,8 +98,7 @@ pub fn run(args: Args, plan: Plan) -> anyhow::Result<()> {
     let Plan {
         start,
         output,
-        read,
-        opts,
+        bake,
     } = plan;
     let input_name = args.input.display().to_string();
     let mut guard = files::guard::Guard::new();
@@ -205,7 +141,7 @@ pub fn run(args: Args, plan: Plan) -> anyhow::Result<()> {
         b.set_message(name.to_string());
     };
 
-    let summary = bake_file(&args.input, &output, &opts, &read, &stage)?;
+    let summary = bake_file(&args.input, &output, &bake, &stage, &AtomicBool::new(false))?;
     if let Some(b) = bar.get() {
         b.finish_and_clear();
     }
@@ -218,19 +154,7 @@ pub fn run(args: Args, plan: Plan) -> anyhow::Result<()> {
     }
     let mut out = QuietStdout::new();
     if args.json {
-        /// The summary with the run's own facts; through a `Value` so keys print sorted.
-        #[derive(serde::Serialize)]
-        struct Report<'a> {
-            #[serde(flatten)]
-            summary: &'a BakeSummary,
-            seconds: f64,
-            output: String,
-        }
-        let v = serde_json::to_value(Report {
-            summary: &summary,
-            seconds,
-            output: output.display().to_string(),
-        })?;
+        let v = summary_json(&summary, seconds, &output)?;
         writeln!(out, "{}", serde_json::to_string_pretty(&v)?)?;
     } else if !args.quiet {
         writeln!(
@@ -255,39 +179,4 @@ pub fn run(args: Args, plan: Plan) -> anyhow::Result<()> {
         }
     }
     Ok(())
-}
-
-/// Reads the grids of `input` that `read` selects, bakes them with `opts` (source and
-/// staggered grids filled in per file) and writes `output` atomically. The caller has
-/// checked that `output` is not an input of the run (`files::guard`).
-pub fn bake_file(
-    input: &Path,
-    output: &Path,
-    opts: &BakeOptions,
-    read: &ReadOptions,
-    stage: &(dyn Fn(&str) + Sync),
-) -> anyhow::Result<BakeSummary> {
-    let input_name = input.display().to_string();
-    let mut opts = opts.clone();
-    opts.source = input
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    // Read only the grids that will be baked.
-    stage("reading VDB");
-    let file = VdbFile::open(input)?;
-    let (grids, staggered) = match read_inputs(&file, read) {
-        Ok(v) => v,
-        // Reader errors already name the file.
-        Err(ReadError::Vdb(e)) => return Err(e.into()),
-        Err(e) => return Err(anyhow::Error::new(e).context(input_name)),
-    };
-    opts.staggered = staggered;
-    drop(file);
-
-    let (brick_file, summary) =
-        bake_with_progress(grids, &opts, stage).with_context(|| input_name.clone())?;
-    stage("writing");
-    format::writer::write(output, &brick_file)?;
-    Ok(summary)
 }

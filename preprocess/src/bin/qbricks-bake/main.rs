@@ -3,6 +3,7 @@
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
+use qbricks_preprocess::sequence::input_pattern;
 
 mod bake;
 mod inspect;
@@ -53,8 +54,8 @@ fn main() -> ExitCode {
         Command::Inspect(args) => inspect::run(args),
         // One file, or every frame of a sequence (which bakes each as one file).
         Command::Bake(args) => {
-            bake::plan(&args).and_then(|plan| match bake::frame_pattern(&args)? {
-                Some(pattern) => sequence::run(&args, pattern, &plan.opts, &plan.read, plan.start),
+            bake::plan(&args).and_then(|plan| match input_pattern(&args.input)? {
+                Some(pattern) => sequence::run(&args, pattern, &plan.bake, plan.start),
                 None => bake::run(args, plan),
             })
         }

@@ -11,8 +11,9 @@ use format::sequence::FramePattern;
 use qbricks_viewer::film;
 use qbricks_viewer::mesh::Meshes;
 use qbricks_viewer::overlay;
+use qbricks_viewer::overlay::file_title;
 use qbricks_viewer::render::{Frame, FrameReport, Renderer, Scene};
-use qbricks_viewer::view_state::{Overrides, ViewState};
+use qbricks_viewer::view_state::{Overrides, ResolvedView, ViewState};
 use qbricks_viewer::volume::Volume;
 
 /// The bundled sample, relative to the current directory.
@@ -143,26 +144,13 @@ pub fn run(args: Args, path: PathBuf) -> anyhow::Result<()> {
     let open_ms = t_open.elapsed().as_secs_f64() * 1e3;
 
     // View state: file or data-derived defaults, then flags.
-    let mut state = match &args.state {
-        Some(s) => ViewState::load(s)?,
-        None => ViewState::default_for_volume(&vol),
-    };
-    let notes = args
-        .view
-        .apply(&mut state, args.state.is_some())
-        .map_err(|m| anyhow::anyhow!(m))?;
-    args.view
-        .apply_fields(&mut state, &vol.fields)
-        .with_context(|| path.display().to_string())?;
-    if args.state.is_none() && !args.view.places_camera() {
-        // The flags may have chosen another iso value, field or image size than the
-        // defaults were framed for.
-        state.frame_surface(&vol);
-    }
-    state
-        .validate()
-        .map_err(|m| anyhow::anyhow!("view state: {m}"))?;
-    if let Some(w) = state.iso_outside_range(&vol.fields) {
+    let given = args.state.as_deref().map(ViewState::load).transpose()?;
+    let ResolvedView {
+        mut state,
+        notes,
+        warnings,
+    } = args.view.resolve(&vol, &path, given)?;
+    for w in warnings {
         eprintln!("qbricks-view: warning: {}: {w}", path.display());
     }
     check_files(
@@ -171,7 +159,6 @@ pub fn run(args: Args, path: PathBuf) -> anyhow::Result<()> {
         [("brick file".to_string(), path.as_path())],
         args.output.iter().map(|o| ("-o".to_string(), o.as_path())),
     )?;
-    check_frame_memory(state.width, state.height)?;
     for n in notes {
         eprintln!("qbricks-view: note: {n}");
     }
@@ -181,10 +168,8 @@ pub fn run(args: Args, path: PathBuf) -> anyhow::Result<()> {
         Meshes::load(&state.meshes)?
     };
     let renderer = Renderer::new(args.threads).context("starting worker threads")?;
-    if args.view.wants_visible_range() {
-        fit_visible(&renderer, &vol, &mut state, &meshes, &args.view)
-            .with_context(|| path.display().to_string())?;
-    }
+    fit_visible(&renderer, &vol, &mut state, &meshes, &args.view)
+        .with_context(|| path.display().to_string())?;
     let scene = Scene::new(&vol, &state, &meshes).with_context(|| format!("{}", path.display()))?;
 
     // One pixel, explained.
@@ -203,7 +188,7 @@ pub fn run(args: Args, path: PathBuf) -> anyhow::Result<()> {
 
     let (frame, ms) = render_frame(&renderer, &scene, &args);
     let title = args.title.clone().unwrap_or_else(|| file_title(&path));
-    let picture = picture(&frame, &state, &vol, args.aov.is_some(), &title);
+    let picture = overlay::figure(&frame, &state, &vol, args.aov.is_some(), &title);
     write_outputs(&args, &state, Some((&frame, picture)))?;
     if args.json {
         let report = FrameReport::new(&frame, &state, ms, open_ms, renderer.threads());
@@ -270,8 +255,7 @@ pub fn check_frame_memory(width: u32, height: u32) -> anyhow::Result<()> {
     Ok(film::check_frame_memory(width, height, 1)?)
 }
 
-/// `--colour-range visible`: the colour map spread over the colour field's values on the
-/// surfaces a first picture shows; a note when none shows.
+/// `--colour-range visible` (see [`Overrides::fit_visible_colours`]), its note on stderr.
 pub fn fit_visible(
     renderer: &Renderer,
     vol: &Volume,
@@ -279,31 +263,10 @@ pub fn fit_visible(
     meshes: &Meshes,
     view: &Overrides,
 ) -> anyhow::Result<()> {
-    let range = renderer.fit_colours_to_visible(vol, state, meshes, |r| view.colour_scale(r))?;
-    if range.is_none() {
-        eprintln!(
-            "qbricks-view: note: --colour-range visible: no surface in the picture; the colour \
-             map keeps the field's range"
-        );
+    if let Some(note) = view.fit_visible_colours(renderer, vol, state, meshes)? {
+        eprintln!("qbricks-view: note: {note}");
     }
     Ok(())
-}
-
-/// The default title: the file's name.
-pub fn file_title(path: &Path) -> String {
-    path.file_name().map_or_else(
-        || path.display().to_string(),
-        |n| n.to_string_lossy().into_owned(),
-    )
-}
-
-/// The 8-bit picture of `frame` with the view's overlays (none on an `--aov` buffer,
-/// which is for looking at values, not for figures).
-pub fn picture(frame: &Frame, state: &ViewState, vol: &Volume, aov: bool, title: &str) -> Vec<u8> {
-    if aov {
-        return film::to_rgb8(&frame.rgb);
-    }
-    overlay::picture(frame, state, Some(overlay::data_bounds(vol)), Some(title))
 }
 
 /// Writes the PNG (when there is a picture and `-o`) and the `--save-state` file together,

@@ -13,15 +13,14 @@ use format::sequence::{gaps, FramePattern};
 use qbricks_viewer::dataset::Dataset;
 use qbricks_viewer::film;
 use qbricks_viewer::mesh::Meshes;
+use qbricks_viewer::overlay::{self, file_title};
 use qbricks_viewer::render::{FrameReport, Renderer, Scene};
 use qbricks_viewer::sequence::{self, output_pattern, RangeSource};
 use qbricks_viewer::sequence_defaults::{self as defaults, FrameIso, Framed, IsoRule};
 use qbricks_viewer::view_state::ViewState;
 use serde::Serialize;
 
-use crate::render::{
-    check_files, check_frame_memory, file_title, fit_visible, picture, render_frame, Args,
-};
+use crate::render::{check_files, check_frame_memory, fit_visible, render_frame, Args};
 
 /// One line of `--json` per frame: the single-frame report, or the error.
 #[derive(Serialize)]
@@ -266,10 +265,8 @@ fn render_one(
             // A state file's band is the user's.
             o.apply(&mut mine, args.state.is_none());
         }
-        if args.view.wants_visible_range() {
-            fit_visible(renderer, vol, &mut mine, meshes, &args.view)
-                .with_context(|| input.display().to_string())?;
-        }
+        fit_visible(renderer, vol, &mut mine, meshes, &args.view)
+            .with_context(|| input.display().to_string())?;
         &mine
     } else {
         state
@@ -280,7 +277,7 @@ fn render_one(
         .title
         .clone()
         .unwrap_or_else(|| format!("{}  frame {number}", file_title(input)));
-    let rgb8 = picture(&frame, state, vol, args.aov.is_some(), &title);
+    let rgb8 = overlay::figure(&frame, state, vol, args.aov.is_some(), &title);
     let png = film::encode_png_rgb8(frame.width, frame.height, rgb8)
         .map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
     files::output::write_atomic(out, |f| f.write_all(&png))

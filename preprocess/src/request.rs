@@ -1,0 +1,178 @@
+//! A bake as a user asks for it — files, and fields named as text — turned into the options
+//! of [`crate::bake`] and carried out, the same way for `qbricks-bake` and the Python
+//! module (`qbricks.bake`), so that the two make the same file from the same words.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use anyhow::Context;
+
+use crate::bake::{bake_with_progress, BakeOptions, BakeSummary, DEFAULT_MAX_BRICK};
+use crate::derive::Stencil;
+use crate::fields::FieldKind;
+use crate::inputs::{read_inputs, Layout, ReadError, ReadOptions};
+use crate::vdb::VdbFile;
+
+/// What a bake is asked for, in the words of `qbricks-bake bake`'s flags.
+#[derive(Debug, Clone)]
+pub struct BakeRequest {
+    /// `--fields`: q, speed, vorticity, lambda2, helicity, velocity or a scalar grid's
+    /// name; `None`: the default (q and speed).
+    pub fields: Option<Vec<String>>,
+    /// `--grid`: grid names to bake (every grid of that name).
+    pub grids: Vec<String>,
+    /// `--velocity`: the velocity to bake where the file holds several candidates.
+    pub velocity: Vec<String>,
+    pub layout: Layout,
+    pub stencil: Stencil,
+    /// `--max-brick`: largest brick edge in cells.
+    pub max_brick: u32,
+    /// `--strict`: refuse non-finite values instead of replacing them.
+    pub strict: bool,
+    /// Worker threads (None: rayon's global pool).
+    pub threads: Option<usize>,
+}
+
+impl Default for BakeRequest {
+    fn default() -> Self {
+        BakeRequest {
+            fields: None,
+            grids: Vec::new(),
+            velocity: Vec::new(),
+            layout: Layout::Auto,
+            stencil: Stencil::Central,
+            max_brick: DEFAULT_MAX_BRICK,
+            strict: false,
+            threads: None,
+        }
+    }
+}
+
+/// A field list that names an empty field (`--fields q,,speed`).
+#[derive(Debug, thiserror::Error)]
+#[error("--fields: empty field name")]
+pub struct EmptyFieldName;
+
+/// The read and bake options of a request, checked once and used for every file of a run.
+#[derive(Debug, Clone)]
+pub struct BakePlan {
+    pub read: ReadOptions,
+    pub opts: BakeOptions,
+}
+
+impl BakeRequest {
+    /// The options every bake of this request uses (the per-file facts, source name and
+    /// staggered grids, are filled in by [`bake_file`]).
+    pub fn plan(&self) -> Result<BakePlan, EmptyFieldName> {
+        let fields = self
+            .fields
+            .as_ref()
+            .map(|list| {
+                list.iter()
+                    .map(|s| FieldKind::parse_or_grid(s).ok_or(EmptyFieldName))
+                    .collect::<Result<Vec<_>, _>>()
+            })
+            .transpose()?;
+        // Scalar grids named as fields are read beside the velocity.
+        let extra = fields
+            .iter()
+            .flatten()
+            .filter_map(|k| match k {
+                FieldKind::Scalar(n) => Some(n.clone()),
+                _ => None,
+            })
+            .collect();
+        Ok(BakePlan {
+            read: ReadOptions {
+                grids: self.grids.clone(),
+                velocity: self.velocity.clone(),
+                layout: self.layout,
+                extra,
+            },
+            opts: BakeOptions {
+                grids: self.grids.clone(),
+                fields,
+                stencil: self.stencil,
+                max_brick: self.max_brick,
+                strict: self.strict,
+                threads: self.threads,
+                ..BakeOptions::default()
+            },
+        })
+    }
+}
+
+/// The output of a bake of `input` when none is named: the input with extension `.qbk`.
+pub fn default_output(input: &Path) -> PathBuf {
+    input.with_extension("qbk")
+}
+
+/// A bake stopped by its caller (Ctrl-C in Python) before it wrote anything.
+#[derive(Debug, thiserror::Error)]
+#[error("cancelled")]
+pub struct Cancelled;
+
+/// Reads the grids of `input` that `plan` selects, bakes them (source and staggered grids
+/// filled in per file) and writes `output` atomically; `stage` hears each stage's name.
+/// `cancel`, when set, stops the bake between stages, before the output is written. The
+/// caller has checked that `output` is not an input of the run (`files::guard`).
+pub fn bake_file(
+    input: &Path,
+    output: &Path,
+    plan: &BakePlan,
+    stage: &(dyn Fn(&str) + Sync),
+    cancel: &AtomicBool,
+) -> anyhow::Result<BakeSummary> {
+    let stopped = || -> anyhow::Result<()> {
+        match cancel.load(Ordering::Relaxed) {
+            true => Err(Cancelled.into()),
+            false => Ok(()),
+        }
+    };
+    let input_name = input.display().to_string();
+    let mut opts = plan.opts.clone();
+    opts.source = input
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    // Read only the grids that will be baked.
+    stage("reading VDB");
+    let file = VdbFile::open(input)?;
+    let (grids, staggered) = match read_inputs(&file, &plan.read) {
+        Ok(v) => v,
+        // Reader errors already name the file.
+        Err(ReadError::Vdb(e)) => return Err(e.into()),
+        Err(e) => return Err(anyhow::Error::new(e).context(input_name)),
+    };
+    opts.staggered = staggered;
+    drop(file);
+    stopped()?;
+
+    let (brick_file, summary) =
+        bake_with_progress(grids, &opts, stage).with_context(|| input_name.clone())?;
+    stopped()?;
+    stage("writing");
+    format::writer::write(output, &brick_file)?;
+    Ok(summary)
+}
+
+/// A bake's summary as `qbricks-bake --json` prints it: the [`BakeSummary`] with the run's
+/// own facts (through a `Value`, so keys print sorted).
+pub fn summary_json(
+    summary: &BakeSummary,
+    seconds: f64,
+    output: &Path,
+) -> serde_json::Result<serde_json::Value> {
+    #[derive(serde::Serialize)]
+    struct Report<'a> {
+        #[serde(flatten)]
+        summary: &'a BakeSummary,
+        seconds: f64,
+        output: String,
+    }
+    serde_json::to_value(Report {
+        summary,
+        seconds,
+        output: output.display().to_string(),
+    })
+}
