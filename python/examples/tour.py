@@ -31,6 +31,16 @@ img = ds.render(width=640, height=360, colour_field="vorticity", colormap="magma
 img.save(out / "wake.png")
 print("picture:", img.array.shape, "->", out / "wake.png")
 
+# The view that made it is a qbricks.ViewState: change it, save it for `qbricks-view
+# render --state` or the window, render it again.
+view = img.state
+view.width, view.height = 320, 180
+view.save(out / "view.json")
+small = ds.render(view, aov="depth")             # the distance to the surface, as numbers
+hit = np.isfinite(small.aov[:, :, 0])
+print(f"view -> {out / 'view.json'}; {hit.mean():.0%} of a {view.width}x{view.height} "
+      f"picture shows the surface, {small.aov[hit].min():.3g} to {small.aov[hit].max():.3g} away")
+
 # The stored histogram of Q and a probe along the wake's axis.
 counts, edges = ds.histogram("q")
 (lo, hi) = ds.bounds

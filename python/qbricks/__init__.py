@@ -13,19 +13,17 @@ the picture is the one the CLI writes, pixel for pixel.
 
 from __future__ import annotations
 
-import io
 import json
 import os
-import zlib
-import struct
-from typing import Any, Dict, Iterable, Mapping, Optional, Sequence, Tuple, Union
+from collections.abc import MutableMapping
+from typing import Any, Dict, Iterator, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
 from . import _qbricks
 from ._qbricks import FormatError
 
-__all__ = ["open", "bake", "Dataset", "Image", "FormatError", "__version__"]
+__all__ = ["open", "bake", "Dataset", "Image", "ViewState", "FormatError", "__version__"]
 __version__ = _qbricks.__version__
 
 PathLike = Union[str, "os.PathLike[str]"]
@@ -73,16 +71,113 @@ def _flags(view: Mapping[str, Any]) -> list:
     return flags
 
 
+class ViewState(MutableMapping):
+    """A view state: everything that makes a picture besides the data (camera, mode, iso
+    values, colour map, lights, planes, meshes, size), as ``qbricks-view render
+    --save-state`` writes it and ``--state`` reads it, and as the window saves it.
+
+    A mapping of the JSON's keys (``vs["camera"]["eye"]``), also readable and settable as
+    attributes (``vs.width = 800``). Every change is checked as a state file is: an unknown
+    key or a bad value raises ``ValueError`` and leaves the state as it was. Made from a
+    dict, a JSON file (:meth:`load`), JSON text (:meth:`from_json`), or by
+    :meth:`Dataset.state` and :attr:`Image.state`; pass it as ``state=`` to
+    :meth:`Dataset.render`. ``ViewState(d).to_dict()`` is ``d`` for any state the CLI
+    wrote, and :meth:`save` writes what ``--save-state`` would."""
+
+    __slots__ = ("_data",)
+
+    def __init__(self, state: Union[Mapping[str, Any], "ViewState"]) -> None:
+        data = state.to_dict() if isinstance(state, ViewState) else dict(state)
+        object.__setattr__(self, "_data", self._checked(data))
+
+    @staticmethod
+    def _checked(data: Dict[str, Any]) -> Dict[str, Any]:
+        return json.loads(_qbricks.normalize_state(json.dumps(data)))
+
+    @classmethod
+    def from_json(cls, text: str) -> "ViewState":
+        """A state from its JSON text."""
+        return cls(json.loads(text))
+
+    @classmethod
+    def load(cls, path: PathLike) -> "ViewState":
+        """A state from a view-state JSON file, read and checked as ``--state`` reads it
+        (``FileNotFoundError``; ``ValueError`` naming the file for a bad one)."""
+        return cls(json.loads(_qbricks.load_state(os.fspath(path))))
+
+    def to_json(self) -> str:
+        """The JSON text, as ``--save-state`` writes it (without the final newline)."""
+        return _qbricks.normalize_state(json.dumps(self._data))
+
+    def to_dict(self) -> Dict[str, Any]:
+        """A deep copy as plain dicts and lists."""
+        return json.loads(json.dumps(self._data))
+
+    def save(self, path: PathLike) -> None:
+        """Writes the state as ``--save-state`` does (atomically: a temporary file renamed
+        over ``path``)."""
+        _qbricks.save_state(json.dumps(self._data), os.fspath(path))
+
+    def replace(self, **changes: Any) -> "ViewState":
+        """A copy with the given top-level keys changed."""
+        data = self.to_dict()
+        data.update(changes)
+        return ViewState(data)
+
+    # The mapping: reads give copies of nested values, so that a change always goes
+    # through a check (vs["camera"]["fov"] = 5 changes a copy; vs["camera"] = {...} checks).
+    def __getitem__(self, key: str) -> Any:
+        return json.loads(json.dumps(self._data[key]))
+
+    def __setitem__(self, key: str, value: Any) -> None:
+        data = dict(self._data)
+        data[key] = value
+        object.__setattr__(self, "_data", self._checked(data))
+
+    def __delitem__(self, key: str) -> None:
+        data = dict(self._data)
+        del data[key]
+        object.__setattr__(self, "_data", self._checked(data))
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._data)
+
+    def __len__(self) -> int:
+        return len(self._data)
+
+    def __getattr__(self, key: str) -> Any:
+        try:
+            return self[key]
+        except KeyError:
+            raise AttributeError(key) from None
+
+    def __setattr__(self, key: str, value: Any) -> None:
+        self[key] = value
+
+    def __eq__(self, other: Any) -> bool:
+        if isinstance(other, Mapping):
+            return self._data == dict(other)
+        return NotImplemented
+
+    def __repr__(self) -> str:
+        c = self._data.get("camera", {})
+        return (f"<qbricks.ViewState {self._data.get('width')}x{self._data.get('height')} "
+                f"{self._data.get('mode')} iso={self._data.get('iso')} eye={c.get('eye')}>")
+
+
 class Image:
     """A rendered picture: ``array`` is (H, W, 4) uint8 RGBA (alpha 255), ``state`` the
-    effective view state (a dict: pass it back as ``state=`` to render the same view),
+    effective :class:`ViewState` (pass it back as ``state=`` to render the same view),
     ``depth`` the (H, W) float32 distance to the first surface (inf where none) when
-    ``depth=True`` was asked for. Shows itself in Jupyter; :meth:`save` writes a PNG."""
+    ``depth=True`` was asked for, ``aov`` the (H, W, C) float32 debug buffer when
+    ``aov=`` was. Shows itself in Jupyter; :meth:`save` writes a PNG."""
 
-    def __init__(self, array: np.ndarray, state: Dict[str, Any], depth: Optional[np.ndarray]):
+    def __init__(self, array: np.ndarray, state: ViewState, depth: Optional[np.ndarray],
+                 aov: Optional[np.ndarray] = None):
         self.array = array
         self.state = state
         self.depth = depth
+        self.aov = aov
 
     @property
     def shape(self) -> Tuple[int, ...]:
@@ -92,29 +187,16 @@ class Image:
         return self.array if dtype is None else self.array.astype(dtype)
 
     def to_png(self) -> bytes:
-        """The picture as PNG bytes (RGB, 8 bits, as ``qbricks-view render`` writes)."""
-        h, w = self.array.shape[:2]
-        rgb = np.ascontiguousarray(self.array[:, :, :3])
-        raw = b"".join(b"\x00" + rgb[y].tobytes() for y in range(h))
-
-        def chunk(kind: bytes, data: bytes) -> bytes:
-            body = kind + data
-            return struct.pack(">I", len(data)) + body + struct.pack(">I", zlib.crc32(body))
-
-        return (
-            b"\x89PNG\r\n\x1a\n"
-            + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0))
-            + chunk(b"IDAT", zlib.compress(raw, 6))
-            + chunk(b"IEND", b"")
-        )
+        """The picture as PNG bytes (RGB, 8 bits), encoded as ``qbricks-view render``
+        encodes its pictures."""
+        return _qbricks.png_bytes(np.ascontiguousarray(self.array))
 
     def _repr_png_(self) -> bytes:
         return self.to_png()
 
     def save(self, path: PathLike) -> None:
-        """Writes the picture as a PNG file."""
-        with io.open(path, "wb") as f:
-            f.write(self.to_png())
+        """Writes the picture as a PNG file, atomically (as the CLI writes its pictures)."""
+        _qbricks.save_png(np.ascontiguousarray(self.array), os.fspath(path))
 
     def __repr__(self) -> str:
         h, w = self.array.shape[:2]
@@ -160,10 +242,10 @@ class Dataset:
         counts = np.asarray(counts, dtype=np.uint64)
         return counts, np.linspace(lo, hi, len(counts) + 1)
 
-    def state(self, state: Any = None, **view: Any) -> Dict[str, Any]:
-        """The effective view state of ``render(state, **view)`` as a dict, without
-        rendering (what ``qbricks-view render --save-state`` writes)."""
-        return json.loads(self._ds.state_json(_native_state(state), _flags(view)))
+    def state(self, state: Any = None, **view: Any) -> ViewState:
+        """The effective view state of ``render(state, **view)``, without rendering (what
+        ``qbricks-view render --save-state`` writes)."""
+        return ViewState(json.loads(self._ds.state_json(_native_state(state), _flags(view))))
 
     def render(
         self,
@@ -177,8 +259,8 @@ class Dataset:
     ) -> Image:
         """Renders a view as ``qbricks-view render`` does, overlays included.
 
-        ``state``: a view-state dict (as ``Image.state`` or ``Dataset.state`` return, or a
-        ``--save-state`` file loads) or the path of a view-state JSON file; None: the
+        ``state``: a :class:`ViewState` or a dict (as ``Image.state`` or ``Dataset.state``
+        return, or a ``--save-state`` file holds) or the path of a view-state JSON file; None: the
         data's default view. The keywords are the CLI's view flags, applied over the state:
         ``width``, ``height``, ``mode`` ("iso", "dvr"), ``iso`` (a value or a list),
         ``iso_field``, ``iso_opacity``, ``iso_colour``, ``strategy``, ``step``, ``spp``,
@@ -187,16 +269,21 @@ class Dataset:
         ``log``, ``overlays`` (a list or "legend,axes,…"), ``clip`` and ``slices`` (lists
         of "x>0.5" or ((ox, oy, oz), (nx, ny, nz))), ``slice_opacity``, ``slice_contours``,
         ``slice_clip``, ``shadows``, ``preintegrated``, ``meshes``. ``threads``: worker
-        threads (default all cores); ``aov``: a debug buffer instead of the shaded picture
-        ("normal", "depth", "level", "value"); ``title``: the title overlay's text (default
-        the file's name); ``depth``: also return the float depth (``Image.depth``).
+        threads (default all cores); ``aov``: a debug buffer instead of the shaded picture,
+        at the first surface point of each pixel's centre ray: "normal" (``Image.aov`` is
+        the (H, W, 3) unit normal), "depth" (the distance along the ray, inf on a miss),
+        "level" (the finest refinement level there) or "value" (the colour field's value),
+        as (H, W, 1) float32 with NaN on a miss, and ``Image.array`` its false-colour
+        picture as ``--aov`` writes it; ``title``: the title overlay's text (default the
+        file's name); ``depth``: also return the float depth (``Image.depth``).
 
-        The GIL is released while the picture renders.
+        The GIL is released while the picture renders; Ctrl-C stops it
+        (``KeyboardInterrupt``).
         """
-        array, depth_array, state_json = self._ds.render(
+        array, depth_array, aov_array, state_json = self._ds.render(
             _native_state(state), _flags(view), threads=threads, aov=aov, title=title, depth=depth
         )
-        return Image(array, json.loads(state_json), depth_array)
+        return Image(array, ViewState(json.loads(state_json)), depth_array, aov_array)
 
     def probe(self, points: Any, *, field: Optional[str] = None) -> Dict[str, np.ndarray]:
         """Every field at ``points`` ((N, 3) world coordinates) as float64 arrays of length
@@ -242,6 +329,8 @@ def _native_state(state: Any) -> Any:
         return None
     if isinstance(state, (str, os.PathLike)):
         return os.fspath(state)
+    if isinstance(state, ViewState):
+        return state.to_json().encode("utf-8")
     if isinstance(state, Mapping):
         return json.dumps(state).encode("utf-8")
     raise TypeError("state: expected a view-state dict or the path of a view-state JSON file")
@@ -266,14 +355,24 @@ def bake(
     max_brick: Optional[int] = None,
     strict: bool = False,
     threads: Optional[int] = None,
+    jobs: Optional[int] = None,
     progress: bool = False,
 ) -> Dict[str, Any]:
     """Bakes an OpenVDB file into a ``.qbk`` file, as ``qbricks-bake SRC -o OUT --json``
     does, and returns its summary (cells, bricks, field ranges, ``seconds``, ``output``,
     ``warnings``). ``out`` defaults to ``src`` with the extension ``.qbk``. ``fields``:
     "q", "speed", "vorticity", "lambda2", "helicity", "velocity" or a scalar grid's name
-    (a list or a comma-separated string; default q and speed). The GIL is released while
-    baking."""
+    (a list or a comma-separated string; default q and speed).
+
+    A frame pattern (``"cache/frame_####.vdb"`` or ``%04d``) bakes every frame that exists
+    to ``out`` (a pattern too; default the input's with ``.qbk``), ``jobs`` frames at once
+    (default: as the threads and memory allow), and writes the manifest
+    ``qbricks-view`` reads; the summary is the sequence's (``frames``, ``failed``,
+    ``missing``, ``fields``, ``manifest``…). A frame that fails is named in a
+    ``ValueError`` once the others are baked.
+
+    The GIL is released while baking; Ctrl-C stops the bake between its stages (or
+    frames) without writing the output and raises ``KeyboardInterrupt``."""
 
     def names(v: Union[None, str, Sequence[str]]) -> list:
         if v is None:
@@ -291,6 +390,7 @@ def bake(
         max_brick=max_brick,
         strict=strict,
         threads=threads,
+        jobs=jobs,
         progress=progress,
     )
     return json.loads(summary)

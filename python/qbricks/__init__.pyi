@@ -1,23 +1,51 @@
 # Type stubs of the qbricks package (see __init__.py for the documentation).
 import os
-from typing import Any, Dict, Mapping, Optional, Sequence, Tuple, Union
+from collections.abc import MutableMapping
+from typing import Any, Dict, Iterator, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
 
 __version__: str
 PathLike = Union[str, os.PathLike[str]]
-State = Union[None, PathLike, Mapping[str, Any]]
+State = Union[None, PathLike, "ViewState", Mapping[str, Any]]
 Vec3 = Union[Sequence[float], npt.NDArray[np.floating[Any]]]
 Plane = Union[str, Tuple[Vec3, Vec3]]
 
 class FormatError(ValueError):
     """A file that is not a valid .qbk brick file (the CLI's one-line message)."""
 
+class ViewState(MutableMapping[str, Any]):
+    """A view state, as --save-state writes it; every change is checked."""
+    width: int
+    height: int
+    mode: str
+    iso: float
+    iso_field: str
+    spp: int
+    camera: Dict[str, Any]
+    colormap: Dict[str, Any]
+    def __init__(self, state: Union[Mapping[str, Any], "ViewState"]) -> None: ...
+    @classmethod
+    def from_json(cls, text: str) -> "ViewState": ...
+    @classmethod
+    def load(cls, path: PathLike) -> "ViewState": ...
+    def to_json(self) -> str: ...
+    def to_dict(self) -> Dict[str, Any]: ...
+    def save(self, path: PathLike) -> None: ...
+    def replace(self, **changes: Any) -> "ViewState": ...
+    def __getitem__(self, key: str) -> Any: ...
+    def __setitem__(self, key: str, value: Any) -> None: ...
+    def __delitem__(self, key: str) -> None: ...
+    def __iter__(self) -> Iterator[str]: ...
+    def __len__(self) -> int: ...
+    def __getattr__(self, key: str) -> Any: ...
+
 class Image:
     array: npt.NDArray[np.uint8]
-    state: Dict[str, Any]
+    state: ViewState
     depth: Optional[npt.NDArray[np.float32]]
+    aov: Optional[npt.NDArray[np.float32]]
     @property
     def shape(self) -> Tuple[int, ...]: ...
     def __array__(self, dtype: Any = ..., copy: Any = ...) -> np.ndarray: ...
@@ -36,7 +64,7 @@ class Dataset:
     def levels(self) -> list[Dict[str, Any]]: ...
     def info(self) -> Dict[str, Any]: ...
     def histogram(self, field: str) -> Tuple[npt.NDArray[np.uint64], npt.NDArray[np.float64]]: ...
-    def state(self, state: State = ..., **view: Any) -> Dict[str, Any]: ...
+    def state(self, state: State = ..., **view: Any) -> ViewState: ...
     def render(
         self,
         state: State = ...,
@@ -99,5 +127,6 @@ def bake(
     max_brick: Optional[int] = ...,
     strict: bool = ...,
     threads: Optional[int] = ...,
+    jobs: Optional[int] = ...,
     progress: bool = ...,
 ) -> Dict[str, Any]: ...

@@ -15,22 +15,21 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use clap::{FromArgMatches, Parser, ValueEnum};
-use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
+use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
 use pyo3::create_exception;
-use pyo3::exceptions::{PyFileNotFoundError, PyRuntimeError, PyValueError};
+use pyo3::exceptions::{PyFileNotFoundError, PyKeyboardInterrupt, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyTuple};
 
-use preprocess::bake::{bake_with_progress, BakeOptions, BakeSummary};
 use preprocess::derive::Stencil;
-use preprocess::fields::FieldKind;
-use preprocess::inputs::{read_inputs, Layout, ReadError, ReadOptions};
-use preprocess::vdb::VdbFile;
+use preprocess::inputs::Layout;
+use preprocess::request::{bake_file, default_output, summary_json, BakeRequest};
+use preprocess::sequence::{self, SequenceEvent};
 use viewer::dataset::Dataset as Opened;
 use viewer::mesh::Meshes;
 use viewer::overlay;
-use viewer::render::{Aov, CancelToken, Renderer, Scene};
-use viewer::view_state::{Overrides, ViewState};
+use viewer::render::{Aov, AovTrace, AovValues, CancelToken, Renderer, Scene};
+use viewer::view_state::{Overrides, ResolvedView, ViewState};
 
 create_exception!(
     qbricks,
@@ -40,61 +39,74 @@ create_exception!(
      version): the message is the one `qbricks-view` prints."
 );
 
+/// Whether `cause` is a missing file, whichever library's error carries it.
+fn is_not_found(cause: &(dyn std::error::Error + 'static)) -> bool {
+    use files::input::InputErrorKind;
+    let missing = |e: &std::io::Error| e.kind() == std::io::ErrorKind::NotFound;
+    let missing_input = |k: &InputErrorKind| matches!(k, InputErrorKind::Io(e) if missing(e));
+    if let Some(e) = cause.downcast_ref::<std::io::Error>() {
+        return missing(e);
+    }
+    if let Some(e) = cause.downcast_ref::<files::input::InputError>() {
+        return missing_input(&e.kind);
+    }
+    if let Some(e) = cause.downcast_ref::<preprocess::vdb::VdbError>() {
+        // The VDB reader keeps the I/O error's text only.
+        return matches!(e.kind, preprocess::vdb::ErrorKind::Io(_)) && !Path::new(&e.file).exists();
+    }
+    if let Some(viewer::view_state::ViewStateError::Io { error, .. }) = cause.downcast_ref() {
+        return missing(error);
+    }
+    if let Some(e) = cause.downcast_ref::<viewer::mesh::MeshError>() {
+        use viewer::mesh::MeshErrorKind;
+        return match &e.kind {
+            MeshErrorKind::Read(io) => missing(io),
+            MeshErrorKind::Input(k) => missing_input(k),
+            _ => false,
+        };
+    }
+    if let Some(e) = format_error(cause) {
+        return match &e.kind {
+            format::FormatErrorKind::Io(io) => missing(io),
+            format::FormatErrorKind::Input(k) => missing_input(k),
+            _ => false,
+        };
+    }
+    false
+}
+
+/// The `.qbk` format error `cause` is or carries.
+fn format_error<'a>(
+    cause: &'a (dyn std::error::Error + 'static),
+) -> Option<&'a format::FormatError> {
+    cause.downcast_ref::<format::FormatError>().or_else(|| {
+        match cause.downcast_ref::<viewer::dataset::OpenError>() {
+            Some(viewer::dataset::OpenError::Format(e)) => Some(e),
+            _ => None,
+        }
+    })
+}
+
 /// The Python exception for an error of the libraries: `FileNotFoundError` when a file
-/// is missing, `qbricks.FormatError` for a bad `.qbk` file, `ValueError` otherwise; the
-/// message is the CLI's (`{err:#}`, without the program's name).
+/// is missing, `qbricks.FormatError` for a bad `.qbk` file, `KeyboardInterrupt` for a
+/// bake stopped by Ctrl-C, `ValueError` otherwise; the message is the CLI's (`{err:#}`,
+/// without the program's name).
 fn to_py(err: anyhow::Error) -> PyErr {
     let msg = format!("{err:#}");
     for cause in err.chain() {
-        // The VDB reader keeps the I/O error's text only.
-        if let Some(e) = cause.downcast_ref::<preprocess::vdb::VdbError>() {
-            if matches!(e.kind, preprocess::vdb::ErrorKind::Io(_)) && !Path::new(&e.file).exists() {
-                return PyFileNotFoundError::new_err(msg);
-            }
+        if is_not_found(cause) {
+            return PyFileNotFoundError::new_err(msg);
         }
-        if let Some(viewer::view_state::ViewStateError::Io { error, .. }) = cause.downcast_ref() {
-            if error.kind() == std::io::ErrorKind::NotFound {
-                return PyFileNotFoundError::new_err(msg);
-            }
-        }
-        if let Some(e) = cause.downcast_ref::<files::input::InputError>() {
-            if let files::input::InputErrorKind::Io(io) = &e.kind {
-                if io.kind() == std::io::ErrorKind::NotFound {
-                    return PyFileNotFoundError::new_err(msg);
-                }
-            }
+        if cause.is::<preprocess::request::Cancelled>() {
+            return PyKeyboardInterrupt::new_err(msg);
         }
         // A file that validates but whose tables the ray caster refuses.
-        if let Some(viewer::dataset::OpenError::Volume { .. }) = cause.downcast_ref() {
+        let refused = matches!(
+            cause.downcast_ref(),
+            Some(viewer::dataset::OpenError::Volume { .. })
+        );
+        if refused || format_error(cause).is_some() {
             return FormatError::new_err(msg);
-        }
-        if let Some(e) = cause.downcast_ref::<std::io::Error>() {
-            if e.kind() == std::io::ErrorKind::NotFound {
-                return PyFileNotFoundError::new_err(msg);
-            }
-        }
-        let format_error =
-            cause
-                .downcast_ref::<format::FormatError>()
-                .or_else(
-                    || match cause.downcast_ref::<viewer::dataset::OpenError>() {
-                        Some(viewer::dataset::OpenError::Format(e)) => Some(e),
-                        _ => None,
-                    },
-                );
-        if let Some(e) = format_error {
-            let missing = match &e.kind {
-                format::FormatErrorKind::Io(io) => io.kind() == std::io::ErrorKind::NotFound,
-                format::FormatErrorKind::Input(files::input::InputErrorKind::Io(io)) => {
-                    io.kind() == std::io::ErrorKind::NotFound
-                }
-                _ => false,
-            };
-            return if missing {
-                PyFileNotFoundError::new_err(msg)
-            } else {
-                FormatError::new_err(msg)
-            };
         }
     }
     PyValueError::new_err(msg)
@@ -158,8 +170,9 @@ enum StateSource {
     File(PathBuf),
 }
 
-/// The effective view state, as `qbricks-view render` computes it: the state (a file, JSON
-/// text, or the data's defaults), then the flags, then framing and validation.
+/// The effective view state, as `qbricks-view render` computes it
+/// ([`Overrides::resolve`]): the state (a file, JSON text, or the data's defaults), then
+/// the flags; with a renderer, `--colour-range visible` is applied too.
 fn effective_state(
     ds: &Opened,
     path: &Path,
@@ -168,26 +181,19 @@ fn effective_state(
     renderer: Option<&Renderer>,
 ) -> anyhow::Result<(ViewState, Meshes)> {
     let vol = ds.volume();
-    let (mut state, given) = match source {
-        StateSource::Defaults => (ViewState::default_for_volume(vol), false),
-        StateSource::Json(text) => (ViewState::from_json(Path::new("state"), text)?, true),
-        StateSource::File(p) => (ViewState::load(p)?, true),
+    let given = match source {
+        StateSource::Defaults => None,
+        StateSource::Json(text) => Some(ViewState::from_json(Path::new("state"), text)?),
+        StateSource::File(p) => Some(ViewState::load(p)?),
     };
-    let notes = view
-        .apply(&mut state, given)
-        .map_err(|m| anyhow::anyhow!(m))?;
-    view.apply_fields(&mut state, &vol.fields)
-        .with_context(|| path.display().to_string())?;
-    if !given && !view.places_camera() {
-        state.frame_surface(vol);
-    }
-    state
-        .validate()
-        .map_err(|m| anyhow::anyhow!("view state: {m}"))?;
-    if let Some(w) = state.iso_outside_range(&vol.fields) {
+    let ResolvedView {
+        mut state,
+        notes,
+        warnings,
+    } = view.resolve(vol, path, given)?;
+    for w in warnings {
         eprintln!("qbricks: warning: {}: {w}", path.display());
     }
-    viewer::film::check_frame_memory(state.width, state.height, 1)?;
     for n in notes {
         eprintln!("qbricks: note: {n}");
     }
@@ -197,16 +203,11 @@ fn effective_state(
         Meshes::load(&state.meshes)?
     };
     if let Some(renderer) = renderer {
-        if view.wants_visible_range() {
-            let range = renderer
-                .fit_colours_to_visible(vol, &mut state, &meshes, |r| view.colour_scale(r))
-                .with_context(|| path.display().to_string())?;
-            if range.is_none() {
-                eprintln!(
-                    "qbricks: note: colour_range='visible': no surface in the picture; the \
-                     colour map keeps the field's range"
-                );
-            }
+        if let Some(note) = view
+            .fit_visible_colours(renderer, vol, &mut state, &meshes)
+            .with_context(|| path.display().to_string())?
+        {
+            eprintln!("qbricks: note: {note}");
         }
     }
     Ok((state, meshes))
@@ -239,6 +240,8 @@ struct Rendered {
     height: u32,
     rgba: Vec<u8>,
     depth: Option<Vec<f32>>,
+    /// The `aov` buffer as numbers (see [`viewer::render::AovTrace::values`]).
+    aov: Option<AovValues>,
     state_json: String,
 }
 
@@ -294,7 +297,8 @@ impl Dataset {
     }
 
     /// Renders as `qbricks-view render` does: returns (rgba (H, W, 4) uint8, depth (H, W)
-    /// float32 or None, the effective state as JSON text). The GIL is released meanwhile.
+    /// float32 or None, the `aov` buffer (H, W, C) float32 or None, the effective state as
+    /// JSON text). The GIL is released meanwhile; Ctrl-C stops the render.
     #[pyo3(signature = (state, flags, *, threads=None, aov=None, title=None, depth=false))]
     #[allow(clippy::too_many_arguments)]
     fn render<'py>(
@@ -317,7 +321,9 @@ impl Dataset {
             title,
             depth,
         };
-        let out = run_interruptibly(py, move |cancel| job.run(cancel))?;
+        let cancel = CancelToken::new();
+        let out = run_interruptibly(py, || cancel.cancel(), || job.run(&cancel))?
+            .ok_or_else(|| PyRuntimeError::new_err("qbricks: render cancelled"))?;
         let (w, h) = (out.width as usize, out.height as usize);
         let image = PyArray1::from_vec(py, out.rgba).reshape([h, w, 4])?;
         let depth = match out.depth {
@@ -327,11 +333,19 @@ impl Dataset {
                 .unbind(),
             None => py.None(),
         };
+        let aov = match out.aov {
+            Some(a) => PyArray1::from_vec(py, a.values)
+                .reshape([h, w, a.channels])?
+                .into_any()
+                .unbind(),
+            None => py.None(),
+        };
         PyTuple::new(
             py,
             [
                 image.into_any().unbind(),
                 depth,
+                aov,
                 out.state_json.into_pyobject(py)?.into_any().unbind(),
             ],
         )
@@ -515,29 +529,18 @@ impl RenderJob {
         let (state, meshes) = effective_state(&ds, &path, &source, &view, Some(&renderer))?;
         let vol = ds.volume();
         let scene = Scene::new(vol, &state, &meshes).with_context(|| path.display().to_string())?;
-        let frame = match aov {
-            Some(aov) => renderer.install(|| viewer::render::render_aov(&scene, aov)),
+        let (frame, aov) = match aov {
+            Some(aov) => {
+                let trace = renderer.install(|| AovTrace::new(&scene));
+                (trace.picture(&scene, aov), Some(trace.values(aov)))
+            }
             None => match renderer.render_cancellable(&scene, cancel) {
-                Some(f) => f,
+                Some(f) => (f, None),
                 None => return Ok(None),
             },
         };
-        let title = title.unwrap_or_else(|| {
-            path.file_name().map_or_else(
-                || path.display().to_string(),
-                |n| n.to_string_lossy().into_owned(),
-            )
-        });
-        let rgb8 = if aov.is_some() {
-            viewer::film::to_rgb8(&frame.rgb)
-        } else {
-            overlay::picture(
-                &frame,
-                &state,
-                Some(overlay::data_bounds(vol)),
-                Some(&title),
-            )
-        };
+        let title = title.unwrap_or_else(|| overlay::file_title(&path));
+        let rgb8 = overlay::figure(&frame, &state, vol, aov.is_some(), &title);
         let mut rgba = Vec::with_capacity(rgb8.len() / 3 * 4);
         for p in rgb8.chunks_exact(3) {
             rgba.extend_from_slice(&[p[0], p[1], p[2], 255]);
@@ -547,24 +550,26 @@ impl RenderJob {
             height: frame.height,
             rgba,
             depth: depth.then_some(frame.depth),
+            aov,
             state_json: state.to_json(),
         }))
     }
 }
 
 /// Runs `job` on a thread of its own with the GIL released, while this thread checks for
-/// signals (Ctrl-C) every 20 ms: a Python exception from a signal handler cancels the job
-/// and is raised once the job has stopped. A panic in the job is a `RuntimeError`.
+/// signals (Ctrl-C) every 20 ms: a Python exception from a signal handler calls `stop`
+/// (which asks the job to end early) and is raised once the job has ended. A panic in the
+/// job is a `RuntimeError`.
 fn run_interruptibly<T: Send>(
     py: Python<'_>,
-    job: impl FnOnce(&CancelToken) -> anyhow::Result<Option<T>> + Send,
+    stop: impl Fn(),
+    job: impl FnOnce() -> anyhow::Result<T> + Send,
 ) -> PyResult<T> {
-    let cancel = CancelToken::new();
     let done = AtomicBool::new(false);
     let mut interrupted: Option<PyErr> = None;
     let result = std::thread::scope(|s| {
         let handle = s.spawn(|| {
-            let r = guarded(|| job(&cancel));
+            let r = guarded(job);
             done.store(true, Ordering::Release);
             r
         });
@@ -577,7 +582,7 @@ fn run_interruptibly<T: Send>(
             });
             if interrupted.is_none() {
                 if let Err(e) = py.check_signals() {
-                    cancel.cancel();
+                    stop();
                     interrupted = Some(e);
                 }
             }
@@ -586,15 +591,12 @@ fn run_interruptibly<T: Send>(
     });
     match (result, interrupted) {
         (_, Some(e)) => Err(e),
-        (Ok(Ok(Some(v))), None) => Ok(v),
-        (Ok(Ok(None)), None) => Err(PyRuntimeError::new_err("qbricks: render cancelled")),
-        (Ok(Err(e)), None) => Err(e),
+        (Ok(r), None) => r,
         (Err(_), None) => Err(PyRuntimeError::new_err(
-            "qbricks: internal error: render thread",
+            "qbricks: internal error: worker thread",
         )),
     }
 }
-
 /// Opens and validates a `.qbk` file (the payload checksum too unless `checksum` is false).
 #[pyfunction]
 #[pyo3(signature = (path, *, checksum=true))]
@@ -614,12 +616,14 @@ fn open(py: Python<'_>, path: PathBuf, checksum: bool) -> PyResult<Dataset> {
     })
 }
 
-/// Bakes an OpenVDB file into a `.qbk` file as `qbricks-bake SRC -o OUT --json` does;
-/// returns its JSON summary as text. The GIL is released meanwhile.
+/// Bakes an OpenVDB file into a `.qbk` file as `qbricks-bake SRC -o OUT --json` does, or
+/// every frame of a sequence when `src` is a frame pattern (`in_####.vdb`, and `out` one
+/// too); returns the JSON summary as text. The GIL is released meanwhile; Ctrl-C stops
+/// the bake between stages (or frames) and raises `KeyboardInterrupt`.
 #[pyfunction]
 #[pyo3(signature = (src, out, *, fields=None, grids=Vec::new(), velocity=Vec::new(),
     layout="auto".to_string(), stencil="central".to_string(), max_brick=None, strict=false,
-    threads=None, progress=false))]
+    threads=None, jobs=None, progress=false))]
 #[allow(clippy::too_many_arguments)]
 fn bake(
     py: Python<'_>,
@@ -633,58 +637,68 @@ fn bake(
     max_brick: Option<u32>,
     strict: bool,
     threads: Option<usize>,
+    jobs: Option<usize>,
     progress: bool,
 ) -> PyResult<String> {
-    py.allow_threads(move || {
-        guarded(|| {
+    let cancel = AtomicBool::new(false);
+    run_interruptibly(
+        py,
+        || cancel.store(true, Ordering::Relaxed),
+        || {
             let start = Instant::now();
             files::limits::threads(threads)?;
-            let output = out.clone().unwrap_or_else(|| src.with_extension("qbk"));
-            let fields = match fields {
-                None => None,
-                Some(list) => Some(
-                    list.iter()
-                        .map(|s| {
-                            FieldKind::parse_or_grid(s)
-                                .ok_or_else(|| anyhow::anyhow!("fields: empty field name"))
-                        })
-                        .collect::<anyhow::Result<Vec<_>>>()?,
-                ),
-            };
-            let extra: Vec<String> = fields
-                .iter()
-                .flatten()
-                .filter_map(|k| match k {
-                    FieldKind::Scalar(n) => Some(n.clone()),
-                    _ => None,
-                })
-                .collect();
-            let layout = match layout.as_str() {
-                "auto" => Layout::Auto,
-                "centred" | "centered" => Layout::Centred,
-                "staggered" => Layout::Staggered,
-                l => anyhow::bail!("layout: expected auto, centred or staggered, found {l:?}"),
-            };
-            let stencil = match stencil.as_str() {
-                "central" => Stencil::Central,
-                "cross-level" | "cross_level" => Stencil::CrossLevel,
-                s => anyhow::bail!("stencil: expected central or cross-level, found {s:?}"),
-            };
-            let read = ReadOptions {
-                grids: grids.clone(),
-                velocity,
-                layout,
-                extra,
-            };
-            let mut opts = BakeOptions {
-                grids,
+            let request = BakeRequest {
                 fields,
-                stencil,
+                grids,
+                velocity,
+                layout: Layout::from_str(&layout, true).map_err(|_| {
+                    anyhow::anyhow!("layout: expected auto, centred or staggered, found {layout:?}")
+                })?,
+                stencil: Stencil::from_str(&stencil.replace('_', "-"), true).map_err(|_| {
+                    anyhow::anyhow!("stencil: expected central or cross-level, found {stencil:?}")
+                })?,
                 max_brick: max_brick.unwrap_or(preprocess::bake::DEFAULT_MAX_BRICK),
                 strict,
                 threads,
-                ..BakeOptions::default()
             };
+            let plan = request.plan()?;
+            let seconds = || start.elapsed().as_secs_f64();
+            if let Some(pattern) = sequence::input_pattern(&src)? {
+                let on_event = |event: SequenceEvent| {
+                    if let SequenceEvent::Frame {
+                        frame,
+                        result,
+                        done,
+                        total,
+                        ..
+                    } = event
+                    {
+                        if let Err(e) = result {
+                            eprintln!("qbricks-bake: frame {frame}: {e:#}");
+                        }
+                        if progress {
+                            eprintln!(
+                                "qbricks-bake: {:7.2} s  frame {frame} done ({done}/{total})",
+                                seconds()
+                            );
+                        }
+                    }
+                };
+                let report = sequence::bake_sequence(
+                    &src,
+                    &pattern,
+                    out.as_deref(),
+                    &plan,
+                    jobs,
+                    &cancel,
+                    &on_event,
+                )?;
+                if let Some(message) = report.failure() {
+                    anyhow::bail!(message);
+                }
+                return Ok(report.summary(seconds()).to_string());
+            }
+            let output = out.clone().unwrap_or_else(|| default_output(&src));
             files::guard::Guard::new()
                 .input("input file", &src)
                 .output(
@@ -696,50 +710,83 @@ fn bake(
                     &output,
                 )
                 .check()?;
-            let input_name = src.display().to_string();
             let stage = |name: &str| {
                 if progress {
-                    let t = start.elapsed().as_secs_f64();
-                    eprintln!("qbricks-bake: {t:7.2} s  {name}");
+                    eprintln!("qbricks-bake: {:7.2} s  {name}", seconds());
                 }
             };
-            opts.source = src
-                .file_name()
-                .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_default();
-            stage("reading VDB");
-            let file = VdbFile::open(&src)?;
-            let (grids, staggered) = match read_inputs(&file, &read) {
-                Ok(v) => v,
-                Err(ReadError::Vdb(e)) => return Err(e.into()),
-                Err(e) => return Err(anyhow::Error::new(e).context(input_name)),
-            };
-            opts.staggered = staggered;
-            drop(file);
-            let (brick_file, summary) =
-                bake_with_progress(grids, &opts, &stage).with_context(|| input_name.clone())?;
-            stage("writing");
-            format::writer::write(&output, &brick_file)?;
+            let summary = bake_file(&src, &output, &plan, &stage, &cancel)?;
             for w in &summary.warnings {
-                eprintln!("qbricks-bake: warning: {input_name}: {w}");
+                eprintln!("qbricks-bake: warning: {}: {w}", src.display());
             }
-            #[derive(serde::Serialize)]
-            struct Report<'a> {
-                #[serde(flatten)]
-                summary: &'a BakeSummary,
-                seconds: f64,
-                output: String,
-                warnings: &'a [String],
-            }
-            let v = serde_json::to_value(Report {
-                summary: &summary,
-                seconds: start.elapsed().as_secs_f64(),
-                output: output.display().to_string(),
-                warnings: &summary.warnings,
-            })?;
-            Ok(serde_json::to_string(&v)?)
-        })
+            let mut v = summary_json(&summary, seconds(), &output)?;
+            v["warnings"] = serde_json::json!(summary.warnings);
+            Ok(v.to_string())
+        },
+    )
+}
+
+/// The PNG of an (H, W, 3 or 4) uint8 picture (alpha dropped), encoded as `qbricks-view
+/// render` encodes its pictures.
+fn png_of(image: &PyReadonlyArray3<'_, u8>) -> anyhow::Result<Vec<u8>> {
+    let shape = image.shape();
+    if shape.len() != 3 || !(shape[2] == 3 || shape[2] == 4) {
+        anyhow::bail!(
+            "image: expected an (H, W, 3) or (H, W, 4) uint8 array, found shape {shape:?}"
+        );
+    }
+    let (h, w) = (shape[0], shape[1]);
+    let (w32, h32) = (u32::try_from(w)?, u32::try_from(h)?);
+    viewer::film::check_frame_memory(w32, h32, 1)?;
+    let a = image.as_array();
+    let mut rgb = Vec::with_capacity(w * h * 3);
+    for y in 0..h {
+        for x in 0..w {
+            rgb.extend_from_slice(&[a[[y, x, 0]], a[[y, x, 1]], a[[y, x, 2]]]);
+        }
+    }
+    Ok(viewer::film::encode_png_rgb8(w32, h32, rgb)?)
+}
+
+/// The PNG bytes of an (H, W, 3 or 4) uint8 picture.
+#[pyfunction]
+fn png_bytes<'py>(
+    py: Python<'py>,
+    image: PyReadonlyArray3<'py, u8>,
+) -> PyResult<Bound<'py, PyBytes>> {
+    let png = guarded(|| png_of(&image))?;
+    Ok(PyBytes::new(py, &png))
+}
+
+/// Writes an (H, W, 3 or 4) uint8 picture as a PNG file, atomically (a temporary file
+/// renamed over `path`), as the CLI writes its pictures.
+#[pyfunction]
+fn save_png(image: PyReadonlyArray3<'_, u8>, path: PathBuf) -> PyResult<()> {
+    guarded(|| {
+        let png = png_of(&image)?;
+        files::output::write_atomic(&path, |f| std::io::Write::write_all(f, &png))
+            .with_context(|| path.display().to_string())?;
+        Ok(())
     })
+}
+
+/// A view-state file read and checked as `--state` reads it, as JSON text.
+#[pyfunction]
+fn load_state(path: PathBuf) -> PyResult<String> {
+    guarded(|| Ok(ViewState::load(&path)?.to_json()))
+}
+
+/// Writes view-state JSON text to `path` as `--save-state` does (validated, atomically).
+#[pyfunction]
+fn save_state(text: &str, path: PathBuf) -> PyResult<()> {
+    guarded(|| Ok(ViewState::from_json(Path::new("state"), text)?.save(&path)?))
+}
+
+/// A view state given as JSON text, read and validated as a state file is, written back
+/// as `--save-state` writes it: what `qbricks.ViewState` holds.
+#[pyfunction]
+fn normalize_state(text: &str) -> PyResult<String> {
+    guarded(|| Ok(ViewState::from_json(Path::new("state"), text)?.to_json()))
 }
 
 #[pymodule]
@@ -747,6 +794,11 @@ fn _qbricks(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Dataset>()?;
     m.add_function(wrap_pyfunction!(open, m)?)?;
     m.add_function(wrap_pyfunction!(bake, m)?)?;
+    m.add_function(wrap_pyfunction!(normalize_state, m)?)?;
+    m.add_function(wrap_pyfunction!(save_state, m)?)?;
+    m.add_function(wrap_pyfunction!(load_state, m)?)?;
+    m.add_function(wrap_pyfunction!(png_bytes, m)?)?;
+    m.add_function(wrap_pyfunction!(save_png, m)?)?;
     m.add("FormatError", m.py().get_type::<FormatError>())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
