@@ -50,24 +50,18 @@ fn concurrency(jobs: Option<usize>, frames: &[(u64, PathBuf)]) -> usize {
     threads.min(by_memory).clamp(1, n)
 }
 
-/// What a sequence bake tells its caller as it goes.
-pub enum SequenceEvent<'a> {
-    /// The frames are listed and checked: `frames` will be baked, `jobs` at a time;
-    /// `missing`: numbers absent between the first and the last.
-    Start {
-        frames: &'a [(u64, PathBuf)],
-        jobs: usize,
-        missing: &'a [u64],
-    },
-    /// One frame is done (`done` of `total` so far), with its outcome.
-    Frame {
-        frame: u64,
-        input: &'a Path,
-        output: &'a Path,
-        result: &'a anyhow::Result<BakeSummary>,
-        done: usize,
-        total: usize,
-    },
+/// One frame's outcome, as the manifest lists it.
+pub type FrameOutcome = Result<ManifestFrame, ManifestFailure>;
+
+/// What a sequence bake tells its caller as each frame is done.
+pub struct FrameDone<'a> {
+    pub frame: u64,
+    pub input: &'a Path,
+    pub output: &'a Path,
+    pub result: &'a anyhow::Result<BakeSummary>,
+    /// Frames done so far (of this call), and how many it bakes.
+    pub done: usize,
+    pub total: usize,
 }
 
 /// A finished sequence bake: the manifest written, and where.
@@ -116,11 +110,192 @@ impl SequenceReport {
     }
 }
 
-/// Bakes every frame matching `input` (`input_text` as the user wrote it) to `output` (a
-/// frame pattern; `None`: the input's with `.qbk`), `jobs` frames at once (default: see
-/// [`concurrency`]), then writes the manifest. Every output is checked against every
-/// input before any frame is baked. A frame that fails is listed in the manifest as failed
-/// and the run goes on; `cancel` stops it before the next frame (no manifest is written).
+/// A sequence bake, checked and ready: the frames that match the input pattern, where each
+/// goes, and how many to bake at once. Made by [`SequenceBake::prepare`], run by
+/// [`SequenceBake::bake`] (all its frames, or one process's share of them in a
+/// frame-parallel run) and ended by [`SequenceBake::finish`], which writes the manifest.
+pub struct SequenceBake {
+    in_pattern: String,
+    out_path: PathBuf,
+    out: FramePattern,
+    /// The frames that exist, by number, with their input files.
+    pub frames: Vec<(u64, PathBuf)>,
+    /// Numbers absent between the first frame and the last.
+    pub missing: Vec<u64>,
+    /// Frames baked at once.
+    pub jobs: usize,
+}
+
+impl SequenceBake {
+    /// Lists the frames matching `input` (`input_text` as the user wrote it) and checks the
+    /// run: `output` a frame pattern too (`None`: the input's with `.qbk`), the frame count
+    /// within bounds, every output against every input frame (before any frame is baked),
+    /// its directory made. `jobs`: frames at once (default: see [`concurrency`]).
+    pub fn prepare(
+        input_text: &Path,
+        input: &FramePattern,
+        output: Option<&Path>,
+        jobs: Option<usize>,
+    ) -> anyhow::Result<SequenceBake> {
+        let in_pattern = input_text.display().to_string();
+        let out_path = output.map_or_else(|| default_output(input_text), Path::to_path_buf);
+        let out = match output {
+            Some(o) => FramePattern::parse(o)?.ok_or_else(|| {
+                anyhow::anyhow!(
+                    "{}: the input is a frame pattern, so the output must be one too (e.g. out/frame_####.qbk)",
+                    o.display()
+                )
+            })?,
+            None => FramePattern::parse(&out_path)?
+                .context("the default output lost the frame pattern")?,
+        };
+        let frames = input
+            .scan()
+            .with_context(|| format!("{in_pattern}: cannot list {}", input.dir().display()))?;
+        if frames.is_empty() {
+            anyhow::bail!("{in_pattern}: no file matches the frame pattern");
+        }
+        files::limits::count("frames", frames.len() as u64, 1, files::limits::MAX_FRAMES)?;
+        // Every output against every input frame before any frame is baked: `-o
+        // 'f_1###.vdb'` names input frame 1001 as the output of frame 1.
+        let mut guard = files::guard::Guard::new();
+        for (frame, path) in &frames {
+            guard.input(format!("frame {frame}"), path);
+        }
+        for (frame, _) in &frames {
+            guard.output(format!("-o (frame {frame})"), &out.path(*frame));
+        }
+        guard.output("the manifest", &out.manifest_path());
+        guard.check()?;
+        if !out.dir().as_os_str().is_empty() {
+            std::fs::create_dir_all(out.dir())
+                .with_context(|| format!("{}: cannot create the directory", out.dir().display()))?;
+        }
+        let numbers: Vec<u64> = frames.iter().map(|f| f.0).collect();
+        let missing = gaps(&numbers);
+        let jobs = concurrency(jobs, &frames);
+        Ok(SequenceBake {
+            in_pattern,
+            out_path,
+            out,
+            frames,
+            missing,
+            jobs,
+        })
+    }
+
+    /// The size of each frame's input file (0 when unreadable): what a frame-parallel run
+    /// balances its ranks by.
+    pub fn input_sizes(&self) -> Vec<u64> {
+        self.frames
+            .iter()
+            .map(|(_, p)| std::fs::metadata(p).map_or(0, |m| m.len()))
+            .collect()
+    }
+
+    /// Bakes the frames `which` (indices into [`SequenceBake::frames`]), `jobs` at once; a
+    /// frame that fails is an outcome like the others and the run goes on. `cancel` stops
+    /// the run before the next frame ([`Cancelled`]; frames written stay, whole).
+    pub fn bake(
+        &self,
+        plan: &BakePlan,
+        which: &[usize],
+        cancel: &AtomicBool,
+        on_frame: &(dyn Fn(FrameDone) + Sync),
+    ) -> Result<Vec<FrameOutcome>, Cancelled> {
+        // Workers take the next frame from a counter; each bake uses the shared rayon
+        // pool, so frames overlap their sequential parts (reading, writing) and share the
+        // threads.
+        let next = AtomicUsize::new(0);
+        let results: Mutex<Vec<Option<FrameOutcome>>> = Mutex::new(vec![None; which.len()]);
+        let done = AtomicUsize::new(0);
+        std::thread::scope(|scope| {
+            for _ in 0..self.jobs.min(which.len()).max(1) {
+                scope.spawn(|| loop {
+                    if cancel.load(Ordering::Relaxed) {
+                        break;
+                    }
+                    let k = next.fetch_add(1, Ordering::Relaxed);
+                    let Some((frame, path)) = which.get(k).and_then(|&i| self.frames.get(i)) else {
+                        break;
+                    };
+                    let output = self.out.path(*frame);
+                    let result = bake_file(path, &output, plan, &|_| {}, cancel);
+                    if result.as_ref().is_err_and(|e| e.is::<Cancelled>()) {
+                        break;
+                    }
+                    let entry = manifest_entry(*frame, path, &output, &result);
+                    if let Ok(mut r) = results.lock() {
+                        r[k] = Some(entry);
+                    }
+                    on_frame(FrameDone {
+                        frame: *frame,
+                        input: path,
+                        output: &output,
+                        result: &result,
+                        done: done.fetch_add(1, Ordering::Relaxed) + 1,
+                        total: which.len(),
+                    });
+                });
+            }
+        });
+        if cancel.load(Ordering::Relaxed) {
+            return Err(Cancelled);
+        }
+        // A worker that panicked poisons the lock; its frames are then missing, not lost
+        // silently: they are listed as failed by `finish`.
+        let results = results.into_inner().unwrap_or_else(|e| e.into_inner());
+        Ok(results.into_iter().flatten().collect())
+    }
+
+    /// Writes the manifest of `outcomes` (every frame's, in any order; a frame that matched
+    /// but has none is listed as failed) and returns the run's report.
+    pub fn finish(self, outcomes: Vec<FrameOutcome>) -> anyhow::Result<SequenceReport> {
+        let mut baked = Vec::new();
+        let mut failed = Vec::new();
+        for r in outcomes {
+            match r {
+                Ok(f) => baked.push(f),
+                Err(f) => failed.push(f),
+            }
+        }
+        for (frame, path) in &self.frames {
+            let known = |n: u64| {
+                baked.iter().any(|f: &ManifestFrame| f.frame == n)
+                    || failed.iter().any(|f: &ManifestFailure| f.frame == n)
+            };
+            if !known(*frame) {
+                failed.push(ManifestFailure {
+                    frame: *frame,
+                    input: path.display().to_string(),
+                    error: "not baked: its worker stopped".to_string(),
+                });
+            }
+        }
+        baked.sort_by_key(|f| f.frame);
+        failed.sort_by_key(|f| f.frame);
+        let manifest = Manifest {
+            input_pattern: self.in_pattern,
+            output_pattern: self.out_path.display().to_string(),
+            fields: global_ranges(&baked),
+            frames: baked,
+            failed,
+            missing: self.missing,
+        };
+        let manifest_path = self.out.manifest_path();
+        write_manifest(&manifest_path, &manifest)?;
+        Ok(SequenceReport {
+            manifest,
+            manifest_path,
+            matched: self.frames.len(),
+            jobs: self.jobs,
+        })
+    }
+}
+
+/// Bakes every frame matching `input` to `output` in this process and writes the manifest
+/// (see [`SequenceBake`]; `Cancelled` when `cancel` stopped it, and then no manifest is
+/// written).
 pub fn bake_sequence(
     input_text: &Path,
     input: &FramePattern,
@@ -128,117 +303,12 @@ pub fn bake_sequence(
     plan: &BakePlan,
     jobs: Option<usize>,
     cancel: &AtomicBool,
-    on_event: &(dyn Fn(SequenceEvent) + Sync),
+    on_frame: &(dyn Fn(FrameDone) + Sync),
 ) -> anyhow::Result<SequenceReport> {
-    let in_pattern = input_text.display().to_string();
-    let out_path = output.map_or_else(|| default_output(input_text), Path::to_path_buf);
-    let out = match output {
-        Some(o) => FramePattern::parse(o)?.ok_or_else(|| {
-            anyhow::anyhow!(
-                "{}: the input is a frame pattern, so the output must be one too (e.g. out/frame_####.qbk)",
-                o.display()
-            )
-        })?,
-        None => FramePattern::parse(&out_path)?
-            .context("the default output lost the frame pattern")?,
-    };
-    let frames = input
-        .scan()
-        .with_context(|| format!("{in_pattern}: cannot list {}", input.dir().display()))?;
-    if frames.is_empty() {
-        anyhow::bail!("{in_pattern}: no file matches the frame pattern");
-    }
-    files::limits::count("frames", frames.len() as u64, 1, files::limits::MAX_FRAMES)?;
-    // Every output against every input frame before any frame is baked: `-o 'f_1###.vdb'`
-    // names input frame 1001 as the output of frame 1.
-    let mut guard = files::guard::Guard::new();
-    for (frame, path) in &frames {
-        guard.input(format!("frame {frame}"), path);
-    }
-    for (frame, _) in &frames {
-        guard.output(format!("-o (frame {frame})"), &out.path(*frame));
-    }
-    guard.output("the manifest", &out.manifest_path());
-    guard.check()?;
-    if !out.dir().as_os_str().is_empty() {
-        std::fs::create_dir_all(out.dir())
-            .with_context(|| format!("{}: cannot create the directory", out.dir().display()))?;
-    }
-    let numbers: Vec<u64> = frames.iter().map(|f| f.0).collect();
-    let missing = gaps(&numbers);
-    let jobs = concurrency(jobs, &frames);
-    on_event(SequenceEvent::Start {
-        frames: &frames,
-        jobs,
-        missing: &missing,
-    });
-
-    // Workers take the next frame from a counter; each bake uses the shared rayon pool, so
-    // frames overlap their sequential parts (reading, writing) and share the threads.
-    let next = AtomicUsize::new(0);
-    let results: Mutex<Vec<Option<Result<ManifestFrame, ManifestFailure>>>> =
-        Mutex::new(vec![None; frames.len()]);
-    let done = AtomicUsize::new(0);
-    std::thread::scope(|scope| {
-        for _ in 0..jobs {
-            scope.spawn(|| loop {
-                if cancel.load(Ordering::Relaxed) {
-                    break;
-                }
-                let i = next.fetch_add(1, Ordering::Relaxed);
-                let Some((frame, path)) = frames.get(i) else {
-                    break;
-                };
-                let output = out.path(*frame);
-                let result = bake_file(path, &output, plan, &|_| {}, cancel);
-                if result.as_ref().is_err_and(|e| e.is::<Cancelled>()) {
-                    break;
-                }
-                let entry = manifest_entry(*frame, path, &output, &result);
-                if let Ok(mut r) = results.lock() {
-                    r[i] = Some(entry);
-                }
-                on_event(SequenceEvent::Frame {
-                    frame: *frame,
-                    input: path,
-                    output: &output,
-                    result: &result,
-                    done: done.fetch_add(1, Ordering::Relaxed) + 1,
-                    total: frames.len(),
-                });
-            });
-        }
-    });
-    if cancel.load(Ordering::Relaxed) {
-        return Err(Cancelled.into());
-    }
-    let results = results
-        .into_inner()
-        .map_err(|_| anyhow::anyhow!("a frame worker panicked"))?;
-    let mut baked = Vec::new();
-    let mut failed = Vec::new();
-    for r in results.into_iter().flatten() {
-        match r {
-            Ok(f) => baked.push(f),
-            Err(f) => failed.push(f),
-        }
-    }
-    let manifest = Manifest {
-        input_pattern: in_pattern,
-        output_pattern: out_path.display().to_string(),
-        fields: global_ranges(&baked),
-        frames: baked,
-        failed,
-        missing,
-    };
-    let manifest_path = out.manifest_path();
-    write_manifest(&manifest_path, &manifest)?;
-    Ok(SequenceReport {
-        manifest,
-        manifest_path,
-        matched: frames.len(),
-        jobs,
-    })
+    let run = SequenceBake::prepare(input_text, input, output, jobs)?;
+    let all: Vec<usize> = (0..run.frames.len()).collect();
+    let outcomes = run.bake(plan, &all, cancel, on_frame)?;
+    run.finish(outcomes)
 }
 
 /// The manifest's line for one frame's outcome.

@@ -24,7 +24,7 @@ use pyo3::types::{PyBytes, PyDict, PyTuple};
 use preprocess::derive::Stencil;
 use preprocess::inputs::Layout;
 use preprocess::request::{bake_file, default_output, summary_json, BakeRequest};
-use preprocess::sequence::{self, SequenceEvent};
+use preprocess::sequence::{self, FrameDone};
 use viewer::dataset::Dataset as Opened;
 use viewer::mesh::Meshes;
 use viewer::overlay;
@@ -664,24 +664,18 @@ fn bake(
             let plan = request.plan()?;
             let seconds = || start.elapsed().as_secs_f64();
             if let Some(pattern) = sequence::input_pattern(&src)? {
-                let on_event = |event: SequenceEvent| {
-                    if let SequenceEvent::Frame {
-                        frame,
-                        result,
-                        done,
-                        total,
-                        ..
-                    } = event
-                    {
-                        if let Err(e) = result {
-                            eprintln!("qbricks-bake: frame {frame}: {e:#}");
-                        }
-                        if progress {
-                            eprintln!(
-                                "qbricks-bake: {:7.2} s  frame {frame} done ({done}/{total})",
-                                seconds()
-                            );
-                        }
+                let on_frame = |f: FrameDone| {
+                    if let Err(e) = f.result {
+                        eprintln!("qbricks-bake: frame {}: {e:#}", f.frame);
+                    }
+                    if progress {
+                        eprintln!(
+                            "qbricks-bake: {:7.2} s  frame {} done ({}/{})",
+                            seconds(),
+                            f.frame,
+                            f.done,
+                            f.total
+                        );
                     }
                 };
                 let report = sequence::bake_sequence(
@@ -691,7 +685,7 @@ fn bake(
                     &plan,
                     jobs,
                     &cancel,
-                    &on_event,
+                    &on_frame,
                 )?;
                 if let Some(message) = report.failure() {
                     anyhow::bail!(message);

@@ -4,6 +4,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 use qbricks_preprocess::sequence::input_pattern;
+use ranks::Ranks;
 
 mod bake;
 mod inspect;
@@ -50,13 +51,20 @@ fn moved(prog: &str, sub: &str) -> ExitCode {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    // The ranks of an MPI run (built with the `mpi` feature), else this one process.
+    let ranks = Ranks::init();
     let result = match cli.command {
-        Command::Inspect(args) => inspect::run(args),
-        // One file, or every frame of a sequence (which bakes each as one file).
+        Command::Inspect(args) => ranks
+            .one_process_only("qbricks-bake inspect")
+            .and_then(|()| inspect::run(args)),
+        // One file, or every frame of a sequence (which bakes each as one file; over the
+        // ranks of an MPI run, each rank its share).
         Command::Bake(args) => {
             bake::plan(&args).and_then(|plan| match input_pattern(&args.input)? {
-                Some(pattern) => sequence::run(&args, pattern, &plan.bake, plan.start),
-                None => bake::run(args, plan),
+                Some(pattern) => sequence::run(&args, pattern, &plan.bake, plan.start, &ranks),
+                None => ranks
+                    .one_process_only("a bake of one file")
+                    .and_then(|()| bake::run(args, plan)),
             })
         }
         Command::Synth(_) => return moved("qbricks-bake", "synth"),
@@ -68,8 +76,7 @@ fn main() -> ExitCode {
             if files::output::is_broken_pipe(err.as_ref()) {
                 return ExitCode::SUCCESS;
             }
-            eprintln!("qbricks-bake: {err:#}");
-            ExitCode::from(2)
+            ranks.fail("qbricks-bake", &err)
         }
     }
 }

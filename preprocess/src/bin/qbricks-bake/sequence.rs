@@ -1,5 +1,7 @@
 //! `qbricks-bake bake 'in_####.vdb' -o 'out_####.qbk'`: the progress bar and the report;
-//! the run is [`qbricks_preprocess::sequence::bake_sequence`].
+//! the run is [`qbricks_preprocess::sequence::SequenceBake`]. In an MPI run every rank
+//! bakes its share of the frames (balanced by input size) and rank 0 writes the manifest
+//! and reports.
 
 use std::io::{IsTerminal, Write};
 use std::sync::atomic::AtomicBool;
@@ -8,7 +10,8 @@ use std::time::Instant;
 use files::output::QuietStdout;
 use indicatif::{ProgressBar, ProgressStyle};
 use qbricks_preprocess::request::BakePlan;
-use qbricks_preprocess::sequence::{bake_sequence, FramePattern, SequenceEvent};
+use qbricks_preprocess::sequence::{FrameDone, FrameOutcome, FramePattern, SequenceBake};
+use ranks::Ranks;
 
 use crate::bake::Args;
 
@@ -17,9 +20,18 @@ pub fn run(
     input: FramePattern,
     plan: &BakePlan,
     start: Instant,
+    ranks: &Ranks,
 ) -> anyhow::Result<()> {
     let in_pattern = args.input.display().to_string();
-    let terminal = std::io::stderr().is_terminal();
+    let run = ranks.agree(SequenceBake::prepare(
+        &args.input,
+        &input,
+        args.output.as_deref(),
+        args.jobs,
+    ))?;
+    let mine = ranks.share(&run.input_sizes());
+    // In a parallel run each rank tells of its own frames in lines, not in a bar.
+    let terminal = std::io::stderr().is_terminal() && !ranks.is_parallel();
     let show = !args.quiet && (args.progress || terminal);
     let bar = std::sync::OnceLock::<ProgressBar>::new();
     // Lines on stderr that do not tear the bar.
@@ -27,99 +39,111 @@ pub fn run(
         Some(b) => b.println(line),
         None => eprintln!("{line}"),
     };
-    let on_event = |event: SequenceEvent| match event {
-        SequenceEvent::Start {
-            frames,
-            jobs,
-            missing,
-        } => {
-            if show && terminal {
-                let b = ProgressBar::new(frames.len() as u64);
-                b.set_style(
-                    ProgressStyle::with_template(
-                        "{elapsed:>4} [{bar:30}] {pos}/{len} frames ({per_sec}, eta {eta}) {msg}",
-                    )
-                    .unwrap_or_else(|_| ProgressStyle::default_bar())
-                    .progress_chars("=> "),
-                );
-                let _ = bar.set(b);
-            }
-            if !args.quiet && !missing.is_empty() {
-                let list: Vec<String> = missing.iter().take(20).map(u64::to_string).collect();
-                say(format!(
-                    "qbricks-bake: warning: {in_pattern}: {} frame(s) missing between {} and {}: {}{}",
-                    missing.len(),
-                    frames[0].0,
-                    frames[frames.len() - 1].0,
-                    list.join(", "),
-                    if missing.len() > 20 { ", …" } else { "" }
-                ));
-            }
-            if show && !terminal {
-                say(format!(
-                    "qbricks-bake: {in_pattern}: {} frames, {jobs} at a time",
-                    frames.len()
-                ));
-            }
+    if show && terminal {
+        let b = ProgressBar::new(mine.len() as u64);
+        b.set_style(
+            ProgressStyle::with_template(
+                "{elapsed:>4} [{bar:30}] {pos}/{len} frames ({per_sec}, eta {eta}) {msg}",
+            )
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+        );
+        let _ = bar.set(b);
+    }
+    let frames = &run.frames;
+    if ranks.is_root() && !args.quiet && !run.missing.is_empty() {
+        let missing = &run.missing;
+        let list: Vec<String> = missing.iter().take(20).map(u64::to_string).collect();
+        say(format!(
+            "qbricks-bake: warning: {in_pattern}: {} frame(s) missing between {} and {}: {}{}",
+            missing.len(),
+            frames[0].0,
+            frames[frames.len() - 1].0,
+            list.join(", "),
+            if missing.len() > 20 { ", …" } else { "" }
+        ));
+    }
+    if show && !terminal {
+        match ranks.is_parallel() {
+            false => say(format!(
+                "qbricks-bake: {in_pattern}: {} frames, {} at a time",
+                frames.len(),
+                run.jobs
+            )),
+            true => say(format!(
+                "qbricks-bake: {in_pattern}: rank {} of {}: {} of {} frames, {} at a time",
+                ranks.rank(),
+                ranks.size(),
+                mine.len(),
+                frames.len(),
+                run.jobs
+            )),
         }
-        SequenceEvent::Frame {
+    }
+    // Whose progress a line tells, in a parallel run.
+    let who = match ranks.is_parallel() {
+        true => format!("rank {}: ", ranks.rank()),
+        false => String::new(),
+    };
+    let on_frame = |f: FrameDone| {
+        let FrameDone {
             frame,
             input,
             output,
             result,
             done,
             total,
-        } => {
-            let name = input.display().to_string();
-            match result {
-                Ok(summary) if !args.quiet => {
-                    for w in &summary.warnings {
-                        say(format!("qbricks-bake: warning: {name}: {w}"));
-                    }
-                }
-                Ok(_) => {}
-                Err(e) => {
-                    // Reader errors start with the file name; others get it here.
-                    let msg = format!("{e:#}");
-                    say(match msg.starts_with(&name) {
-                        true => format!("qbricks-bake: {msg}"),
-                        false => format!("qbricks-bake: {name}: {msg}"),
-                    });
-                    if !args.quiet && output.exists() {
-                        say(format!(
-                            "qbricks-bake: warning: {} is left from an earlier bake; the \
-                             manifest lists frame {frame} as failed, so qbricks-view skips it",
-                            output.display()
-                        ));
-                    }
+        } = f;
+        let name = input.display().to_string();
+        match result {
+            Ok(summary) if !args.quiet => {
+                for w in &summary.warnings {
+                    say(format!("qbricks-bake: warning: {name}: {w}"));
                 }
             }
-            match bar.get() {
-                Some(b) => {
-                    b.set_message(format!("frame {frame}"));
-                    b.inc(1);
+            Ok(_) => {}
+            Err(e) => {
+                // Reader errors start with the file name; others get it here.
+                let msg = format!("{e:#}");
+                say(match msg.starts_with(&name) {
+                    true => format!("qbricks-bake: {msg}"),
+                    false => format!("qbricks-bake: {name}: {msg}"),
+                });
+                if !args.quiet && output.exists() {
+                    say(format!(
+                        "qbricks-bake: warning: {} is left from an earlier bake; the \
+                         manifest lists frame {frame} as failed, so qbricks-view skips it",
+                        output.display()
+                    ));
                 }
-                None if show => eprintln!(
-                    "qbricks-bake: {:7.2} s  frame {frame} done ({done}/{total})",
-                    start.elapsed().as_secs_f64(),
-                ),
-                None => {}
             }
+        }
+        match bar.get() {
+            Some(b) => {
+                b.set_message(format!("frame {frame}"));
+                b.inc(1);
+            }
+            None if show => eprintln!(
+                "qbricks-bake: {who}{:7.2} s  frame {frame} done ({done}/{total})",
+                start.elapsed().as_secs_f64(),
+            ),
+            None => {}
         }
     };
     let never = AtomicBool::new(false);
-    let report = bake_sequence(
-        &args.input,
-        &input,
-        args.output.as_deref(),
-        plan,
-        args.jobs,
-        &never,
-        &on_event,
-    );
+    let outcomes = run.bake(plan, &mine, &never, &on_frame)?;
     if let Some(b) = bar.get() {
         b.finish_and_clear();
     }
+    // Every rank's outcomes at rank 0, which writes the manifest and reports.
+    let Some(parts) = ranks.gather(&serde_json::to_vec(&outcomes)?) else {
+        return Ok(());
+    };
+    let mut outcomes = Vec::new();
+    for part in parts {
+        outcomes.extend(serde_json::from_slice::<Vec<FrameOutcome>>(&part)?);
+    }
+    let report = run.finish(outcomes);
     let report = report?;
     let manifest = &report.manifest;
     let seconds = start.elapsed().as_secs_f64();

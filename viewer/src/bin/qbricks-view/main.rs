@@ -3,6 +3,7 @@
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
+use ranks::Ranks;
 
 mod info;
 mod probe;
@@ -56,16 +57,31 @@ fn moved(prog: &str, sub: &str) -> ExitCode {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    // The ranks of an MPI run (built with the `mpi` feature), else this one process.
+    let ranks = Ranks::init();
     let result = match cli.command {
-        None => window::run(cli.window),
-        Some(Command::Open(args)) => window::run(args),
-        Some(Command::Info(args)) => info::run(args),
-        // One file, or every frame of a sequence (each rendered as one file is).
+        None => ranks
+            .one_process_only("the window")
+            .and_then(|()| window::run(cli.window)),
+        Some(Command::Open(args)) => ranks
+            .one_process_only("the window")
+            .and_then(|()| window::run(args)),
+        Some(Command::Info(args)) => ranks
+            .one_process_only("qbricks-view info")
+            .and_then(|()| info::run(args)),
+        // One file, or every frame of a sequence (each rendered as one file is; over the
+        // ranks of an MPI run, each rank its share).
         Some(Command::Render(args)) => render::target(&args).and_then(|t| match t {
-            render::Target::File(path) => render::run(*args, path),
-            render::Target::Sequence(path, pattern) => render_sequence::run(&args, &path, pattern),
+            render::Target::File(path) => ranks
+                .one_process_only("a render of one file")
+                .and_then(|()| render::run(*args, path)),
+            render::Target::Sequence(path, pattern) => {
+                render_sequence::run(&args, &path, pattern, &ranks)
+            }
         }),
-        Some(Command::Probe(args)) => probe::run(args),
+        Some(Command::Probe(args)) => ranks
+            .one_process_only("qbricks-view probe")
+            .and_then(|()| probe::run(args)),
         Some(Command::Bench(_)) => return moved("qbricks-view", "bench"),
     };
     match result {
@@ -74,8 +90,7 @@ fn main() -> ExitCode {
             if files::output::is_broken_pipe(err.as_ref()) {
                 return ExitCode::SUCCESS;
             }
-            eprintln!("qbricks-view: {err:#}");
-            ExitCode::from(2)
+            ranks.fail("qbricks-view", &err)
         }
     }
 }

@@ -18,7 +18,8 @@ use qbricks_viewer::render::{FrameReport, Renderer, Scene};
 use qbricks_viewer::sequence::{self, output_pattern, RangeSource};
 use qbricks_viewer::sequence_defaults::{self as defaults, FrameIso, Framed, IsoRule};
 use qbricks_viewer::view_state::ViewState;
-use serde::Serialize;
+use ranks::Ranks;
+use serde::{Deserialize, Serialize};
 
 use crate::render::{check_files, check_frame_memory, fit_visible, render_frame, Args};
 
@@ -34,7 +35,193 @@ struct FrameLine {
     error: Option<String>,
 }
 
-pub fn run(args: &Args, path: &Path, pattern: FramePattern) -> anyhow::Result<()> {
+/// Renders every frame of a sequence (in an MPI run, this rank's share; rank 0 reports).
+pub fn run(args: &Args, path: &Path, pattern: FramePattern, ranks: &Ranks) -> anyhow::Result<()> {
+    let Prepared {
+        state,
+        frames,
+        own,
+        out_pattern,
+        meshes,
+        renderer,
+    } = ranks.agree(prepare(args, path, &pattern, ranks.is_root()))?;
+    let shown = path.display().to_string();
+    // This rank's frames, balanced by file size (all of them without MPI).
+    let sizes: Vec<u64> = frames
+        .iter()
+        .map(|(_, p)| std::fs::metadata(p).map_or(0, |m| m.len()))
+        .collect();
+    let mine = ranks.share(&sizes);
+    // In a parallel run the ranks' bars would tear each other: lines only.
+    let target = match ranks.is_parallel() {
+        false => indicatif::ProgressDrawTarget::stderr(),
+        true => indicatif::ProgressDrawTarget::hidden(),
+    };
+    let bar = indicatif::ProgressBar::with_draw_target(Some(mine.len() as u64), target);
+    if let Ok(style) = indicatif::ProgressStyle::with_template(
+        "{elapsed:>4} [{bar:30}] {pos}/{len} frames ({per_sec}, eta {eta}) {msg}",
+    ) {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    let mut stdout = QuietStdout::new();
+    let mut done = Vec::new();
+    for &i in &mine {
+        let (frame, input) = &frames[i];
+        bar.set_message(format!("frame {frame}"));
+        let out = out_pattern.path(*frame);
+        let own_iso = own.iter().find(|o| o.frame == *frame);
+        let result = render_one(
+            args,
+            (*frame, input),
+            &out,
+            (&state, own_iso),
+            &meshes,
+            &renderer,
+        );
+        let line = FrameLine {
+            frame: *frame,
+            file: input.display().to_string(),
+            output: out.display().to_string(),
+            report: result.as_ref().ok().cloned(),
+            error: result.as_ref().err().map(|e| format!("{e:#}")),
+        };
+        if let Err(e) = &result {
+            // Errors name the file they are about (the frame, or its image).
+            let msg = format!("qbricks-view: {e:#}");
+            // A bar that does not draw (stderr not a terminal) drops its lines.
+            if bar.is_hidden() {
+                eprintln!("{msg}");
+            } else {
+                bar.println(msg);
+            }
+        }
+        let json = serde_json::to_string(&line)?;
+        // Alone, each frame's line as soon as it is rendered.
+        if args.json && !ranks.is_parallel() {
+            writeln!(stdout, "{json}")?;
+        }
+        done.push(FrameDone {
+            frame: *frame,
+            json,
+            failed: result.is_err().then(|| input.display().to_string()),
+        });
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    // Every rank's frames at rank 0, which reports them in frame order.
+    let Some(parts) = ranks.gather(&serde_json::to_vec(&done)?) else {
+        return Ok(());
+    };
+    let mut done = Vec::new();
+    for part in parts {
+        done.extend(serde_json::from_slice::<Vec<FrameDone>>(&part)?);
+    }
+    done.sort_by_key(|d| d.frame);
+    if args.json && ranks.is_parallel() {
+        for d in &done {
+            writeln!(stdout, "{}", d.json)?;
+        }
+    }
+    let failed: Vec<&str> = done.iter().filter_map(|d| d.failed.as_deref()).collect();
+    // The state only for a run that succeeded: nothing is written when a run fails.
+    if let (Some(p), true) = (&args.save_state, failed.is_empty()) {
+        state.save(p).with_context(|| "--save-state".to_string())?;
+    }
+    if !failed.is_empty() {
+        bail!(
+            "{shown}: {} of {} frames failed: {}",
+            failed.len(),
+            frames.len(),
+            failed.join(", ")
+        );
+    }
+    Ok(())
+}
+
+/// One rendered frame as the rank that rendered it reports it to rank 0: its `--json`
+/// line, and its file when it failed.
+#[derive(Serialize, Deserialize)]
+struct FrameDone {
+    frame: u64,
+    json: String,
+    failed: Option<String>,
+}
+
+/// Opens, renders and writes one frame (the image atomically, as a single render does),
+/// with its own iso value when it has one.
+fn render_one(
+    args: &Args,
+    (number, input): (u64, &Path),
+    out: &Path,
+    (state, own): (&ViewState, Option<&FrameIso>),
+    meshes: &Meshes,
+    renderer: &Renderer,
+) -> anyhow::Result<FrameReport> {
+    if !input.exists() {
+        bail!("{}: no such file", input.display());
+    }
+    let options = format::OpenOptions {
+        verify_checksum: !args.no_checksum,
+    };
+    let data = Dataset::open_with(input, &options)?;
+    let vol = data.volume();
+    // `--colour-range visible` fits each frame's map to what that frame shows.
+    let mut mine;
+    let state = if args.view.wants_visible_range() || own.is_some() {
+        mine = state.clone();
+        if let Some(o) = own {
+            // A state file's band is the user's.
+            o.apply(&mut mine, args.state.is_none());
+        }
+        fit_visible(renderer, vol, &mut mine, meshes, &args.view)
+            .with_context(|| input.display().to_string())?;
+        &mine
+    } else {
+        state
+    };
+    let scene = Scene::new(vol, state, meshes).with_context(|| input.display().to_string())?;
+    let (frame, ms) = render_frame(renderer, &scene, args);
+    let title = args
+        .title
+        .clone()
+        .unwrap_or_else(|| format!("{}  frame {number}", file_title(input)));
+    let rgb8 = overlay::figure(&frame, state, vol, args.aov.is_some(), &title);
+    let png = film::encode_png_rgb8(frame.width, frame.height, rgb8)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
+    files::output::write_atomic(out, |f| f.write_all(&png))
+        .with_context(|| out.display().to_string())?;
+    Ok(FrameReport::new(
+        &frame,
+        state,
+        ms,
+        data.open_ms,
+        renderer.threads(),
+    ))
+}
+
+/// What every frame of a sequence shares, checked before any frame is rendered.
+struct Prepared {
+    state: ViewState,
+    frames: Vec<(u64, PathBuf)>,
+    own: Vec<FrameIso>,
+    out_pattern: FramePattern,
+    meshes: Meshes,
+    renderer: Renderer,
+}
+
+/// The one view state of a sequence, its frames and outputs, all checked; `tell`: say on
+/// stderr what was chosen (rank 0 of a parallel run, which speaks for all).
+fn prepare(
+    args: &Args,
+    path: &Path,
+    pattern: &FramePattern,
+    tell: bool,
+) -> anyhow::Result<Prepared> {
+    let note = |line: &str| {
+        if tell {
+            eprintln!("{line}");
+        }
+    };
     let shown = path.display().to_string();
     if args.pixel.is_some() {
         bail!("{shown}: --pixel explains one file's pixel; give one frame's file instead of the pattern");
@@ -43,7 +230,7 @@ pub fn run(args: &Args, path: &Path, pattern: FramePattern) -> anyhow::Result<()
         bail!("{shown}: expected -o with a frame pattern for the images (e.g. -o 'png/frame_####.png')");
     };
     let out_pattern = output_pattern(output).map_err(anyhow::Error::msg)?;
-    let plan = sequence::plan(&pattern, &shown, args.frames)?;
+    let plan = sequence::plan(pattern, &shown, args.frames)?;
     let (frames, info) = (plan.frames, plan.info);
     // One view state for every frame: from --state, or from what the frames share (the
     // sequence's ranges), then the flags; the camera then frames the union of the frames'
@@ -104,40 +291,40 @@ pub fn run(args: &Args, path: &Path, pattern: FramePattern) -> anyhow::Result<()
             .map(|(f, p)| (format!("-o (frame {f})"), p.as_path())),
     )?;
     match &info.source {
-        RangeSource::Manifest(m) => eprintln!(
+        RangeSource::Manifest(m) => note(&format!(
             "qbricks-view: {shown}: field ranges of the whole sequence from {}",
             m.display()
-        ),
-        RangeSource::Frames(n) => eprintln!(
+        )),
+        RangeSource::Frames(n) => note(&format!(
             "qbricks-view: {shown}: no manifest ({}), field ranges are the union of the {n} \
              frame(s)' own ranges",
             pattern.manifest_path().display()
-        ),
+        )),
     }
-    eprintln!("qbricks-view: {shown}: {}", rule.describe(&state));
+    note(&format!("qbricks-view: {shown}: {}", rule.describe(&state)));
     match framed {
-        Some(Framed::Surfaces(n)) => eprintln!(
+        Some(Framed::Surfaces(n)) => note(&format!(
             "qbricks-view: {shown}: one camera for every frame, on the union of the iso \
              surfaces of {n} frame(s)"
-        ),
-        Some(Framed::Data) => eprintln!(
+        )),
+        Some(Framed::Data) => note(&format!(
             "qbricks-view: {shown}: no frame has an iso surface at its value; the camera \
              frames the union of the frames' data"
-        ),
+        )),
         None => {}
     }
     for (frame, _) in &frames {
         if let Some(o) = own.iter().find(|o| o.frame == *frame) {
-            eprintln!("qbricks-view: {o}");
+            note(&format!("qbricks-view: {o}"));
         } else if let Some(w) = info
             .frame(*frame)
             .and_then(|f| state.iso_outside_range(&f.fields))
         {
-            eprintln!("qbricks-view: warning: frame {frame}: {w}");
+            note(&format!("qbricks-view: warning: frame {frame}: {w}"));
         }
     }
     for s in &plan.skipped {
-        eprintln!("qbricks-view: warning: {s}");
+        note(&format!("qbricks-view: warning: {s}"));
     }
     if args.frames.is_none() {
         // Skipped frames were named above: not missing as well.
@@ -150,17 +337,17 @@ pub fn run(args: &Args, path: &Path, pattern: FramePattern) -> anyhow::Result<()
         let missing = gaps(&numbers);
         if !missing.is_empty() {
             let list: Vec<String> = missing.iter().take(20).map(u64::to_string).collect();
-            eprintln!(
+            note(&format!(
                 "qbricks-view: warning: {shown}: {} frame(s) missing: {}{}",
                 missing.len(),
                 list.join(", "),
                 if missing.len() > 20 { ", …" } else { "" }
-            );
+            ));
         }
     }
     check_frame_memory(state.width, state.height)?;
     for n in notes {
-        eprintln!("qbricks-view: note: {n}");
+        note(&format!("qbricks-view: note: {n}"));
     }
     let meshes = if state.meshes.is_empty() {
         Meshes::empty()
@@ -177,116 +364,12 @@ pub fn run(args: &Args, path: &Path, pattern: FramePattern) -> anyhow::Result<()
         })?;
     }
 
-    let bar = indicatif::ProgressBar::with_draw_target(
-        Some(frames.len() as u64),
-        indicatif::ProgressDrawTarget::stderr(),
-    );
-    if let Ok(style) = indicatif::ProgressStyle::with_template(
-        "{elapsed:>4} [{bar:30}] {pos}/{len} frames ({per_sec}, eta {eta}) {msg}",
-    ) {
-        bar.set_style(style.progress_chars("=> "));
-    }
-    let mut failed = Vec::new();
-    let mut stdout = QuietStdout::new();
-    for (frame, input) in &frames {
-        bar.set_message(format!("frame {frame}"));
-        let out = out_pattern.path(*frame);
-        let mine = own.iter().find(|o| o.frame == *frame);
-        let result = render_one(
-            args,
-            (*frame, input),
-            &out,
-            (&state, mine),
-            &meshes,
-            &renderer,
-        );
-        let line = FrameLine {
-            frame: *frame,
-            file: input.display().to_string(),
-            output: out.display().to_string(),
-            report: result.as_ref().ok().cloned(),
-            error: result.as_ref().err().map(|e| format!("{e:#}")),
-        };
-        if let Err(e) = &result {
-            // Errors name the file they are about (the frame, or its image).
-            let msg = format!("qbricks-view: {e:#}");
-            // A bar that does not draw (stderr not a terminal) drops its lines.
-            if bar.is_hidden() {
-                eprintln!("{msg}");
-            } else {
-                bar.println(msg);
-            }
-            failed.push(input.display().to_string());
-        }
-        if args.json {
-            writeln!(stdout, "{}", serde_json::to_string(&line)?)?;
-        }
-        bar.inc(1);
-    }
-    bar.finish_and_clear();
-    // The state only for a run that succeeded: nothing is written when a run fails.
-    if let (Some(p), true) = (&args.save_state, failed.is_empty()) {
-        state.save(p).with_context(|| "--save-state".to_string())?;
-    }
-    if !failed.is_empty() {
-        bail!(
-            "{shown}: {} of {} frames failed: {}",
-            failed.len(),
-            frames.len(),
-            failed.join(", ")
-        );
-    }
-    Ok(())
-}
-
-/// Opens, renders and writes one frame (the image atomically, as a single render does),
-/// with its own iso value when it has one.
-fn render_one(
-    args: &Args,
-    (number, input): (u64, &Path),
-    out: &Path,
-    (state, own): (&ViewState, Option<&FrameIso>),
-    meshes: &Meshes,
-    renderer: &Renderer,
-) -> anyhow::Result<FrameReport> {
-    if !input.exists() {
-        bail!("{}: no such file", input.display());
-    }
-    let options = format::OpenOptions {
-        verify_checksum: !args.no_checksum,
-    };
-    let data = Dataset::open_with(input, &options)?;
-    let vol = data.volume();
-    // `--colour-range visible` fits each frame's map to what that frame shows.
-    let mut mine;
-    let state = if args.view.wants_visible_range() || own.is_some() {
-        mine = state.clone();
-        if let Some(o) = own {
-            // A state file's band is the user's.
-            o.apply(&mut mine, args.state.is_none());
-        }
-        fit_visible(renderer, vol, &mut mine, meshes, &args.view)
-            .with_context(|| input.display().to_string())?;
-        &mine
-    } else {
-        state
-    };
-    let scene = Scene::new(vol, state, meshes).with_context(|| input.display().to_string())?;
-    let (frame, ms) = render_frame(renderer, &scene, args);
-    let title = args
-        .title
-        .clone()
-        .unwrap_or_else(|| format!("{}  frame {number}", file_title(input)));
-    let rgb8 = overlay::figure(&frame, state, vol, args.aov.is_some(), &title);
-    let png = film::encode_png_rgb8(frame.width, frame.height, rgb8)
-        .map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
-    files::output::write_atomic(out, |f| f.write_all(&png))
-        .with_context(|| out.display().to_string())?;
-    Ok(FrameReport::new(
-        &frame,
+    Ok(Prepared {
         state,
-        ms,
-        data.open_ms,
-        renderer.threads(),
-    ))
+        frames,
+        own,
+        out_pattern,
+        meshes,
+        renderer,
+    })
 }
