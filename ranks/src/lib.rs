@@ -8,6 +8,9 @@
 //! others cannot know it must not let them wait for it forever: [`Ranks::abandon`] ends the
 //! process without finalising MPI, which makes the launcher end the whole job.
 
+use serde::de::DeserializeOwned;
+use serde::Serialize;
+
 /// The ranks of a run.
 pub struct Ranks {
     rank: usize,
@@ -141,12 +144,22 @@ impl Ranks {
         }
     }
 
-    /// Every rank's `bytes` at rank 0, in rank order (`None` at the other ranks).
+    /// Every rank's `items` at rank 0, rank after rank (`None` at the other ranks).
     /// Collective: every rank must call it at the same step; the last one of a run.
-    pub fn gather(&self, bytes: &[u8]) -> Option<Vec<Vec<u8>>> {
-        let all = self.gather_bytes(bytes);
+    pub fn gather<T: Serialize + DeserializeOwned>(
+        &self,
+        items: &[T],
+    ) -> anyhow::Result<Option<Vec<T>>> {
+        let parts = self.gather_bytes(&serde_json::to_vec(items)?);
         self.collected.set(true);
-        all
+        let Some(parts) = parts else {
+            return Ok(None);
+        };
+        let mut all = Vec::new();
+        for part in parts {
+            all.extend(serde_json::from_slice::<Vec<T>>(&part)?);
+        }
+        Ok(Some(all))
     }
 
     fn gather_bytes(&self, bytes: &[u8]) -> Option<Vec<Vec<u8>>> {
@@ -278,7 +291,7 @@ mod tests {
         assert!(r.is_root() && !r.is_parallel());
         assert_eq!(r.share(&[3, 1, 2]), vec![0, 1, 2]);
         assert_eq!(r.statuses(false), vec![false]);
-        assert_eq!(r.gather(b"x"), Some(vec![b"x".to_vec()]));
+        assert_eq!(r.gather(&[1u64, 2]).ok(), Some(Some(vec![1, 2])));
         assert_eq!(r.agree(Ok::<_, anyhow::Error>(3)).ok(), Some(3));
         let e = r.agree::<()>(Err(anyhow::anyhow!("bad"))).unwrap_err();
         assert_eq!(e.to_string(), "bad");

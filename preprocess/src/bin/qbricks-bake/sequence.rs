@@ -10,7 +10,7 @@ use std::time::Instant;
 use files::output::QuietStdout;
 use indicatif::{ProgressBar, ProgressStyle};
 use qbricks_preprocess::request::BakePlan;
-use qbricks_preprocess::sequence::{FrameDone, FrameOutcome, FramePattern, SequenceBake};
+use qbricks_preprocess::sequence::{FrameDone, FramePattern, SequenceBake};
 use ranks::Ranks;
 
 use crate::bake::Args;
@@ -136,13 +136,9 @@ pub fn run(
         b.finish_and_clear();
     }
     // Every rank's outcomes at rank 0, which writes the manifest and reports.
-    let Some(parts) = ranks.gather(&serde_json::to_vec(&outcomes)?) else {
+    let Some(outcomes) = ranks.gather(&outcomes)? else {
         return Ok(());
     };
-    let mut outcomes = Vec::new();
-    for part in parts {
-        outcomes.extend(serde_json::from_slice::<Vec<FrameOutcome>>(&part)?);
-    }
     let report = run.finish(outcomes);
     let report = report?;
     let manifest = &report.manifest;

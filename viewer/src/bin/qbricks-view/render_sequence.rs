@@ -109,13 +109,9 @@ pub fn run(args: &Args, path: &Path, pattern: FramePattern, ranks: &Ranks) -> an
     }
     bar.finish_and_clear();
     // Every rank's frames at rank 0, which reports them in frame order.
-    let Some(parts) = ranks.gather(&serde_json::to_vec(&done)?) else {
+    let Some(mut done) = ranks.gather(&done)? else {
         return Ok(());
     };
-    let mut done = Vec::new();
-    for part in parts {
-        done.extend(serde_json::from_slice::<Vec<FrameDone>>(&part)?);
-    }
     done.sort_by_key(|d| d.frame);
     if args.json && ranks.is_parallel() {
         for d in &done {
