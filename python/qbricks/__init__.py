@@ -115,7 +115,7 @@ class ViewState(MutableMapping):
 
     def save(self, path: PathLike) -> None:
         """Writes the state as ``--save-state`` does (atomically: a temporary file renamed
-        over ``path``)."""
+        over ``path``); refuses (``ValueError``) to write over one of its meshes."""
         _qbricks.save_state(json.dumps(self._data), os.fspath(path))
 
     def replace(self, **changes: Any) -> "ViewState":
@@ -173,11 +173,13 @@ class Image:
     ``aov=`` was. Shows itself in Jupyter; :meth:`save` writes a PNG."""
 
     def __init__(self, array: np.ndarray, state: ViewState, depth: Optional[np.ndarray],
-                 aov: Optional[np.ndarray] = None):
+                 aov: Optional[np.ndarray] = None, inputs: Sequence[str] = ()):
         self.array = array
         self.state = state
         self.depth = depth
         self.aov = aov
+        # The files the picture was made from, which save() never overwrites.
+        self._inputs = list(inputs)
 
     @property
     def shape(self) -> Tuple[int, ...]:
@@ -195,8 +197,10 @@ class Image:
         return self.to_png()
 
     def save(self, path: PathLike) -> None:
-        """Writes the picture as a PNG file, atomically (as the CLI writes its pictures)."""
-        _qbricks.save_png(np.ascontiguousarray(self.array), os.fspath(path))
+        """Writes the picture as a PNG file, atomically (as the CLI writes its pictures);
+        refuses (``ValueError``) to write over the brick file, state file or meshes it was
+        rendered from."""
+        _qbricks.save_png(np.ascontiguousarray(self.array), os.fspath(path), self._inputs)
 
     def __repr__(self) -> str:
         h, w = self.array.shape[:2]
@@ -283,7 +287,10 @@ class Dataset:
         array, depth_array, aov_array, state_json = self._ds.render(
             _native_state(state), _flags(view), threads=threads, aov=aov, title=title, depth=depth
         )
-        return Image(array, ViewState(json.loads(state_json)), depth_array, aov_array)
+        inputs = [self.path] + [m["path"] for m in json.loads(state_json).get("meshes", [])]
+        if isinstance(state, (str, os.PathLike)):
+            inputs.append(os.fspath(state))
+        return Image(array, ViewState(json.loads(state_json)), depth_array, aov_array, inputs)
 
     def probe(self, points: Any, *, field: Optional[str] = None) -> Dict[str, np.ndarray]:
         """Every field at ``points`` ((N, 3) world coordinates) as float64 arrays of length

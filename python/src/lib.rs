@@ -752,11 +752,25 @@ fn png_bytes<'py>(
     Ok(PyBytes::new(py, &png))
 }
 
+/// Refuses to write `path` over one of `inputs` (the files a picture or state was made
+/// from), as the CLI refuses (`files::guard`).
+fn check_output(role: &str, path: &Path, inputs: &[PathBuf]) -> anyhow::Result<()> {
+    let mut guard = files::guard::Guard::new();
+    for i in inputs {
+        guard.input("an input of this picture", i);
+    }
+    guard.output(role, path).check()?;
+    Ok(())
+}
+
 /// Writes an (H, W, 3 or 4) uint8 picture as a PNG file, atomically (a temporary file
-/// renamed over `path`), as the CLI writes its pictures.
+/// renamed over `path`), as the CLI writes its pictures; never over one of `inputs` (the
+/// brick file, the state file and meshes it was rendered from).
 #[pyfunction]
-fn save_png(image: PyReadonlyArray3<'_, u8>, path: PathBuf) -> PyResult<()> {
+#[pyo3(signature = (image, path, inputs=Vec::new()))]
+fn save_png(image: PyReadonlyArray3<'_, u8>, path: PathBuf, inputs: Vec<PathBuf>) -> PyResult<()> {
     guarded(|| {
+        check_output("save", &path, &inputs)?;
         let png = png_of(&image)?;
         files::output::write_atomic(&path, |f| std::io::Write::write_all(f, &png))
             .with_context(|| path.display().to_string())?;
@@ -770,10 +784,18 @@ fn load_state(path: PathBuf) -> PyResult<String> {
     guarded(|| Ok(ViewState::load(&path)?.to_json()))
 }
 
-/// Writes view-state JSON text to `path` as `--save-state` does (validated, atomically).
+/// Writes view-state JSON text to `path` as `--save-state` does (validated, atomically),
+/// never over one of its meshes or `inputs`.
 #[pyfunction]
-fn save_state(text: &str, path: PathBuf) -> PyResult<()> {
-    guarded(|| Ok(ViewState::from_json(Path::new("state"), text)?.save(&path)?))
+#[pyo3(signature = (text, path, inputs=Vec::new()))]
+fn save_state(text: &str, path: PathBuf, inputs: Vec<PathBuf>) -> PyResult<()> {
+    guarded(|| {
+        let state = ViewState::from_json(Path::new("state"), text)?;
+        let mut inputs = inputs;
+        inputs.extend(state.meshes.iter().map(|m| m.path.clone()));
+        check_output("save", &path, &inputs)?;
+        Ok(state.save(&path)?)
+    })
 }
 
 /// A view state given as JSON text, read and validated as a state file is, written back

@@ -341,3 +341,44 @@ def test_ctrl_c_interrupts_bake(tmp_path):
     for p in done:
         qbricks.open(p)
     assert qbricks.bake(SAMPLE_VDB, tmp_path / "after.qbk")["bricks"] > 0
+
+
+def test_saves_never_overwrite_inputs(tmp_path):
+    """Image.save and ViewState.save refuse the files a picture was made from (as the CLI's
+    outputs do) and write atomically through symlinks and into FIFOs."""
+    import os
+    path = tmp_path / "copy.qbk"
+    shutil.copy(SAMPLE, path)
+    ds = qbricks.open(path)
+    state_file = tmp_path / "view.json"
+    ds.state(width=32, height=24).save(state_file)
+    img = ds.render(state_file)
+    before = path.read_bytes()
+    with pytest.raises(ValueError, match="copy.qbk"):
+        img.save(path)
+    link = tmp_path / "link.png"
+    link.symlink_to(path)
+    with pytest.raises(ValueError):
+        img.save(link)
+    with pytest.raises(ValueError, match="view.json"):
+        img.save(state_file)
+    assert path.read_bytes() == before
+    mesh = tmp_path / "m.obj"
+    shutil.copy(SAMPLE.parent / "sphere.obj", mesh)
+    vs = ds.state(width=32, height=24, meshes=[f"{mesh}@0,0,0,0.5"])
+    with pytest.raises(ValueError, match="m.obj"):
+        vs.save(mesh)
+    # A symlink to a new file is written through; a FIFO is written into.
+    target = tmp_path / "real.png"
+    out_link = tmp_path / "out.png"
+    out_link.symlink_to(target)
+    img.save(out_link)
+    assert out_link.is_symlink() and read_png(target).shape == (24, 32, 3)
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    got = []
+    reader = threading.Thread(target=lambda: got.append(open(fifo, "rb").read()))
+    reader.start()
+    img.save(fifo)
+    reader.join(10)
+    assert got and got[0].startswith(b"\x89PNG")
