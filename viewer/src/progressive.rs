@@ -210,7 +210,8 @@ impl Progressive {
         options: ProgressiveOptions,
         notify: Box<dyn Fn() + Send + Sync>,
     ) -> Result<Progressive, StartError> {
-        let renderer = Renderer::new(options.threads)?;
+        // The window's frames come first: its renders run below its priority.
+        let renderer = Renderer::background(options.threads)?;
         let threads = renderer.threads();
         let scale = options.min_scale.max(1);
         let shared = Arc::new(Shared {

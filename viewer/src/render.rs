@@ -250,6 +250,32 @@ fn render_under(scene: &Scene, cancel: &CancelToken) -> (Frame, bool) {
     (frame, done)
 }
 
+/// Niceness of [`Renderer::background`]'s workers: each step of niceness weighs a thread
+/// about 1.25 times less for Linux's scheduler, so at 5 a busy UI thread gets about three
+/// times a worker's share of a core, while the workers still have the rest of it.
+pub const BACKGROUND_NICENESS: i8 = 5;
+
+/// Lowers the calling thread's priority to [`BACKGROUND_NICENESS`] (Linux), or leaves it.
+fn lower_priority() {
+    #[cfg(target_os = "linux")]
+    {
+        use thread_priority::unix::{
+            set_thread_priority_and_policy, thread_native_id, NormalThreadSchedulePolicy,
+            ThreadSchedulePolicy,
+        };
+        use thread_priority::{ThreadPriority, ThreadPriorityValue};
+        // The crate maps its 0..=99 scale onto niceness 19..=-20 as
+        // `(39 · (1 − p/99)) as i8 − 20`: 35 is niceness 5 (the test below reads it back).
+        if let Ok(p) = ThreadPriorityValue::try_from(35u8) {
+            let _ = set_thread_priority_and_policy(
+                thread_native_id(),
+                ThreadPriority::Crossplatform(p),
+                ThreadSchedulePolicy::Normal(NormalThreadSchedulePolicy::Other),
+            );
+        }
+    }
+}
+
 /// A persistent pool of render threads (building a pool costs more than a small frame).
 pub struct Renderer {
     pool: rayon::ThreadPool,
@@ -261,6 +287,19 @@ impl Renderer {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads.unwrap_or(0))
             .thread_name(|i| format!("qbricks-render-{i}"))
+            .build()?;
+        Ok(Renderer { pool })
+    }
+
+    /// A pool of `threads` workers that yield to the process's other threads: each runs
+    /// below normal priority (niceness [`BACKGROUND_NICENESS`] on Linux), so that a window
+    /// drawing its frames on a machine the renderer keeps busy is served first. Where the
+    /// priority cannot be lowered the workers run at normal priority.
+    pub fn background(threads: Option<usize>) -> Result<Renderer, rayon::ThreadPoolBuildError> {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads.unwrap_or(0))
+            .thread_name(|i| format!("qbricks-render-{i}"))
+            .start_handler(|_| lower_priority())
             .build()?;
         Ok(Renderer { pool })
     }
@@ -644,6 +683,36 @@ pub fn render_with_threads(
 mod tests {
     use super::*;
     use crate::camera::{Camera, Projection};
+
+    /// The niceness of the calling thread, from `/proc/thread-self/stat` (field 19).
+    #[cfg(target_os = "linux")]
+    fn own_niceness() -> i64 {
+        let stat = std::fs::read_to_string("/proc/thread-self/stat").expect("stat");
+        // The command name (field 2) is in parentheses and may hold spaces.
+        let after = &stat[stat.rfind(')').expect("comm") + 2..];
+        after
+            .split(' ')
+            .nth(16)
+            .expect("field 19")
+            .parse()
+            .expect("nice")
+    }
+
+    /// The window's render workers run below the priority of the thread that made them
+    /// (the UI); the CLI's run at it.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn background_workers_run_below_normal_priority() {
+        let own = own_niceness();
+        let bg = Renderer::background(Some(2)).expect("pool");
+        let nices: Vec<i64> = bg.install(|| rayon::broadcast(|_| own_niceness()));
+        assert_eq!(nices, vec![own.max(i64::from(BACKGROUND_NICENESS)); 2]);
+        let normal = Renderer::new(Some(2)).expect("pool");
+        assert_eq!(
+            normal.install(|| rayon::broadcast(|_| own_niceness())),
+            vec![own; 2]
+        );
+    }
     use crate::mesh::Meshes;
     use crate::testvol;
     use crate::volume::Volume;
