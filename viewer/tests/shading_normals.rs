@@ -213,6 +213,19 @@ fn the_flat_band_barely_tilts_an_oblique_shading_normal() {
     );
 }
 
+/// The debug buffers' view: the sphere f = 11, well outside the fine box [8, 24]³ along
+/// the axes, seen from a corner at `width`×`height`.
+fn aov_view(vol: &Volume, width: u32, height: u32) -> ViewState {
+    let mut st = ViewState::default_for_volume(vol);
+    st.iso_field = "f".into();
+    st.iso = 11.0;
+    st.width = width;
+    st.height = height;
+    st.camera.look_at = C;
+    st.camera.eye = [36.0, -10.0, 30.0];
+    st
+}
+
 #[test]
 fn aov_buffers_show_normals_and_levels() {
     use qbricks_viewer::render::{render_aov, Aov};
@@ -220,13 +233,7 @@ fn aov_buffers_show_normals_and_levels() {
     let view = testvol::open(&file).expect("open");
     let vol = Volume::new(&view).expect("volume");
     let meshes = Meshes::empty();
-    let mut st = ViewState::default_for_volume(&vol);
-    st.iso_field = "f".into();
-    st.iso = 11.0; // well outside the fine box [8, 24]³ along the axes
-    st.width = 64;
-    st.height = 64;
-    st.camera.look_at = C;
-    st.camera.eye = [36.0, -10.0, 30.0];
+    let st = aov_view(&vol, 64, 64);
     let scene = Scene::new(&vol, &st, &meshes).expect("scene");
     let normal = render_aov(&scene, Aov::Normal);
     assert!(normal.hits > 1000);
@@ -258,14 +265,8 @@ fn aov_values_are_the_pictures_numbers() {
     let view = testvol::open(&file).expect("open");
     let vol = Volume::new(&view).expect("volume");
     let meshes = Meshes::empty();
-    let mut st = ViewState::default_for_volume(&vol);
-    st.iso_field = "f".into();
-    st.iso = 11.0;
+    let mut st = aov_view(&vol, 48, 40);
     st.colormap.field = "f".into();
-    st.width = 48;
-    st.height = 40;
-    st.camera.look_at = C;
-    st.camera.eye = [36.0, -10.0, 30.0];
     let scene = Scene::new(&vol, &st, &meshes).expect("scene");
     let trace = AovTrace::new(&scene);
     let n_px = 48 * 40;
