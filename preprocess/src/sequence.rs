@@ -259,12 +259,13 @@ impl SequenceBake {
                 Err(f) => failed.push(f),
             }
         }
+        let known: std::collections::HashSet<u64> = baked
+            .iter()
+            .map(|f| f.frame)
+            .chain(failed.iter().map(|f| f.frame))
+            .collect();
         for (frame, path) in &self.frames {
-            let known = |n: u64| {
-                baked.iter().any(|f: &ManifestFrame| f.frame == n)
-                    || failed.iter().any(|f: &ManifestFailure| f.frame == n)
-            };
-            if !known(*frame) {
+            if !known.contains(frame) {
                 failed.push(ManifestFailure {
                     frame: *frame,
                     input: path.display().to_string(),
