@@ -107,6 +107,33 @@ pub fn default_output(input: &Path) -> PathBuf {
     input.with_extension("qbk")
 }
 
+/// Bakes `input` to `output` (`None`: [`default_output`]) after checking that the output
+/// is not the input (`files::guard`; `flag` is how the user named the output, `-o` or
+/// `out`); returns where it wrote and the summary. The one-file bake of the CLI and of
+/// the Python module.
+pub fn bake_one(
+    input: &Path,
+    output: Option<&Path>,
+    flag: &str,
+    plan: &BakePlan,
+    stage: &(dyn Fn(&str) + Sync),
+    cancel: &AtomicBool,
+) -> anyhow::Result<(PathBuf, BakeSummary)> {
+    let (role, output) = match output {
+        Some(o) => (flag, o.to_path_buf()),
+        None => (
+            "the default output (the input with .qbk)",
+            default_output(input),
+        ),
+    };
+    files::guard::Guard::new()
+        .input("input file", input)
+        .output(role, &output)
+        .check()?;
+    let summary = bake_file(input, &output, plan, stage, cancel)?;
+    Ok((output, summary))
+}
+
 /// A bake stopped by its caller (Ctrl-C in Python) before it wrote anything.
 #[derive(Debug, thiserror::Error)]
 #[error("cancelled")]

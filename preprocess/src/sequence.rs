@@ -184,15 +184,6 @@ impl SequenceBake {
         })
     }
 
-    /// The size of each frame's input file (0 when unreadable): what a frame-parallel run
-    /// balances its ranks by.
-    pub fn input_sizes(&self) -> Vec<u64> {
-        self.frames
-            .iter()
-            .map(|(_, p)| std::fs::metadata(p).map_or(0, |m| m.len()))
-            .collect()
-    }
-
     /// Bakes the frames `which` (indices into [`SequenceBake::frames`]), `jobs` at once; a
     /// frame that fails is an outcome like the others and the run goes on. `cancel` stops
     /// the run before the next frame ([`Cancelled`]; frames written stay, whole).

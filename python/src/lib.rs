@@ -23,7 +23,7 @@ use pyo3::types::{PyBytes, PyDict, PyTuple};
 
 use preprocess::derive::Stencil;
 use preprocess::inputs::Layout;
-use preprocess::request::{bake_file, default_output, summary_json, BakeRequest};
+use preprocess::request::{bake_one, summary_json, BakeRequest};
 use preprocess::sequence::{self, FrameDone};
 use viewer::dataset::Dataset as Opened;
 use viewer::mesh::Meshes;
@@ -692,24 +692,12 @@ fn bake(
                 }
                 return Ok(report.summary(seconds()).to_string());
             }
-            let output = out.clone().unwrap_or_else(|| default_output(&src));
-            files::guard::Guard::new()
-                .input("input file", &src)
-                .output(
-                    if out.is_some() {
-                        "out"
-                    } else {
-                        "the default output (the input with .qbk)"
-                    },
-                    &output,
-                )
-                .check()?;
             let stage = |name: &str| {
                 if progress {
                     eprintln!("qbricks-bake: {:7.2} s  {name}", seconds());
                 }
             };
-            let summary = bake_file(&src, &output, &plan, &stage, &cancel)?;
+            let (output, summary) = bake_one(&src, out.as_deref(), "out", &plan, &stage, &cancel)?;
             for w in &summary.warnings {
                 eprintln!("qbricks-bake: warning: {}: {w}", src.display());
             }

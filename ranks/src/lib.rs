@@ -8,6 +8,8 @@
 //! others cannot know it must not let them wait for it forever: [`Ranks::abandon`] ends the
 //! process without finalising MPI, which makes the launcher end the whole job.
 
+use std::path::Path;
+
 use serde::de::DeserializeOwned;
 use serde::Serialize;
 
@@ -101,6 +103,16 @@ impl Ranks {
     /// The items (by index into `weights`, ascending) this rank takes: see [`share_of`].
     pub fn share(&self, weights: &[u64]) -> Vec<usize> {
         share_of(weights, self.rank, self.size)
+    }
+
+    /// The files (indices, ascending) this rank takes, weighed by their size (0 when it
+    /// cannot be read): how the frames of a sequence are shared out.
+    pub fn share_files<'a>(&self, files: impl IntoIterator<Item = &'a Path>) -> Vec<usize> {
+        let sizes: Vec<u64> = files
+            .into_iter()
+            .map(|p| std::fs::metadata(p).map_or(0, |m| m.len()))
+            .collect();
+        self.share(&sizes)
     }
 
     /// Each rank's `ok`, at every rank, in rank order. Collective: every rank must call it

@@ -12,7 +12,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use qbricks_preprocess::bake::DEFAULT_MAX_BRICK;
 use qbricks_preprocess::derive::Stencil;
 use qbricks_preprocess::inputs::Layout;
-use qbricks_preprocess::request::{bake_file, default_output, summary_json, BakePlan, BakeRequest};
+use qbricks_preprocess::request::{bake_one, summary_json, BakePlan, BakeRequest};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -63,11 +63,10 @@ pub struct Args {
     pub progress: bool,
 }
 
-/// What the arguments ask for, checked once: the read and bake options and the output, for
-/// one file or for every frame of a sequence.
+/// What the arguments ask for, checked once: the read and bake options, for one file or for
+/// every frame of a sequence.
 pub struct Plan {
     pub start: Instant,
-    pub output: PathBuf,
     pub bake: BakePlan,
 }
 
@@ -85,32 +84,14 @@ pub fn plan(args: &Args) -> anyhow::Result<Plan> {
     };
     Ok(Plan {
         start: Instant::now(),
-        output: args
-            .output
-            .clone()
-            .unwrap_or_else(|| default_output(&args.input)),
         bake: request.plan()?,
     })
 }
 
 /// Bakes one file.
 pub fn run(args: Args, plan: Plan) -> anyhow::Result<()> {
-    let Plan {
-        start,
-        output,
-        bake,
-    } = plan;
+    let Plan { start, bake } = plan;
     let input_name = args.input.display().to_string();
-    let mut guard = files::guard::Guard::new();
-    guard.input("input file", &args.input).output(
-        if args.output.is_some() {
-            "-o"
-        } else {
-            "the default output (the input with .qbk)"
-        },
-        &output,
-    );
-    guard.check()?;
 
     // Progress: on a terminal a spinner naming the stage, shown once the bake has taken a
     // second (short bakes stay silent); with --progress elsewhere, plain stage lines.
@@ -141,7 +122,14 @@ pub fn run(args: Args, plan: Plan) -> anyhow::Result<()> {
         b.set_message(name.to_string());
     };
 
-    let summary = bake_file(&args.input, &output, &bake, &stage, &AtomicBool::new(false))?;
+    let (output, summary) = bake_one(
+        &args.input,
+        args.output.as_deref(),
+        "-o",
+        &bake,
+        &stage,
+        &AtomicBool::new(false),
+    )?;
     if let Some(b) = bar.get() {
         b.finish_and_clear();
     }

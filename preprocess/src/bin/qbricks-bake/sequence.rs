@@ -29,7 +29,7 @@ pub fn run(
         args.output.as_deref(),
         args.jobs,
     ))?;
-    let mine = ranks.share(&run.input_sizes());
+    let mine = ranks.share_files(run.frames.iter().map(|(_, p)| p.as_path()));
     // In a parallel run each rank tells of its own frames in lines, not in a bar.
     let terminal = std::io::stderr().is_terminal() && !ranks.is_parallel();
     let show = !args.quiet && (args.progress || terminal);

@@ -47,11 +47,7 @@ pub fn run(args: &Args, path: &Path, pattern: FramePattern, ranks: &Ranks) -> an
     } = ranks.agree(prepare(args, path, &pattern, ranks.is_root()))?;
     let shown = path.display().to_string();
     // This rank's frames, balanced by file size (all of them without MPI).
-    let sizes: Vec<u64> = frames
-        .iter()
-        .map(|(_, p)| std::fs::metadata(p).map_or(0, |m| m.len()))
-        .collect();
-    let mine = ranks.share(&sizes);
+    let mine = ranks.share_files(frames.iter().map(|(_, p)| p.as_path()));
     // In a parallel run the ranks' bars would tear each other: lines only.
     let target = match ranks.is_parallel() {
         false => indicatif::ProgressDrawTarget::stderr(),
