@@ -174,7 +174,10 @@ impl Ranks {
         Ok(Some(all))
     }
 
-    fn gather_bytes(&self, bytes: &[u8]) -> Option<Vec<Vec<u8>>> {
+    /// Every rank's `bytes` at rank 0, in rank order (`None` at the other ranks): one step
+    /// of a computation the ranks share (one frame over ranks), which may take many.
+    /// Collective.
+    pub fn gather_bytes(&self, bytes: &[u8]) -> Option<Vec<Vec<u8>>> {
         #[cfg(feature = "mpi")]
         if let Some(w) = &self.world {
             use mpi::point_to_point::{Destination, Source};
@@ -192,6 +195,26 @@ impl Ranks {
             return Some(all);
         }
         Some(vec![bytes.to_vec()])
+    }
+
+    /// Rank 0's `bytes` at every rank (what the others pass is ignored). Collective.
+    pub fn broadcast_bytes(&self, bytes: Vec<u8>) -> Vec<u8> {
+        #[cfg(feature = "mpi")]
+        if let Some(w) = &self.world {
+            use mpi::traits::{Communicator, Root};
+            let root = w.comm.process_at_rank(0);
+            let mut len = bytes.len() as u64;
+            root.broadcast_into(&mut len);
+            let mut buf = if self.rank == 0 {
+                bytes
+            } else {
+                // The length comes from rank 0 of the same run, not from a file.
+                vec![0u8; usize::try_from(len).unwrap_or(0)]
+            };
+            root.broadcast_into(&mut buf[..]);
+            return buf;
+        }
+        bytes
     }
 
     /// How a command's error `err` ends this rank (of `program`): said on stderr (by the

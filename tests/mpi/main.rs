@@ -277,26 +277,105 @@ fn a_broken_frame_is_named_and_fails_the_run() {
     assert_eq!(pngs, ["f_0001.png", "f_0003.png"]);
 }
 
+/// One frame over 2 and 3 ranks (each rank searching its share of the file's KD-tree,
+/// rank 0 compositing) gives the PNG one process gives, byte for byte, with and without the
+/// sphere and its shadows; each rank reads fewer than 75 % of the bricks.
 #[test]
-fn one_file_commands_are_refused_over_ranks_and_run_alone() {
+fn one_frame_over_ranks_equals_one_process_byte_for_byte() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let sample = root().join("data/wake_small.qbk").display().to_string();
+    let sphere = root().join("data/sphere.obj").display().to_string();
+    let view = exe("qbricks-view");
+    let size = ["--width", "160", "--height", "120"];
+    for (case, extra) in [
+        ("plain", vec![]),
+        ("sphere and shadows", vec!["--mesh", &sphere, "--shadows"]),
+    ] {
+        let mut one: Vec<&str> = vec![&view, "render", &sample, "-o", "one.png"];
+        one.extend(size);
+        one.extend(extra.iter().copied());
+        let o = run(d, 0, &one);
+        assert!(o.status.success(), "{case}: {}", text(&o.stderr));
+        let want = std::fs::read(d.join("one.png")).unwrap();
+        for n in [2, 3] {
+            let out = format!("np{n}.png");
+            let mut args: Vec<&str> = vec![&view, "render", &sample, "-o", &out, "--json"];
+            args.extend(size);
+            args.extend(extra.iter().copied());
+            let o = run(d, n, &args);
+            assert!(o.status.success(), "{case}, {n} ranks: {}", text(&o.stderr));
+            assert!(
+                std::fs::read(d.join(&out)).unwrap() == want,
+                "{case}: the PNG of {n} ranks differs from one process's"
+            );
+            let report: serde_json::Value = serde_json::from_slice(&o.stdout)
+                .unwrap_or_else(|e| panic!("{case}: one JSON report ({e}): {}", text(&o.stdout)));
+            let bricks = report["bricks"].as_u64().unwrap();
+            let ranks = report["ranks"].as_array().unwrap();
+            assert_eq!(ranks.len(), n, "{report}");
+            for (i, r) in ranks.iter().enumerate() {
+                assert_eq!(r["rank"].as_u64(), Some(i as u64));
+                let touched = r["bricks_touched"].as_u64().unwrap();
+                assert!(r["ms"].as_f64().unwrap() > 0.0 && r["composite_ms"].as_f64().is_some());
+                if n == 2 {
+                    assert!(
+                        (touched as f64) < 0.75 * bricks as f64,
+                        "{case}: rank {i} read {touched} of {bricks} bricks"
+                    );
+                }
+            }
+            // Both ranks search: the cut balances what the view's surface costs.
+            assert!(
+                ranks
+                    .iter()
+                    .all(|r| r["stats"]["samples"].as_u64().unwrap() > 0),
+                "{case}: {report}"
+            );
+        }
+    }
+}
+
+/// What one frame over ranks cannot render alike is refused by rank 0 with the reason,
+/// and nothing is written; without mpirun the same binary renders it.
+#[test]
+fn views_one_frame_over_ranks_cannot_render_are_refused_and_run_alone() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let sample = root().join("data/wake_small.qbk").display().to_string();
     let view = exe("qbricks-view");
-    let o = run(d, 2, &[&view, "render", &sample, "-o", "one.png"]);
-    let err = text(&o.stderr);
+    for (flags, says) in [
+        (vec!["--mode", "dvr"], "dvr mode"),
+        (
+            vec!["--pixel", "3,3"],
+            "--pixel (one ray, explained) runs in one process",
+        ),
+    ] {
+        let mut args: Vec<&str> = vec![&view, "render", &sample, "-o", "one.png"];
+        args.extend(flags.iter().copied());
+        let o = run(d, 2, &args);
+        let err = text(&o.stderr);
+        assert!(!o.status.success(), "{flags:?}");
+        assert!(err.contains(says), "{flags:?}: {err}");
+        // Said once, by rank 0.
+        assert_eq!(err.matches(says).count(), 1, "{err}");
+        assert!(!d.join("one.png").exists());
+    }
+    // A file that is not there: every rank stops, the run fails, nothing hangs.
+    let o = run(d, 2, &[&view, "render", "missing.qbk", "-o", "one.png"]);
     assert!(!o.status.success());
     assert!(
-        err.contains("a render of one file runs in one process"),
-        "{err}"
+        text(&o.stderr).contains("missing.qbk"),
+        "{}",
+        text(&o.stderr)
     );
-    assert!(!d.join("one.png").exists());
-    // Without mpirun the same binary renders as always.
+    // Without mpirun the same binary renders dvr as always.
     let o = run(
         d,
         0,
         &[
-            &view, "render", &sample, "-o", "one.png", "--width", "32", "--height", "24",
+            &view, "render", &sample, "-o", "one.png", "--width", "32", "--height", "24", "--mode",
+            "dvr",
         ],
     );
     assert!(o.status.success(), "{}", text(&o.stderr));

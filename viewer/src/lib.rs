@@ -24,6 +24,7 @@ pub mod mesh;
 pub mod overlay;
 mod packed;
 pub mod palette;
+pub mod parts;
 pub mod planes;
 pub mod probe;
 pub mod progressive;

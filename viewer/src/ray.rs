@@ -88,6 +88,15 @@ pub(crate) struct FirstSurface {
     pub value: f32,
 }
 
+/// The part of a camera ray the volume is searched on ([`RayCaster::bounds`]).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct RayBounds {
+    pub t_lo: f64,
+    /// The first mesh's distance, or the end of what the clip planes keep.
+    pub t_max: f64,
+    pub mesh: Option<MeshHit>,
+}
+
 impl FirstSurface {
     pub(crate) const NONE: FirstSurface = FirstSurface {
         t: f32::INFINITY,
@@ -157,33 +166,17 @@ impl<'s> RayCaster<'s> {
     pub(crate) fn trace(&mut self, ray: &Ray, jit: f64) -> [f64; 3] {
         let scene = self.scene;
         let st = scene.state;
-        let vol = scene.vol;
         self.rays += 1;
         self.first = FirstSurface::NONE;
-        let o = vol.to_local(ray.origin.to_array());
-        let d = ray.dir.to_array();
         let bg = st.background.map(f64::from);
-        // The clip planes cut the ray's interval before anything is walked, so what lies
-        // behind a plane is seen and empty-space skipping works as without planes.
-        let (t_lo, t_hi) = if scene.cuts.clips.is_empty() {
-            (0.0, f64::INFINITY)
-        } else {
-            let kept = scene.cuts.interval(&o, &d, 0.0, f64::INFINITY);
-            self.main.record(Event::Clip {
-                t0: kept.map_or(f64::INFINITY, |k| k.0),
-                t1: kept.map_or(f64::INFINITY, |k| k.1),
-            });
-            match kept {
-                Some(k) => k,
-                None => return bg,
-            }
+        let Some(RayBounds {
+            t_lo,
+            t_max,
+            mesh: mesh_hit,
+        }) = self.bounds(ray)
+        else {
+            return bg;
         };
-        let mesh_hit = if scene.meshes.is_empty() {
-            None
-        } else {
-            scene.meshes.intersect(ray, t_lo, t_hi)
-        };
-        let t_max = mesh_hit.map_or(t_hi, |h| h.t);
         // Where no surface is met, the depth is the mesh's, or infinite (not the end of
         // the clipped interval: nothing is there).
         self.first.t = mesh_hit.map_or(f32::INFINITY, |h| h.t as f32);
@@ -220,6 +213,69 @@ impl<'s> RayCaster<'s> {
         }
     }
 
+    /// The part of `ray` the volume is searched on: what the clip planes keep of it, up to
+    /// the first mesh it meets (`None`: the planes keep nothing).
+    pub(crate) fn bounds(&mut self, ray: &Ray) -> Option<RayBounds> {
+        let scene = self.scene;
+        // The clip planes cut the ray's interval before anything is walked, so what lies
+        // behind a plane is seen and empty-space skipping works as without planes.
+        let (t_lo, t_hi) = if scene.cuts.clips.is_empty() {
+            (0.0, f64::INFINITY)
+        } else {
+            let o = scene.vol.to_local(ray.origin.to_array());
+            let kept = scene
+                .cuts
+                .interval(&o, &ray.dir.to_array(), 0.0, f64::INFINITY);
+            self.main.record(Event::Clip {
+                t0: kept.map_or(f64::INFINITY, |k| k.0),
+                t1: kept.map_or(f64::INFINITY, |k| k.1),
+            });
+            kept?
+        };
+        let mesh = if scene.meshes.is_empty() {
+            None
+        } else {
+            scene.meshes.intersect(ray, t_lo, t_hi)
+        };
+        Some(RayBounds {
+            t_lo,
+            t_max: mesh.map_or(t_hi, |h| h.t),
+            mesh,
+        })
+    }
+
+    /// Searches only the regions `owned` marks, for camera and shadow rays: one rank's
+    /// share of a frame over ranks (`crate::parts`).
+    pub(crate) fn restrict(&mut self, owned: &'s [bool]) {
+        self.main.restrict(owned);
+        self.shadow.restrict(owned);
+    }
+
+    /// The regions whose values this caster's rays read since it was restricted.
+    pub(crate) fn touched(&self) -> impl Iterator<Item = u32> + '_ {
+        self.main
+            .touched
+            .iter()
+            .chain(&self.shadow.touched)
+            .copied()
+    }
+
+    /// The first crossing of the view's first iso-surface along `ray` within `bounds`,
+    /// with its shading normal (in the regions the caster is restricted to).
+    pub(crate) fn first_crossing(
+        &mut self,
+        ray: &Ray,
+        bounds: &RayBounds,
+        jit: f64,
+    ) -> Option<SurfacePoint> {
+        self.surface_of(0, ray, bounds.t_lo, bounds.t_max, jit)
+    }
+
+    /// Whether the view's first iso-surface lies on the volume part of a shadow ray.
+    pub(crate) fn shadow_occluded(&mut self, q: &VolumeShadow) -> bool {
+        self.shadow.iso_occluded(q.o, q.d, q.t0, q.t1)
+    }
+
     /// Logs (`--pixel`) that surface `i` is drawn at `s`; the surface is named when the
     /// view has several.
     fn log_hit(&mut self, s: &SurfacePoint, i: usize) {
@@ -233,7 +289,7 @@ impl<'s> RayCaster<'s> {
     }
 
     /// What [`FirstSurface`] records of an iso-surface point.
-    fn first_at(&self, ray: &Ray, s: &SurfacePoint) -> FirstSurface {
+    pub(crate) fn first_at(&self, ray: &Ray, s: &SurfacePoint) -> FirstSurface {
         FirstSurface {
             t: (s.world - ray.origin).dot(ray.dir) as f32,
             value: match (self.scene.params.colour_field, s.eval) {
@@ -553,33 +609,16 @@ impl<'s> RayCaster<'s> {
     }
 
     fn shade_mesh(&mut self, ray: &Ray, h: &MeshHit) -> [f64; 3] {
-        let st = self.scene.state;
-        let p = ray.at(h.t);
-        let n = if h.normal.dot(ray.dir) > 0.0 {
-            -h.normal
-        } else {
-            h.normal
-        };
+        let (p, n) = mesh_point(ray, h);
         let vis = self.visibility(p, n);
-        phong(h.colour, n, -ray.dir, p, &st.lights, &vis, &st.material)
-            .to_array()
-            .map(f64::from)
+        lit(self.scene, h.colour, n, ray, p, &vis)
     }
 
     /// Phong-shaded iso-surface point, in `colour` or the colour map's.
     fn shade_surface(&mut self, ray: &Ray, s: &SurfacePoint, colour: Option<[f32; 3]>) -> [f64; 3] {
-        let scene = self.scene;
-        let st = scene.state;
-        let base = match colour {
-            Some(c) => Vec3::from_array(c),
-            None => base_colour(scene, &s.eval.unwrap_or_default(), s.eval.is_some()),
-        };
-        let n = s.normal;
-        let pw = s.world;
-        let vis = self.visibility(pw, n);
-        phong(base, n, -ray.dir, pw, &st.lights, &vis, &st.material)
-            .to_array()
-            .map(f64::from)
+        let base = surface_base(self.scene, s, colour);
+        let vis = self.visibility(s.world, s.normal);
+        lit(self.scene, base, s.normal, ray, s.world, &vis)
     }
 
     /// Shadow transmittance towards every light from world point `p` with normal `n`.
@@ -608,9 +647,54 @@ fn light_visibility(
     n: DVec3,
     light: &Light,
 ) -> f32 {
+    let q = match shadow_ray(scene, p, n, light) {
+        ShadowRay::Settled(v) => return v,
+        ShadowRay::Volume(q) => q,
+    };
+    let (o, d, t0, t1) = (q.o, q.d, q.t0, q.t1);
+    match scene.params.tf.mode {
+        Mode::Iso => {
+            let mut through = first_surface_through(scene, shadow.iso_occluded(o, d, t0, t1));
+            for ((_, sh), s) in more.iter_mut().zip(&scene.more_surfaces) {
+                if through <= 0.0 {
+                    break;
+                }
+                if sh.iso_occluded(o, d, t0, t1) {
+                    through *= 1.0 - s.style.opacity;
+                }
+            }
+            through as f32
+        }
+        Mode::Dvr => shadow.transmittance(o, d, t0, t1) as f32,
+    }
+}
+
+/// A shadow ray, as far as it is known without the volume.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum ShadowRay {
+    /// The light's visibility: the light is behind the surface, the clip planes remove the
+    /// whole ray, or a mesh blocks it.
+    Settled(f32),
+    /// It depends on what the volume holds along this stretch.
+    Volume(VolumeShadow),
+}
+
+/// The stretch `o + t d`, `t ∈ (t0, t1)` (local frame) of a shadow ray inside the clip
+/// planes and before the light.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct VolumeShadow {
+    pub o: [f64; 3],
+    pub d: [f64; 3],
+    pub t0: f64,
+    pub t1: f64,
+}
+
+/// The shadow ray from world point `p` (normal `n`) towards `light`: what meshes, clip
+/// planes and the light's side settle, else the stretch the volume decides.
+pub(crate) fn shadow_ray(scene: &Scene, p: DVec3, n: DVec3, light: &Light) -> ShadowRay {
     let (l, dist) = light.towards(p);
     if n.dot(l) <= 0.0 {
-        return 1.0; // phong ignores lights behind the surface anyway
+        return ShadowRay::Settled(1.0); // phong ignores lights behind the surface anyway
     }
     let eps = 1e-3 * scene.vol.finest_w;
     let origin = p + eps * n;
@@ -623,28 +707,56 @@ fn light_visibility(
         f64::INFINITY
     };
     let Some((t0, t1)) = scene.cuts.interval(&o, &d, 0.0, t_max) else {
-        return 1.0;
+        return ShadowRay::Settled(1.0);
     };
     if !scene.meshes.is_empty() && scene.meshes.occluded(&ray, t0, t1) {
-        return 0.0;
+        return ShadowRay::Settled(0.0);
     }
-    match scene.params.tf.mode {
-        Mode::Iso => {
-            let mut through = 1.0f64;
-            if shadow.iso_occluded(o, d, t0, t1) {
-                through *= 1.0 - scene.first_style.opacity;
-            }
-            for ((_, sh), s) in more.iter_mut().zip(&scene.more_surfaces) {
-                if through <= 0.0 {
-                    break;
-                }
-                if sh.iso_occluded(o, d, t0, t1) {
-                    through *= 1.0 - s.style.opacity;
-                }
-            }
-            through as f32
-        }
-        Mode::Dvr => shadow.transmittance(o, d, t0, t1) as f32,
+    ShadowRay::Volume(VolumeShadow { o, d, t0, t1 })
+}
+
+/// What the view's first iso-surface lets through to a shadow ray that crosses it
+/// (`occluded`) or not.
+pub(crate) fn first_surface_through(scene: &Scene, occluded: bool) -> f64 {
+    if occluded {
+        1.0 - scene.first_style.opacity
+    } else {
+        1.0
+    }
+}
+
+/// Where a camera ray meets a mesh, and the mesh's normal there facing the ray.
+pub(crate) fn mesh_point(ray: &Ray, h: &MeshHit) -> (DVec3, DVec3) {
+    let p = ray.at(h.t);
+    let n = if h.normal.dot(ray.dir) > 0.0 {
+        -h.normal
+    } else {
+        h.normal
+    };
+    (p, n)
+}
+
+/// The colour of a surface of colour `base` at world point `p` (unit normal `n`) seen along
+/// `ray`, lit by the view's lights with shadow transmittances `vis`.
+pub(crate) fn lit(
+    scene: &Scene,
+    base: Vec3,
+    n: DVec3,
+    ray: &Ray,
+    p: DVec3,
+    vis: &[f32],
+) -> [f64; 3] {
+    let st = scene.state;
+    phong(base, n, -ray.dir, p, &st.lights, vis, &st.material)
+        .to_array()
+        .map(f64::from)
+}
+
+/// The unlit colour of iso-surface point `s`: `colour`, or the colour map's.
+fn surface_base(scene: &Scene, s: &SurfacePoint, colour: Option<[f32; 3]>) -> Vec3 {
+    match colour {
+        Some(c) => Vec3::from_array(c),
+        None => base_colour(scene, s.eval.map(|e| e.colour)),
     }
 }
 
@@ -664,9 +776,11 @@ fn facing(grad: [f64; 3], dir: DVec3) -> DVec3 {
     }
 }
 
-fn base_colour(scene: &Scene, e: &Eval, has_eval: bool) -> Vec3 {
-    match (scene.params.colour_field, has_eval) {
-        (Some(_), true) => Vec3::from_array(scene.state.colormap.colour(e.colour as f32)),
+/// The colour map's colour of the colour field's value `colour` (`None`: the
+/// reconstruction had no weights there), or grey without a colour field.
+pub(crate) fn base_colour(scene: &Scene, colour: Option<f64>) -> Vec3 {
+    match (scene.params.colour_field, colour) {
+        (Some(_), Some(c)) => Vec3::from_array(scene.state.colormap.colour(c as f32)),
         _ => Vec3::splat(0.8),
     }
 }
@@ -682,7 +796,7 @@ fn shade_sample(
     e: &Eval,
 ) -> [f64; 3] {
     let st = scene.state;
-    let base = base_colour(scene, e, true);
+    let base = base_colour(scene, Some(e.colour));
     let g = DVec3::from_array(e.grad);
     if g.length() <= 0.0 || g.is_nan() {
         return base.to_array().map(f64::from);

@@ -276,6 +276,30 @@ fn lower_priority() {
     }
 }
 
+/// The view `--colour-range visible` renders first to see which surfaces show: `state`
+/// at one sample per pixel.
+pub fn visible_range_view(state: &ViewState) -> ViewState {
+    let mut first = state.clone();
+    first.spp = 1;
+    first
+}
+
+/// Applies `scale` (a [`ViewCommand::ColourScale`] over the given range) to `state` with the
+/// colour field's range over the surface pixels of `frame` (a render of
+/// [`visible_range_view`]); returns that range, `None` when no surface shows.
+pub fn fit_colours_to_frame(
+    frame: &Frame,
+    vol: &Volume,
+    state: &mut ViewState,
+    scale: impl Fn(Option<(f32, f32)>) -> Option<ViewCommand>,
+) -> Result<Option<(f32, f32)>, UnknownField> {
+    let range = crate::colormap::visible_range(&frame.surface_values);
+    if let Some(command) = range.and_then(|r| scale(Some(r))) {
+        state.apply(&command, &vol.fields)?;
+    }
+    Ok(range)
+}
+
 /// A persistent pool of render threads (building a pool costs more than a small frame).
 pub struct Renderer {
     pool: rayon::ThreadPool,
@@ -329,14 +353,9 @@ impl Renderer {
         meshes: &Meshes,
         scale: impl Fn(Option<(f32, f32)>) -> Option<ViewCommand>,
     ) -> Result<Option<(f32, f32)>, UnknownField> {
-        let mut first = state.clone();
-        first.spp = 1;
+        let first = visible_range_view(state);
         let frame = self.render(&Scene::new(vol, &first, meshes)?);
-        let range = crate::colormap::visible_range(&frame.surface_values);
-        if let Some(command) = range.and_then(|r| scale(Some(r))) {
-            state.apply(&command, &vol.fields)?;
-        }
-        Ok(range)
+        fit_colours_to_frame(&frame, vol, state, scale)
     }
 
     /// Runs `f` on this pool.

@@ -86,6 +86,10 @@ impl Tracer<'_> {
         inexact: bool,
         mask: Option<&DualMask>,
     ) -> Option<(f64, Option<u32>)> {
+        if !self.owns(seg.region) {
+            // Another rank's: its first root there is that rank's candidate.
+            return None;
+        }
         let vol = self.vol;
         let field = self.params.field;
         let r = seg.region as usize;
@@ -124,6 +128,7 @@ impl Tracer<'_> {
             if bricks.is_empty() {
                 vol.dual_bricks(r, &mut bricks);
                 self.bricks_of = Some(seg.region);
+                self.touch(seg.region);
             }
             let cubic = vol.cubic_in(&bricks, o, d, ta, tb, field, iso, known == Some(true));
             self.stats.samples += 1;

@@ -35,6 +35,9 @@ impl Tracer<'_> {
         let p = at(&o, &d, t);
         let vol = self.vol;
         let mut region = region.or_else(|| vol.region_at(p));
+        if let Some(r) = region {
+            self.touch(r);
+        }
         let eval = region
             .and_then(|r| vol.eval(r as usize, p, self.params.field, self.params.colour_field))
             .or_else(|| {

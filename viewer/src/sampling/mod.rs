@@ -165,7 +165,7 @@ impl Params {
 }
 
 /// Work counters of one or more rays (summed in integers: deterministic).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct Stats {
     /// Reconstructions (samples, refinement probes, exact's dual-cell cubics).
     pub samples: u64,
@@ -284,6 +284,12 @@ pub struct Tracer<'v> {
     /// that region.
     bricks: Vec<crate::reconstruct::DualBrick>,
     bricks_of: Option<u32>,
+    /// One frame over ranks (`crate::parts`): the regions (by index) this rank searches;
+    /// the others are another rank's, and a walk steps over them. `None`: all.
+    owned: Option<&'v [bool]>,
+    /// The regions whose values this tracer read while `owned` is set (a region may be
+    /// listed more than once): what a rank's report counts.
+    pub(crate) touched: Vec<u32>,
 }
 
 impl<'v> Tracer<'v> {
@@ -312,6 +318,29 @@ impl<'v> Tracer<'v> {
             start: Start::Root,
             bricks: Vec::new(),
             bricks_of: None,
+            owned: None,
+            touched: Vec::new(),
+        }
+    }
+
+    /// Searches only the regions `owned` marks (one rank's share of a frame over ranks,
+    /// see `crate::parts`); the iso search is the only one that supports it.
+    pub(crate) fn restrict(&mut self, owned: &'v [bool]) {
+        self.owned = Some(owned);
+    }
+
+    /// Whether region `r` is this tracer's to search.
+    #[inline]
+    fn owns(&self, r: u32) -> bool {
+        self.owned
+            .is_none_or(|o| o.get(r as usize).copied().unwrap_or(false))
+    }
+
+    /// Notes that the values of region `r` were read (only counted for a rank's share).
+    #[inline]
+    fn touch(&mut self, r: u32) {
+        if self.owned.is_some() {
+            self.touched.push(r);
         }
     }
 

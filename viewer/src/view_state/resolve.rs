@@ -83,10 +83,32 @@ impl Overrides {
         }
         let range =
             renderer.fit_colours_to_visible(vol, state, meshes, |r| self.colour_scale(r))?;
-        Ok(range.is_none().then(|| {
-            "--colour-range visible: no surface in the picture; the colour map keeps the \
-             field's range"
-                .to_string()
-        }))
+        Ok(no_surface_note(range))
     }
+
+    /// [`Overrides::fit_visible_colours`] from `frame`, a picture of
+    /// [`crate::render::visible_range_view`] rendered elsewhere (over MPI ranks); `None`
+    /// (nothing to fit) without the flag.
+    pub fn fit_visible_colours_to(
+        &self,
+        frame: &crate::render::Frame,
+        vol: &Volume,
+        state: &mut ViewState,
+    ) -> Result<Option<String>, UnknownField> {
+        if !self.wants_visible_range() {
+            return Ok(None);
+        }
+        let range =
+            crate::render::fit_colours_to_frame(frame, vol, state, |r| self.colour_scale(r))?;
+        Ok(no_surface_note(range))
+    }
+}
+
+/// The note `--colour-range visible` leaves when no surface shows.
+fn no_surface_note(range: Option<(f32, f32)>) -> Option<String> {
+    range.is_none().then(|| {
+        "--colour-range visible: no surface in the picture; the colour map keeps the field's \
+         range"
+            .to_string()
+    })
 }

@@ -72,9 +72,7 @@ fn main() -> ExitCode {
         // One file, or every frame of a sequence (each rendered as one file is; over the
         // ranks of an MPI run, each rank its share).
         Some(Command::Render(args)) => render::target(&args).and_then(|t| match t {
-            render::Target::File(path) => ranks
-                .one_process_only("a render of one file")
-                .and_then(|()| render::run(*args, path)),
+            render::Target::File(path) => render::run(*args, path, &ranks),
             render::Target::Sequence(path, pattern) => {
                 render_sequence::run(&args, &path, pattern, &ranks)
             }

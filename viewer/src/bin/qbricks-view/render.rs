@@ -12,9 +12,11 @@ use qbricks_viewer::film;
 use qbricks_viewer::mesh::Meshes;
 use qbricks_viewer::overlay;
 use qbricks_viewer::overlay::file_title;
-use qbricks_viewer::render::{Frame, FrameReport, Renderer, Scene};
+use qbricks_viewer::parts;
+use qbricks_viewer::render::{visible_range_view, Frame, FrameReport, Renderer, Scene};
 use qbricks_viewer::view_state::{Overrides, ResolvedView, ViewState};
 use qbricks_viewer::volume::Volume;
+use ranks::Ranks;
 
 /// The bundled sample, relative to the current directory.
 pub const DEFAULT_FILE: &str = "data/wake_small.qbk";
@@ -118,56 +120,55 @@ pub fn target(args: &Args) -> anyhow::Result<Target> {
     Ok(Target::File(path))
 }
 
-/// Renders one file.
-pub fn run(args: Args, path: PathBuf) -> anyhow::Result<()> {
-    if args.frames.is_some() {
-        bail!(
-            "{}: --frames needs a frame sequence ('frame_####.qbk' or 'frame_%04d.qbk')",
-            path.display()
-        );
-    }
-    if args.iso_per_frame {
-        bail!(
-            "{}: --iso-per-frame chooses the iso value of each frame of a sequence \
-             ('frame_####.qbk'); a single file already takes its own default",
-            path.display()
-        );
-    }
-    if args.output.is_none() && args.pixel.is_none() {
-        bail!("expected -o OUT.png (or --pixel X,Y)");
-    }
+/// Renders one file: in one process, or as one frame over the ranks of an MPI run (each
+/// rank searching its share of the file's regions, rank 0 compositing and writing; see
+/// `qbricks_viewer::parts`). Every step that can fail is agreed between the ranks, so all
+/// stop at the same step and rank 0 says why.
+pub fn run(args: Args, path: PathBuf, ranks: &Ranks) -> anyhow::Result<()> {
+    ranks.agree(check_args(&args, &path, ranks))?;
 
     // Open.
     let t_open = Instant::now();
-    let view = open_volume(&path, !args.no_checksum)?;
-    let vol = Volume::new(&view).with_context(|| format!("{}", path.display()))?;
+    let view = ranks.agree(open_volume(&path, !args.no_checksum))?;
+    let vol = ranks.agree(Volume::new(&view).with_context(|| format!("{}", path.display())))?;
     let open_ms = t_open.elapsed().as_secs_f64() * 1e3;
 
     // View state: file or data-derived defaults, then flags.
-    let given = args.state.as_deref().map(ViewState::load).transpose()?;
+    let resolved = ranks.agree((|| {
+        let given = args.state.as_deref().map(ViewState::load).transpose()?;
+        let resolved = args.view.resolve(&vol, &path, given)?;
+        check_files(
+            &args,
+            &resolved.state,
+            [("brick file".to_string(), path.as_path())],
+            args.output.iter().map(|o| ("-o".to_string(), o.as_path())),
+        )?;
+        anyhow::Ok(resolved)
+    })())?;
     let ResolvedView {
         mut state,
         notes,
         warnings,
-    } = args.view.resolve(&vol, &path, given)?;
-    for w in warnings {
-        eprintln!("qbricks-view: warning: {}: {w}", path.display());
+    } = resolved;
+    if ranks.is_root() {
+        for w in warnings {
+            eprintln!("qbricks-view: warning: {}: {w}", path.display());
+        }
+        for n in notes {
+            eprintln!("qbricks-view: note: {n}");
+        }
     }
-    check_files(
-        &args,
-        &state,
-        [("brick file".to_string(), path.as_path())],
-        args.output.iter().map(|o| ("-o".to_string(), o.as_path())),
-    )?;
-    for n in notes {
-        eprintln!("qbricks-view: note: {n}");
-    }
-    let meshes = if state.meshes.is_empty() {
-        Meshes::empty()
+    let meshes = ranks.agree(if state.meshes.is_empty() {
+        Ok(Meshes::empty())
     } else {
-        Meshes::load(&state.meshes)?
-    };
-    let renderer = Renderer::new(args.threads).context("starting worker threads")?;
+        Meshes::load(&state.meshes).map_err(anyhow::Error::from)
+    })?;
+    let renderer = ranks.agree(Renderer::new(args.threads).context("starting worker threads"))?;
+    if ranks.is_parallel() {
+        return run_over_ranks(
+            &args, &path, ranks, &vol, state, &meshes, &renderer, open_ms,
+        );
+    }
     fit_visible(&renderer, &vol, &mut state, &meshes, &args.view)
         .with_context(|| path.display().to_string())?;
     let scene = Scene::new(&vol, &state, &meshes).with_context(|| format!("{}", path.display()))?;
@@ -192,6 +193,105 @@ pub fn run(args: Args, path: PathBuf) -> anyhow::Result<()> {
     write_outputs(&args, &state, Some((&frame, picture)))?;
     if args.json {
         let report = FrameReport::new(&frame, &state, ms, open_ms, renderer.threads());
+        writeln!(QuietStdout::new(), "{}", serde_json::to_string(&report)?)?;
+    }
+    Ok(())
+}
+
+/// What a render of one file is asked that it cannot do, before anything is opened.
+fn check_args(args: &Args, path: &Path, ranks: &Ranks) -> anyhow::Result<()> {
+    if args.frames.is_some() {
+        bail!(
+            "{}: --frames needs a frame sequence ('frame_####.qbk' or 'frame_%04d.qbk')",
+            path.display()
+        );
+    }
+    if args.iso_per_frame {
+        bail!(
+            "{}: --iso-per-frame chooses the iso value of each frame of a sequence \
+             ('frame_####.qbk'); a single file already takes its own default",
+            path.display()
+        );
+    }
+    if args.output.is_none() && args.pixel.is_none() {
+        bail!("expected -o OUT.png (or --pixel X,Y)");
+    }
+    if ranks.is_parallel() {
+        let what = match (&args.pixel, &args.aov) {
+            (Some(_), _) => Some("--pixel (one ray, explained)"),
+            (None, Some(_)) => Some("--aov (debug buffers)"),
+            _ => None,
+        };
+        if let Some(what) = what {
+            bail!(
+                "{what} runs in one process: over {} MPI ranks one frame renders the shaded \
+                 picture; run it without mpirun",
+                ranks.size()
+            );
+        }
+    }
+    Ok(())
+}
+
+/// One frame over the ranks of an MPI run: every rank searches the regions of its share
+/// of the file's KD-tree, rank 0 composites, writes the picture and reports (`--json`:
+/// the frame, the file's bricks and every rank's time and bricks).
+#[allow(clippy::too_many_arguments)]
+fn run_over_ranks(
+    args: &Args,
+    path: &Path,
+    ranks: &Ranks,
+    vol: &Volume,
+    mut state: ViewState,
+    meshes: &Meshes,
+    renderer: &Renderer,
+    open_ms: f64,
+) -> anyhow::Result<()> {
+    let frame_of = |scene: &Scene| -> anyhow::Result<Option<(Frame, Vec<parts::RankReport>)>> {
+        ranks.agree(parts::check(scene, ranks.size()).map_err(anyhow::Error::from))?;
+        let owned = parts::owned_regions(scene, ranks.rank(), ranks.size());
+        let part = parts::render_part(scene, &owned, ranks, renderer);
+        Ok(part.with_context(|| path.display().to_string())?)
+    };
+    if args.view.wants_visible_range() {
+        // Rank 0 fits its colour map to what a first frame shows; only rank 0 maps colours.
+        let first = visible_range_view(&state);
+        let scene = ranks
+            .agree(Scene::new(vol, &first, meshes).with_context(|| path.display().to_string()))?;
+        if let Some((frame, _)) = frame_of(&scene)? {
+            if let Some(note) = args
+                .view
+                .fit_visible_colours_to(&frame, vol, &mut state)
+                .with_context(|| path.display().to_string())?
+            {
+                eprintln!("qbricks-view: note: {note}");
+            }
+        }
+    }
+    let scene =
+        ranks.agree(Scene::new(vol, &state, meshes).with_context(|| path.display().to_string()))?;
+    let mut times = Vec::new();
+    let mut last = None;
+    for _ in 0..args.repeat.max(1) {
+        let t = Instant::now();
+        last = frame_of(&scene)?;
+        times.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    // The other ranks are done: rank 0 has the frame.
+    let Some((frame, reports)) = last else {
+        return Ok(());
+    };
+    times.sort_by(f64::total_cmp);
+    let ms = times.get(times.len() / 2).copied().unwrap_or(0.0);
+    let title = args.title.clone().unwrap_or_else(|| file_title(path));
+    let picture = overlay::figure(&frame, &state, vol, false, &title);
+    write_outputs(args, &state, Some((&frame, picture)))?;
+    if args.json {
+        let report = parts::RanksReport {
+            frame: FrameReport::new(&frame, &state, ms, open_ms, renderer.threads()),
+            bricks: vol.brick_count(),
+            ranks: reports,
+        };
         writeln!(QuietStdout::new(), "{}", serde_json::to_string(&report)?)?;
     }
     Ok(())

@@ -1,0 +1,656 @@
+//! A frame over ranks (see the module above): each rank finds the first crossings in its
+//! own regions, rank 0 keeps the nearest per ray, the shadow rays go round once, and rank
+//! 0 shades and accumulates the pixels exactly as one process does.
+
+use std::time::Instant;
+
+use glam::DVec3;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use super::Exchange;
+use crate::film::Film;
+use crate::mesh::MeshHit;
+use crate::ray::{
+    base_colour, first_surface_through, lit, mesh_point, shadow_ray, FirstSurface, RayCaster,
+    ShadowRay, VolumeShadow,
+};
+use crate::render::{Frame, Renderer};
+use crate::sampling::{Stats, Strategy};
+use crate::scene::Scene;
+use crate::tiles::{Tile, TileResult};
+use crate::transfer::Mode;
+
+/// A view one frame over ranks cannot render: what it has, and what to do instead.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "one frame over {ranks} MPI ranks renders one opaque iso-surface found with the `exact` \
+     strategy (meshes, clip planes and shadows included); this view has {what}: render it \
+     without mpirun, or share the frames of a sequence ('frame_####.qbk') over the ranks"
+)]
+pub struct Unsupported {
+    pub ranks: usize,
+    pub what: String,
+}
+
+/// A rank's message that cannot be read (a rank of another build or run).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("one frame over ranks: the message of rank {rank} {what}")]
+pub struct PartError {
+    pub rank: usize,
+    pub what: String,
+}
+
+/// What one rank did for a frame (`render --json`, `ranks`).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct RankReport {
+    pub rank: usize,
+    /// The rank's wall time for the frame, ms.
+    pub ms: f64,
+    /// Of it, the time not spent tracing its own rays: the exchanges, and at rank 0 the
+    /// compositing and shading, ms.
+    pub composite_ms: f64,
+    /// The regions it searches, and the bricks those hold.
+    pub regions: u64,
+    pub bricks_owned: u64,
+    /// The bricks whose values its rays read (the regions it searched or evaluated a hit in).
+    pub bricks_touched: u64,
+    /// Its rays' work counters.
+    pub stats: Stats,
+}
+
+/// What `render --json` prints of a frame over ranks: the frame's report, the file's
+/// bricks, and what each rank did.
+#[derive(Debug, Clone, Serialize)]
+pub struct RanksReport {
+    #[serde(flatten)]
+    pub frame: crate::render::FrameReport,
+    pub bricks: usize,
+    pub ranks: Vec<RankReport>,
+}
+
+/// Refuses a view that one frame over `ranks` ranks cannot render bit for bit as one
+/// process does.
+pub fn check(scene: &Scene, ranks: usize) -> Result<(), Unsupported> {
+    let what = if scene.params.tf.mode == Mode::Dvr {
+        Some("dvr mode".to_string())
+    } else if scene.params.strategy != Strategy::Exact {
+        Some(format!("the `{}` strategy", scene.params.strategy.as_str()))
+    } else if !scene.is_single_opaque() {
+        Some("several iso-surfaces, a translucent one or slices".to_string())
+    } else {
+        None
+    };
+    match what {
+        Some(what) => Err(Unsupported { ranks, what }),
+        None => Ok(()),
+    }
+}
+
+/// Words of one crossing in a rank's message: ray, t, world point, normal, colour value,
+/// first-surface depth and value.
+const CROSSING_WORDS: usize = 12;
+/// Words of one shadow ray rank 0 sends: origin, direction, t0, t1.
+const SHADOW_WORDS: usize = 8;
+
+/// A crossing one rank found, as rank 0 reads it.
+#[derive(Debug, Clone, Copy)]
+struct Crossing {
+    ray: usize,
+    t: f64,
+    world: DVec3,
+    normal: DVec3,
+    /// The colour field's value there (`None` where the reconstruction has no weights):
+    /// rank 0 maps it to the surface's colour, so only rank 0 needs the colour map.
+    colour: Option<f64>,
+    first: FirstSurface,
+}
+
+impl Crossing {
+    fn encode(&self, out: &mut Vec<f64>) {
+        out.push(self.ray as f64);
+        out.push(self.t);
+        out.extend(self.world.to_array());
+        out.extend(self.normal.to_array());
+        out.push(f64::from(u8::from(self.colour.is_some())));
+        out.push(self.colour.unwrap_or(0.0));
+        out.push(f64::from(self.first.t));
+        out.push(f64::from(self.first.value));
+    }
+
+    fn decode(w: &[f64]) -> Crossing {
+        let v = |i: usize| DVec3::new(w[i], w[i + 1], w[i + 2]);
+        Crossing {
+            ray: w[0] as usize,
+            t: w[1],
+            world: v(2),
+            normal: v(5),
+            colour: (w[8] != 0.0).then_some(w[9]),
+            first: FirstSurface {
+                t: w[10] as f32,
+                value: w[11] as f32,
+            },
+        }
+    }
+}
+
+fn to_bytes(words: &[f64]) -> Vec<u8> {
+    words.iter().flat_map(|w| w.to_le_bytes()).collect()
+}
+
+fn words(bytes: &[u8], rank: usize, per: usize) -> Result<Vec<f64>, PartError> {
+    if bytes.len() % (8 * per) != 0 {
+        return Err(PartError {
+            rank,
+            what: format!(
+                "has {} bytes, not records of {} bytes",
+                bytes.len(),
+                8 * per
+            ),
+        });
+    }
+    Ok(bytes
+        .chunks_exact(8)
+        .map(|c| f64::from_le_bytes(c.try_into().unwrap_or([0; 8])))
+        .collect())
+}
+
+/// What a camera ray sees, as rank 0 composites it.
+#[derive(Debug, Clone, Copy)]
+enum Seen {
+    /// The clip planes keep nothing of it, or it meets nothing.
+    Nothing,
+    Mesh(MeshHit),
+    /// The nearest crossing: rank, index in that rank's message.
+    Surface(usize, usize),
+}
+
+/// Renders one frame of `scene` as rank `ex.rank()` of `ex.size()`, searching the regions
+/// `owned` marks ([`super::owned_regions`]). Collective: every rank calls it with the same
+/// view. The rays run on `pool`'s threads; the exchanges on the calling thread (where MPI
+/// was started). Rank 0 returns the frame, the same as [`crate::render::render`] gives, and every
+/// rank's report; the others `None`.
+pub fn render_part(
+    scene: &Scene,
+    owned: &[bool],
+    ex: &dyn Exchange,
+    pool: &Renderer,
+) -> Result<Option<(Frame, Vec<RankReport>)>, PartError> {
+    let start = Instant::now();
+    let st = scene.state;
+    let vol = scene.vol;
+    let (w, h) = (st.width, st.height);
+    let spp = st.spp.max(1);
+    let n_rays = w as usize * h as usize * spp as usize;
+    let ray_index = |x: u32, y: u32, s: u32| (((y * w + x) * spp) + s) as usize;
+    pool.install(|| scene.accel.prepare(vol, scene.params.tf.mode));
+
+    // 1. The first crossing of every ray in this rank's regions.
+    struct Row {
+        crossings: Vec<f64>,
+        touched: Vec<u32>,
+        stats: Stats,
+    }
+    let rows: Vec<Row> = pool.install(|| {
+        (0..h)
+            .into_par_iter()
+            .map(|y| {
+                let mut caster = RayCaster::new(scene);
+                caster.restrict(owned);
+                let mut crossings = Vec::new();
+                for x in 0..w {
+                    for s in 0..spp {
+                        let (ray, jit) = caster.camera_ray(x, y, s);
+                        let Some(bounds) = caster.bounds(&ray) else {
+                            continue;
+                        };
+                        let Some(p) = caster.first_crossing(&ray, &bounds, jit) else {
+                            continue;
+                        };
+                        Crossing {
+                            ray: ray_index(x, y, s),
+                            t: p.t.unwrap_or_else(|| (p.world - ray.origin).dot(ray.dir)),
+                            world: p.world,
+                            normal: p.normal,
+                            colour: p.eval.map(|e| e.colour),
+                            first: caster.first_at(&ray, &p),
+                        }
+                        .encode(&mut crossings);
+                    }
+                }
+                let mut touched: Vec<u32> = caster.touched().collect();
+                touched.sort_unstable();
+                touched.dedup();
+                Row {
+                    crossings,
+                    touched,
+                    stats: caster.stats(),
+                }
+            })
+            .collect()
+    });
+    let mut stats = Stats::default();
+    let mut touched = vec![false; vol.region_count()];
+    let mut mine = Vec::new();
+    for row in &rows {
+        stats += row.stats;
+        mine.extend_from_slice(&row.crossings);
+        for &r in &row.touched {
+            if let Some(t) = touched.get_mut(r as usize) {
+                *t = true;
+            }
+        }
+    }
+    drop(rows);
+    let mut trace_ms = start.elapsed().as_secs_f64() * 1e3;
+    let gathered = ex.gather(&to_bytes(&mine));
+    drop(mine);
+
+    // At rank 0: the nearest crossing of each ray, and what every ray sees.
+    let mut found: Vec<Vec<f64>> = Vec::new();
+    let mut seen: Vec<Seen> = Vec::new();
+    if let Some(parts) = gathered {
+        let mut best = vec![(f64::INFINITY, usize::MAX, 0usize); n_rays];
+        for (rank, bytes) in parts.iter().enumerate() {
+            let part = words(bytes, rank, CROSSING_WORDS)?;
+            for (k, rec) in part.chunks_exact(CROSSING_WORDS).enumerate() {
+                let (i, t) = (rec[0], rec[1]);
+                let Some(b) = (i >= 0.0 && (i as usize) < n_rays && i.fract() == 0.0)
+                    .then(|| &mut best[i as usize])
+                else {
+                    return Err(PartError {
+                        rank,
+                        what: format!("names ray {i}, not one of the frame's {n_rays}"),
+                    });
+                };
+                // The nearest; on a tie the lower rank's.
+                if t < b.0 {
+                    *b = (t, rank, k);
+                }
+            }
+            found.push(part);
+        }
+        seen = pool.install(|| {
+            (0..h)
+                .into_par_iter()
+                .flat_map_iter(|y| {
+                    let mut caster = RayCaster::new(scene);
+                    let best = &best;
+                    (0..w)
+                        .flat_map(move |x| (0..spp).map(move |s| (x, s)))
+                        .map(move |(x, s)| {
+                            let i = ray_index(x, y, s);
+                            let (ray, _) = caster.camera_ray(x, y, s);
+                            let Some(bounds) = caster.bounds(&ray) else {
+                                return Seen::Nothing;
+                            };
+                            match (best[i], bounds.mesh) {
+                                ((_, rank, k), _) if rank != usize::MAX => Seen::Surface(rank, k),
+                                (_, Some(m)) => Seen::Mesh(m),
+                                _ => Seen::Nothing,
+                            }
+                        })
+                        .collect::<Vec<_>>()
+                })
+                .collect()
+        });
+    }
+    let crossing = |rank: usize, k: usize| {
+        Crossing::decode(&found[rank][k * CROSSING_WORDS..(k + 1) * CROSSING_WORDS])
+    };
+
+    // 2. Shadow rays: rank 0 sends those that reach the volume, every rank says whether
+    // the surface crosses them in its regions.
+    let lights = &st.lights;
+    let shadows = st.shadows && !lights.is_empty();
+    let mut vis: Vec<f32> = Vec::new();
+    if shadows {
+        let mut queries: Vec<f64> = Vec::new();
+        let mut pending: Vec<usize> = Vec::new();
+        if ex.rank() == 0 {
+            vis = vec![1.0; n_rays * lights.len()];
+            let caster = RayCaster::new(scene);
+            for y in 0..h {
+                for x in 0..w {
+                    for s in 0..spp {
+                        let i = ray_index(x, y, s);
+                        let (ray, _) = caster.camera_ray(x, y, s);
+                        let (p, n) = match seen[i] {
+                            Seen::Nothing => continue,
+                            Seen::Mesh(m) => mesh_point(&ray, &m),
+                            Seen::Surface(rank, k) => {
+                                let c = crossing(rank, k);
+                                (c.world, c.normal)
+                            }
+                        };
+                        for (j, light) in lights.iter().enumerate() {
+                            match shadow_ray(scene, p, n, light) {
+                                ShadowRay::Settled(v) => vis[i * lights.len() + j] = v,
+                                ShadowRay::Volume(q) => {
+                                    queries.extend(q.o);
+                                    queries.extend(q.d);
+                                    queries.extend([q.t0, q.t1]);
+                                    pending.push(i * lights.len() + j);
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        let sent = ex.broadcast(to_bytes(&queries));
+        let t_answer = Instant::now();
+        let queries = words(&sent, 0, SHADOW_WORDS)?;
+        let parts: Vec<(Vec<u8>, Vec<u32>, Stats)> = pool.install(|| {
+            queries
+                .par_chunks(SHADOW_WORDS * 1024)
+                .flat_map_iter(|chunk| {
+                    let mut caster = RayCaster::new(scene);
+                    caster.restrict(owned);
+                    let a: Vec<u8> = chunk
+                        .chunks_exact(SHADOW_WORDS)
+                        .map(|q| {
+                            let q = VolumeShadow {
+                                o: [q[0], q[1], q[2]],
+                                d: [q[3], q[4], q[5]],
+                                t0: q[6],
+                                t1: q[7],
+                            };
+                            u8::from(caster.shadow_occluded(&q))
+                        })
+                        .collect();
+                    let touched: Vec<u32> = caster.touched().collect();
+                    let stats = caster.stats();
+                    std::iter::once((a, touched, stats))
+                })
+                .collect()
+        });
+        let answers: Vec<u8> = parts
+            .into_iter()
+            .flat_map(|(a, t, s)| {
+                stats += s;
+                for r in t {
+                    if let Some(x) = touched.get_mut(r as usize) {
+                        *x = true;
+                    }
+                }
+                a
+            })
+            .collect();
+        trace_ms += t_answer.elapsed().as_secs_f64() * 1e3;
+        if let Some(all) = ex.gather(&answers) {
+            for (rank, a) in all.iter().enumerate() {
+                if a.len() != pending.len() {
+                    return Err(PartError {
+                        rank,
+                        what: format!(
+                            "answers {} shadow rays, not the {} sent",
+                            a.len(),
+                            pending.len()
+                        ),
+                    });
+                }
+            }
+            for (q, &slot) in pending.iter().enumerate() {
+                let occluded = all.iter().any(|a| a[q] != 0);
+                vis[slot] = first_surface_through(scene, occluded) as f32;
+            }
+        }
+    }
+
+    // 3. At rank 0: every ray shaded as one process shades it, the pixels summed in
+    // sample order.
+    let frame = (ex.rank() == 0).then(|| {
+        let bg = st.background.map(f64::from);
+        let n_lights = if shadows { lights.len() } else { 0 };
+        let pixels: Vec<([f64; 3], u32, FirstSurface)> = pool.install(|| {
+            (0..h)
+                .into_par_iter()
+                .flat_map_iter(|y| {
+                    let caster = RayCaster::new(scene);
+                    let (seen, vis) = (&seen, &vis);
+                    (0..w)
+                        .map(move |x| {
+                            let mut c = [0.0f64; 3];
+                            let mut hits = 0u32;
+                            let mut first = FirstSurface::NONE;
+                            for s in 0..spp {
+                                let i = ray_index(x, y, s);
+                                let (ray, _) = caster.camera_ray(x, y, s);
+                                let v = &vis[i * n_lights..(i + 1) * n_lights];
+                                let (colour, met) = match seen[i] {
+                                    Seen::Nothing => (bg, FirstSurface::NONE),
+                                    Seen::Mesh(m) => {
+                                        let (p, n) = mesh_point(&ray, &m);
+                                        let met = FirstSurface {
+                                            t: m.t as f32,
+                                            value: f32::NAN,
+                                        };
+                                        (lit(scene, m.colour, n, &ray, p, v), met)
+                                    }
+                                    Seen::Surface(rank, k) => {
+                                        let cr = crossing(rank, k);
+                                        hits += 1;
+                                        let base = base_colour(scene, cr.colour);
+                                        (lit(scene, base, cr.normal, &ray, cr.world, v), cr.first)
+                                    }
+                                };
+                                if s == 0 {
+                                    first = met;
+                                }
+                                for a in 0..3 {
+                                    c[a] += colour[a];
+                                }
+                            }
+                            (c, hits, first)
+                        })
+                        .collect::<Vec<_>>()
+                })
+                .collect()
+        });
+        let hits: u64 = pixels.iter().map(|p| u64::from(p.1)).sum();
+        let result = TileResult {
+            tile: Tile {
+                x0: 0,
+                y0: 0,
+                x1: w,
+                y1: h,
+            },
+            samples: 0..spp,
+            sum: pixels.iter().map(|p| p.0).collect(),
+            hit_samples: pixels.iter().map(|p| p.1).collect(),
+            first: pixels.iter().map(|p| p.2).collect(),
+            stats,
+            rays: n_rays as u64,
+            hits,
+        };
+        let mut film = Film::new(w, h);
+        film.add(&result);
+        Frame {
+            width: w,
+            height: h,
+            rgb: film.resolve(),
+            pixel_hits: film.hit_samples().to_vec(),
+            depth: film.depth().to_vec(),
+            surface_values: film.surface_values().to_vec(),
+            stats,
+            rays: n_rays as u64,
+            hits,
+        }
+    });
+
+    // Every rank's report at rank 0.
+    let bricks = |mask: &[bool]| {
+        let mut b = vec![false; vol.brick_count()];
+        for (r, _) in mask.iter().enumerate().filter(|(_, m)| **m) {
+            for id in vol.region_brick_ids(r) {
+                if let Some(x) = b.get_mut(id.to_native() as usize) {
+                    *x = true;
+                }
+            }
+        }
+        b.iter().filter(|x| **x).count() as u64
+    };
+    let ms = start.elapsed().as_secs_f64() * 1e3;
+    let report = RankReport {
+        rank: ex.rank(),
+        ms,
+        composite_ms: (ms - trace_ms).max(0.0),
+        regions: owned.iter().filter(|o| **o).count() as u64,
+        bricks_owned: bricks(owned),
+        bricks_touched: bricks(&touched),
+        stats,
+    };
+    let reports = ex.gather(&serde_json::to_vec(&report).unwrap_or_default());
+    let (Some(mut frame), Some(reports)) = (frame, reports) else {
+        return Ok(None);
+    };
+    let mut all = Vec::new();
+    for (rank, r) in reports.iter().enumerate() {
+        let r: RankReport = serde_json::from_slice(r).map_err(|e| PartError {
+            rank,
+            what: format!("is not a report: {e}"),
+        })?;
+        all.push(r);
+    }
+    frame.stats = Stats::default();
+    for r in &all {
+        frame.stats += r.stats;
+    }
+    Ok(Some((frame, all)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::{icosphere, Meshes};
+    use crate::parts::{local_ranks, owned_regions};
+    use crate::planes::Plane;
+    use crate::view_state::ViewState;
+    use crate::volume::Volume;
+
+    /// The frame over `n` in-process ranks, and each rank's report.
+    fn over_ranks(scene: &Scene, vol: &Volume, n: usize) -> (Frame, Vec<RankReport>) {
+        let owned: Vec<Vec<bool>> = (0..n).map(|r| owned_regions(scene, r, n)).collect();
+        let mut out = std::thread::scope(|s| {
+            let handles: Vec<_> = local_ranks(n)
+                .into_iter()
+                .zip(&owned)
+                .map(|(rank, owned)| {
+                    s.spawn(move || {
+                        let pool = Renderer::new(Some(2)).expect("pool");
+                        render_part(scene, owned, &rank, &pool)
+                    })
+                })
+                .collect();
+            handles
+                .into_iter()
+                .map(|h| h.join().expect("rank thread").expect("frame"))
+                .collect::<Vec<_>>()
+        });
+        assert!(
+            out.iter().skip(1).all(Option::is_none),
+            "only rank 0 has the frame"
+        );
+        out.swap_remove(0).expect("rank 0's frame")
+    }
+
+    fn bits(v: &[f32]) -> Vec<u32> {
+        v.iter().map(|x| x.to_bits()).collect()
+    }
+
+    /// Over 1, 2, 3 and 4 ranks, with and without a mesh, shadows, a clip plane and
+    /// jittered samples, the frame equals one process's bit for bit: colours, depths,
+    /// surface values and hit counts.
+    #[test]
+    fn a_frame_over_ranks_equals_one_process_bit_for_bit() {
+        // A wavy shell off the centre: it crosses both levels, many regions and the level
+        // boundary, and shadows itself.
+        let shell = |p: [f64; 3]| {
+            let r2: f64 = (0..3).map(|a| (p[a] - [10.3, 11.1, 9.7][a]).powi(2)).sum();
+            r2.sqrt() + 0.8 * (0.7 * p[0]).sin() * (0.5 * p[1]).cos()
+        };
+        let file = crate::testvol::nested(12, [0.0; 3], &[("r", &shell)], 4);
+        let view = crate::testvol::open(&file).expect("opens");
+        let vol = Volume::new(&view).expect("volume");
+        let sphere = Meshes::from_meshes(&[icosphere(glam::DVec3::new(12.0, 12.0, 12.0), 3.0, 2)]);
+        let none = Meshes::empty();
+        for (case, shadows, with_mesh, clip, spp) in [
+            ("plain", false, false, false, 1),
+            ("shadows and mesh", true, true, false, 1),
+            ("clipped, 2 samples", true, false, true, 2),
+        ] {
+            let mut state = ViewState::default_for_volume(&vol);
+            state.iso = 6.0;
+            state.width = 48;
+            state.height = 40;
+            state.shadows = shadows;
+            state.spp = spp;
+            if clip {
+                state.clip = vec![Plane {
+                    origin: [12.0, 12.0, 12.5],
+                    normal: [0.3, 0.0, -1.0],
+                }];
+            }
+            let meshes = if with_mesh { &sphere } else { &none };
+            let scene = Scene::new(&vol, &state, meshes).expect("scene");
+            check(&scene, 2).expect("a view ranks render");
+            let serial = crate::render::render(&scene);
+            assert!(
+                serial.hits > 100,
+                "{case}: the surface shows ({} hits)",
+                serial.hits
+            );
+            for n in 1..=4 {
+                let (frame, reports) = over_ranks(&scene, &vol, n);
+                assert_eq!(frame.rgb, serial.rgb, "{case}, {n} ranks: colours");
+                assert_eq!(
+                    bits(&frame.depth),
+                    bits(&serial.depth),
+                    "{case}, {n}: depth"
+                );
+                assert_eq!(
+                    bits(&frame.surface_values),
+                    bits(&serial.surface_values),
+                    "{case}, {n}: values"
+                );
+                assert_eq!(frame.pixel_hits, serial.pixel_hits, "{case}, {n}: hits");
+                assert_eq!((frame.rays, frame.hits), (serial.rays, serial.hits));
+                assert_eq!(reports.len(), n);
+                let all = vol.brick_count() as u64;
+                for r in &reports {
+                    assert!(r.bricks_touched <= all && r.bricks_owned <= all);
+                    if n > 1 {
+                        assert!(r.regions < vol.region_count() as u64, "{case}: {r:?}");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn views_ranks_cannot_render_alike_are_refused_with_the_reason() {
+        let f = |p: [f64; 3]| p[0];
+        let file = crate::testvol::nested(4, [0.0; 3], &[("x", &f)], 4);
+        let view = crate::testvol::open(&file).expect("opens");
+        let vol = Volume::new(&view).expect("volume");
+        let none = Meshes::empty();
+        let mut state = ViewState::default_for_volume(&vol);
+        state.mode = Mode::Dvr;
+        let scene = Scene::new(&vol, &state, &none).expect("scene");
+        let e = check(&scene, 2).expect_err("dvr");
+        assert!(e.to_string().contains("dvr mode"), "{e}");
+        let mut state = ViewState::default_for_volume(&vol);
+        state.iso_opacity = 0.5;
+        let scene = Scene::new(&vol, &state, &none).expect("scene");
+        let e = check(&scene, 3).expect_err("translucent");
+        assert!(e.to_string().contains("3 MPI ranks"), "{e}");
+        let mut state = ViewState::default_for_volume(&vol);
+        state.strategy = Strategy::Bisect;
+        let scene = Scene::new(&vol, &state, &none).expect("scene");
+        assert!(check(&scene, 2)
+            .expect_err("bisect")
+            .to_string()
+            .contains("bisect"));
+    }
+}
