@@ -38,6 +38,12 @@ pub fn check_frame_memory(
     files::limits::check_memory_capped(what, need, MAX_FRAME_BYTES, "8 GiB for images")
 }
 
+/// A pixel's colour: the sum of its `samples` (> 0) sample colours over their count.
+#[inline]
+pub(crate) fn mean_colour(sum: [f64; 3], samples: u32) -> [f32; 3] {
+    sum.map(|c| (c / f64::from(samples)) as f32)
+}
+
 /// Accumulated samples of a `width`×`height` image.
 #[derive(Debug, Clone)]
 pub(crate) struct Film {
@@ -110,7 +116,7 @@ impl Film {
     #[inline]
     pub(crate) fn pixel(&self, i: usize) -> Option<[f32; 3]> {
         let n = self.samples[i];
-        (n > 0).then(|| self.sum[i].map(|c| (c / n as f64) as f32))
+        (n > 0).then(|| mean_colour(self.sum[i], n))
     }
 
     /// The image: each pixel's mean over its samples (black where none yet).

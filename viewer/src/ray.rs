@@ -245,10 +245,12 @@ impl<'s> RayCaster<'s> {
     }
 
     /// Searches only the regions `owned` marks, for camera and shadow rays: one rank's
-    /// share of a frame over ranks (`crate::parts`).
-    pub(crate) fn restrict(&mut self, owned: &'s [bool]) {
-        self.main.restrict(owned);
-        self.shadow.restrict(owned);
+    /// share of a frame over ranks (`crate::parts`). `nodes`: the view's active tree's
+    /// [`owned_nodes`](crate::active::ActiveTree::owned_nodes) for them, so that the walk
+    /// steps over the other ranks' subtrees.
+    pub(crate) fn restrict(&mut self, owned: &'s [bool], nodes: Option<&'s [bool]>) {
+        self.main.restrict(owned, nodes);
+        self.shadow.restrict(owned, nodes);
     }
 
     /// The regions whose values this caster's rays read since it was restricted.

@@ -245,9 +245,82 @@ impl ActiveTree {
         t_min: f64,
         t_max: f64,
         stack: &mut Vec<(u32, f64, f64)>,
+        f: F,
+    ) {
+        self.segments_in(vol, start, o, d, t_min, t_max, None, stack, f)
+    }
+
+    /// Per inner node of the walk, whether a leaf under it holds a region `owned` marks:
+    /// what [`ActiveTree::segments_in`] needs to step over the rest.
+    pub(crate) fn owned_nodes(&self, owned: &[bool]) -> Vec<bool> {
+        let walk = &self.walk;
+        let mut keep = vec![false; walk.inner.len()];
+        let Some(root) = walk.root else {
+            return keep;
+        };
+        let leaf_owned = |r: u32| {
+            walk.leaves
+                .get((r & !LEAF_REF) as usize)
+                .is_some_and(|l| owned.get(l.region as usize).copied().unwrap_or(false))
+        };
+        // Post-order: a node is settled once both children are. Each node is pushed at
+        // most twice, so a malformed walk cannot loop.
+        let mut stack = vec![(root, false)];
+        let mut budget = 2 * walk.inner.len() + 2;
+        while let Some((r, children_done)) = stack.pop() {
+            if r & LEAF_REF != 0 || budget == 0 {
+                continue;
+            }
+            budget -= 1;
+            let Some(node) = walk.inner.get(r as usize) else {
+                continue;
+            };
+            if children_done {
+                keep[r as usize] = node.child.iter().any(|&c| {
+                    if c & LEAF_REF != 0 {
+                        leaf_owned(c)
+                    } else {
+                        keep.get(c as usize).copied().unwrap_or(false)
+                    }
+                });
+            } else {
+                stack.push((r, true));
+                stack.extend(node.child.iter().map(|&c| (c, false)));
+            }
+        }
+        keep
+    }
+
+    /// [`ActiveTree::segments`] over the regions of one rank's share (`owned`: the
+    /// [`ActiveTree::owned_nodes`] and the regions it was made from) when given: the
+    /// subtrees without one are stepped over. A segment's bounds come from its leaf's own
+    /// box, not from the path to it, so those of the share are the same as without one.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn segments_in<F: FnMut(Segment, &[Lattice], bool, Option<&DualMask>) -> bool>(
+        &self,
+        vol: &Volume,
+        start: Start,
+        o: [f64; 3],
+        d: [f64; 3],
+        t_min: f64,
+        t_max: f64,
+        owned: Option<(&[bool], &[bool])>,
+        stack: &mut Vec<(u32, f64, f64)>,
         mut f: F,
     ) {
         let walk = &self.walk;
+        let keep = |c: u32| match owned {
+            None => true,
+            Some((nodes, regions)) => {
+                if c & LEAF_REF != 0 {
+                    walk.leaves
+                        .get((c & !LEAF_REF) as usize)
+                        .is_some_and(|l| regions.get(l.region as usize).copied().unwrap_or(false))
+                } else {
+                    nodes.get(c as usize).copied().unwrap_or(false)
+                }
+            }
+        };
         let root = match (walk.root, start) {
             (None, _) | (_, Start::Nothing) => return,
             (Some(root), Start::Root) => root,
@@ -287,7 +360,10 @@ impl ActiveTree {
             };
             while r & LEAF_REF == 0 {
                 let node = &walk.inner[r as usize];
-                let hit = meets(node, &o32, &inv32, t_lo, t_hi);
+                let mut hit = meets(node, &o32, &inv32, t_lo, t_hi);
+                if owned.is_some() {
+                    hit = [hit[0] && keep(node.child[0]), hit[1] && keep(node.child[1])];
+                }
                 // The two children lie on the two sides of the split plane: the one on
                 // the side the ray starts from comes first.
                 let (near, far) = if d[usize::from(node.axis)] > 0.0 {
@@ -306,6 +382,9 @@ impl ActiveTree {
                 }
             }
             if r & LEAF_REF == 0 {
+                continue;
+            }
+            if owned.is_some() && !keep(r) {
                 continue;
             }
             let leaf = &walk.leaves[(r & !LEAF_REF) as usize];

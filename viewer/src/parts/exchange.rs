@@ -110,7 +110,8 @@ mod tests {
     #[test]
     fn gather_and_broadcast_between_threads() {
         let ranks = local_ranks(3);
-        let got: Vec<(Option<Vec<Vec<u8>>>, Vec<u8>)> = std::thread::scope(|s| {
+        type Got = (Option<Vec<Vec<u8>>>, Vec<u8>);
+        let got: Vec<Got> = std::thread::scope(|s| {
             let handles: Vec<_> = ranks
                 .into_iter()
                 .map(|r| {

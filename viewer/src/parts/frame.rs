@@ -9,7 +9,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::Exchange;
-use crate::film::Film;
+use crate::film;
 use crate::mesh::MeshHit;
 use crate::ray::{
     base_colour, first_surface_through, lit, mesh_point, shadow_ray, FirstSurface, RayCaster,
@@ -18,7 +18,6 @@ use crate::ray::{
 use crate::render::{Frame, Renderer};
 use crate::sampling::{Stats, Strategy};
 use crate::scene::Scene;
-use crate::tiles::{Tile, TileResult};
 use crate::transfer::Mode;
 
 /// A view one frame over ranks cannot render: what it has, and what to do instead.
@@ -139,7 +138,7 @@ fn to_bytes(words: &[f64]) -> Vec<u8> {
 }
 
 fn words(bytes: &[u8], rank: usize, per: usize) -> Result<Vec<f64>, PartError> {
-    if bytes.len() % (8 * per) != 0 {
+    if !bytes.len().is_multiple_of(8 * per) {
         return Err(PartError {
             rank,
             what: format!(
@@ -162,8 +161,13 @@ enum Seen {
     Nothing,
     Mesh(MeshHit),
     /// The nearest crossing: rank, index in that rank's message.
-    Surface(usize, usize),
+    Surface(u32, u32),
 }
+
+/// What the clip planes and meshes make of a camera ray (at rank 0).
+const CLIPPED: u8 = 0;
+const OPEN: u8 = 1;
+const MESH: u8 = 2;
 
 /// Renders one frame of `scene` as rank `ex.rank()` of `ex.size()`, searching the regions
 /// `owned` marks ([`super::owned_regions`]). Collective: every rank calls it with the same
@@ -184,24 +188,47 @@ pub fn render_part(
     let n_rays = w as usize * h as usize * spp as usize;
     let ray_index = |x: u32, y: u32, s: u32| (((y * w + x) * spp) + s) as usize;
     pool.install(|| scene.accel.prepare(vol, scene.params.tf.mode));
+    // The walk steps over the subtrees of the view's active tree that hold none of this
+    // rank's regions.
+    let nodes = scene.accel.active_tree(vol).map(|t| t.owned_nodes(owned));
+    let nodes = nodes.as_deref();
 
     // 1. The first crossing of every ray in this rank's regions.
     struct Row {
         crossings: Vec<f64>,
         touched: Vec<u32>,
         stats: Stats,
+        /// At rank 0, per ray: whether the clip planes keep nothing of it, keep it, or
+        /// keep it and a mesh is met (then the next of `meshes`): the composite needs
+        /// them without tracing the meshes again.
+        kinds: Vec<u8>,
+        meshes: Vec<MeshHit>,
     }
-    let rows: Vec<Row> = pool.install(|| {
+    let root = ex.rank() == 0;
+    let mut rows: Vec<Row> = pool.install(|| {
         (0..h)
             .into_par_iter()
             .map(|y| {
                 let mut caster = RayCaster::new(scene);
-                caster.restrict(owned);
+                caster.restrict(owned, nodes);
                 let mut crossings = Vec::new();
+                let mut kinds = Vec::new();
+                let mut meshes = Vec::new();
                 for x in 0..w {
                     for s in 0..spp {
                         let (ray, jit) = caster.camera_ray(x, y, s);
-                        let Some(bounds) = caster.bounds(&ray) else {
+                        let bounds = caster.bounds(&ray);
+                        if root {
+                            kinds.push(match bounds.map(|b| b.mesh) {
+                                None => CLIPPED,
+                                Some(None) => OPEN,
+                                Some(Some(m)) => {
+                                    meshes.push(m);
+                                    MESH
+                                }
+                            });
+                        }
+                        let Some(bounds) = bounds else {
                             continue;
                         };
                         let Some(p) = caster.first_crossing(&ray, &bounds, jit) else {
@@ -225,6 +252,8 @@ pub fn render_part(
                     crossings,
                     touched,
                     stats: caster.stats(),
+                    kinds,
+                    meshes,
                 }
             })
             .collect()
@@ -232,7 +261,11 @@ pub fn render_part(
     let mut stats = Stats::default();
     let mut touched = vec![false; vol.region_count()];
     let mut mine = Vec::new();
-    for row in &rows {
+    let mut kinds = Vec::with_capacity(if root { n_rays } else { 0 });
+    let mut meshes = Vec::new();
+    for row in &mut rows {
+        kinds.append(&mut row.kinds);
+        meshes.append(&mut row.meshes);
         stats += row.stats;
         mine.extend_from_slice(&row.crossings);
         for &r in &row.touched {
@@ -248,9 +281,9 @@ pub fn render_part(
 
     // At rank 0: the nearest crossing of each ray, and what every ray sees.
     let mut found: Vec<Vec<f64>> = Vec::new();
-    let mut seen: Vec<Seen> = Vec::new();
+    let mut best = Vec::new();
     if let Some(parts) = gathered {
-        let mut best = vec![(f64::INFINITY, usize::MAX, 0usize); n_rays];
+        best = vec![(f64::INFINITY, u32::MAX, 0u32); n_rays];
         for (rank, bytes) in parts.iter().enumerate() {
             let part = words(bytes, rank, CROSSING_WORDS)?;
             for (k, rec) in part.chunks_exact(CROSSING_WORDS).enumerate() {
@@ -265,38 +298,38 @@ pub fn render_part(
                 };
                 // The nearest; on a tie the lower rank's.
                 if t < b.0 {
-                    *b = (t, rank, k);
+                    *b = (t, rank as u32, k as u32);
                 }
             }
             found.push(part);
         }
-        seen = pool.install(|| {
-            (0..h)
-                .into_par_iter()
-                .flat_map_iter(|y| {
-                    let mut caster = RayCaster::new(scene);
-                    let best = &best;
-                    (0..w)
-                        .flat_map(move |x| (0..spp).map(move |s| (x, s)))
-                        .map(move |(x, s)| {
-                            let i = ray_index(x, y, s);
-                            let (ray, _) = caster.camera_ray(x, y, s);
-                            let Some(bounds) = caster.bounds(&ray) else {
-                                return Seen::Nothing;
-                            };
-                            match (best[i], bounds.mesh) {
-                                ((_, rank, k), _) if rank != usize::MAX => Seen::Surface(rank, k),
-                                (_, Some(m)) => Seen::Mesh(m),
-                                _ => Seen::Nothing,
-                            }
-                        })
-                        .collect::<Vec<_>>()
-                })
-                .collect()
-        });
     }
-    let crossing = |rank: usize, k: usize| {
-        Crossing::decode(&found[rank][k * CROSSING_WORDS..(k + 1) * CROSSING_WORDS])
+    let crossing = |rank: u32, k: u32| {
+        let k = k as usize;
+        Crossing::decode(&found[rank as usize][k * CROSSING_WORDS..(k + 1) * CROSSING_WORDS])
+    };
+    // Where each ray's mesh hit is in `meshes` (only with meshes).
+    let mesh_of: Vec<u32> = if root && !meshes.is_empty() {
+        let mut next = 0u32;
+        kinds
+            .iter()
+            .map(|&k| {
+                let i = next;
+                if k == MESH {
+                    next += 1;
+                }
+                i
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
+    // What ray `i` sees, at rank 0.
+    let seen = |i: usize| match (kinds[i], best[i]) {
+        (CLIPPED, _) => Seen::Nothing,
+        (_, (_, rank, k)) if rank != u32::MAX => Seen::Surface(rank, k),
+        (MESH, _) => Seen::Mesh(meshes[mesh_of[i] as usize]),
+        _ => Seen::Nothing,
     };
 
     // 2. Shadow rays: rank 0 sends those that reach the volume, every rank says whether
@@ -315,7 +348,7 @@ pub fn render_part(
                     for s in 0..spp {
                         let i = ray_index(x, y, s);
                         let (ray, _) = caster.camera_ray(x, y, s);
-                        let (p, n) = match seen[i] {
+                        let (p, n) = match seen(i) {
                             Seen::Nothing => continue,
                             Seen::Mesh(m) => mesh_point(&ray, &m),
                             Seen::Surface(rank, k) => {
@@ -346,7 +379,7 @@ pub fn render_part(
                 .par_chunks(SHADOW_WORDS * 1024)
                 .flat_map_iter(|chunk| {
                     let mut caster = RayCaster::new(scene);
-                    caster.restrict(owned);
+                    caster.restrict(owned, nodes);
                     let a: Vec<u8> = chunk
                         .chunks_exact(SHADOW_WORDS)
                         .map(|q| {
@@ -403,80 +436,81 @@ pub fn render_part(
     let frame = (ex.rank() == 0).then(|| {
         let bg = st.background.map(f64::from);
         let n_lights = if shadows { lights.len() } else { 0 };
-        let pixels: Vec<([f64; 3], u32, FirstSurface)> = pool.install(|| {
+        // Each row's mean colours, hit counts, depths and surface values: what the film
+        // of one process resolves to, per pixel the same sum in sample order.
+        type Row = (Vec<[f32; 3]>, Vec<u32>, Vec<f32>, Vec<f32>);
+        let rows: Vec<Row> = pool.install(|| {
             (0..h)
                 .into_par_iter()
-                .flat_map_iter(|y| {
+                .map(|y| {
                     let caster = RayCaster::new(scene);
-                    let (seen, vis) = (&seen, &vis);
-                    (0..w)
-                        .map(move |x| {
-                            let mut c = [0.0f64; 3];
-                            let mut hits = 0u32;
-                            let mut first = FirstSurface::NONE;
-                            for s in 0..spp {
-                                let i = ray_index(x, y, s);
-                                let (ray, _) = caster.camera_ray(x, y, s);
-                                let v = &vis[i * n_lights..(i + 1) * n_lights];
-                                let (colour, met) = match seen[i] {
-                                    Seen::Nothing => (bg, FirstSurface::NONE),
-                                    Seen::Mesh(m) => {
-                                        let (p, n) = mesh_point(&ray, &m);
-                                        let met = FirstSurface {
-                                            t: m.t as f32,
-                                            value: f32::NAN,
-                                        };
-                                        (lit(scene, m.colour, n, &ray, p, v), met)
-                                    }
-                                    Seen::Surface(rank, k) => {
-                                        let cr = crossing(rank, k);
-                                        hits += 1;
-                                        let base = base_colour(scene, cr.colour);
-                                        (lit(scene, base, cr.normal, &ray, cr.world, v), cr.first)
-                                    }
-                                };
-                                if s == 0 {
-                                    first = met;
+                    let mut row: Row = (
+                        Vec::with_capacity(w as usize),
+                        Vec::with_capacity(w as usize),
+                        Vec::with_capacity(w as usize),
+                        Vec::with_capacity(w as usize),
+                    );
+                    for x in 0..w {
+                        let mut c = [0.0f64; 3];
+                        let mut hits = 0u32;
+                        let mut first = FirstSurface::NONE;
+                        for s in 0..spp {
+                            let i = ray_index(x, y, s);
+                            let (ray, _) = caster.camera_ray(x, y, s);
+                            let v = &vis[i * n_lights..(i + 1) * n_lights];
+                            let (colour, met) = match seen(i) {
+                                Seen::Nothing => (bg, FirstSurface::NONE),
+                                Seen::Mesh(m) => {
+                                    let (p, n) = mesh_point(&ray, &m);
+                                    let met = FirstSurface {
+                                        t: m.t as f32,
+                                        value: f32::NAN,
+                                    };
+                                    (lit(scene, m.colour, n, &ray, p, v), met)
                                 }
-                                for a in 0..3 {
-                                    c[a] += colour[a];
+                                Seen::Surface(rank, k) => {
+                                    let cr = crossing(rank, k);
+                                    hits += 1;
+                                    let base = base_colour(scene, cr.colour);
+                                    (lit(scene, base, cr.normal, &ray, cr.world, v), cr.first)
                                 }
+                            };
+                            if s == 0 {
+                                first = met;
                             }
-                            (c, hits, first)
-                        })
-                        .collect::<Vec<_>>()
+                            for a in 0..3 {
+                                c[a] += colour[a];
+                            }
+                        }
+                        row.0.push(film::mean_colour(c, spp));
+                        row.1.push(hits);
+                        row.2.push(first.t);
+                        row.3.push(first.value);
+                    }
+                    row
                 })
                 .collect()
         });
-        let hits: u64 = pixels.iter().map(|p| u64::from(p.1)).sum();
-        let result = TileResult {
-            tile: Tile {
-                x0: 0,
-                y0: 0,
-                x1: w,
-                y1: h,
-            },
-            samples: 0..spp,
-            sum: pixels.iter().map(|p| p.0).collect(),
-            hit_samples: pixels.iter().map(|p| p.1).collect(),
-            first: pixels.iter().map(|p| p.2).collect(),
-            stats,
-            rays: n_rays as u64,
-            hits,
-        };
-        let mut film = Film::new(w, h);
-        film.add(&result);
-        Frame {
+        let n = w as usize * h as usize;
+        let mut frame = Frame {
             width: w,
             height: h,
-            rgb: film.resolve(),
-            pixel_hits: film.hit_samples().to_vec(),
-            depth: film.depth().to_vec(),
-            surface_values: film.surface_values().to_vec(),
+            rgb: Vec::with_capacity(n),
+            pixel_hits: Vec::with_capacity(n),
+            depth: Vec::with_capacity(n),
+            surface_values: Vec::with_capacity(n),
             stats,
             rays: n_rays as u64,
-            hits,
+            hits: 0,
+        };
+        for (rgb, hits, depth, values) in rows {
+            frame.rgb.extend(rgb);
+            frame.pixel_hits.extend(hits);
+            frame.depth.extend(depth);
+            frame.surface_values.extend(values);
         }
+        frame.hits = frame.pixel_hits.iter().map(|&h| u64::from(h)).sum();
+        frame
     });
 
     // Every rank's report at rank 0.
@@ -530,7 +564,7 @@ mod tests {
     use crate::volume::Volume;
 
     /// The frame over `n` in-process ranks, and each rank's report.
-    fn over_ranks(scene: &Scene, vol: &Volume, n: usize) -> (Frame, Vec<RankReport>) {
+    fn over_ranks(scene: &Scene, n: usize) -> (Frame, Vec<RankReport>) {
         let owned: Vec<Vec<bool>> = (0..n).map(|r| owned_regions(scene, r, n)).collect();
         let mut out = std::thread::scope(|s| {
             let handles: Vec<_> = local_ranks(n)
@@ -602,7 +636,7 @@ mod tests {
                 serial.hits
             );
             for n in 1..=4 {
-                let (frame, reports) = over_ranks(&scene, &vol, n);
+                let (frame, reports) = over_ranks(&scene, n);
                 assert_eq!(frame.rgb, serial.rgb, "{case}, {n} ranks: colours");
                 assert_eq!(
                     bits(&frame.depth),

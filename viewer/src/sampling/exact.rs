@@ -31,13 +31,15 @@ impl Tracer<'_> {
         match tree {
             Some(tree) => {
                 let mut gaps = Gaps::new(vol, &o, &d, t0, t1);
-                tree.segments(
+                let share = self.owned.zip(self.owned_nodes).map(|(r, n)| (n, r));
+                tree.segments_in(
                     vol,
                     start,
                     o,
                     d,
                     t0,
                     t1,
+                    share,
                     &mut stack,
                     |seg, lattices, inexact, mask| {
                         gaps.before(self, &seg);

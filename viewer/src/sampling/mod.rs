@@ -287,6 +287,9 @@ pub struct Tracer<'v> {
     /// One frame over ranks (`crate::parts`): the regions (by index) this rank searches;
     /// the others are another rank's, and a walk steps over them. `None`: all.
     owned: Option<&'v [bool]>,
+    /// With `owned`, per inner node of the active tree, whether it leads to an owned
+    /// region (`ActiveTree::owned_nodes`): the walk steps over the others' subtrees.
+    owned_nodes: Option<&'v [bool]>,
     /// The regions whose values this tracer read while `owned` is set (a region may be
     /// listed more than once): what a rank's report counts.
     pub(crate) touched: Vec<u32>,
@@ -319,14 +322,16 @@ impl<'v> Tracer<'v> {
             bricks: Vec::new(),
             bricks_of: None,
             owned: None,
+            owned_nodes: None,
             touched: Vec::new(),
         }
     }
 
     /// Searches only the regions `owned` marks (one rank's share of a frame over ranks,
     /// see `crate::parts`); the iso search is the only one that supports it.
-    pub(crate) fn restrict(&mut self, owned: &'v [bool]) {
+    pub(crate) fn restrict(&mut self, owned: &'v [bool], nodes: Option<&'v [bool]>) {
         self.owned = Some(owned);
+        self.owned_nodes = nodes;
     }
 
     /// Whether region `r` is this tracer's to search.

@@ -251,7 +251,7 @@ fn run_over_ranks(
         ranks.agree(parts::check(scene, ranks.size()).map_err(anyhow::Error::from))?;
         let owned = parts::owned_regions(scene, ranks.rank(), ranks.size());
         let part = parts::render_part(scene, &owned, ranks, renderer);
-        Ok(part.with_context(|| path.display().to_string())?)
+        part.with_context(|| path.display().to_string())
     };
     if args.view.wants_visible_range() {
         // Rank 0 fits its colour map to what a first frame shows; only rank 0 maps colours.
