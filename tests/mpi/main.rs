@@ -336,6 +336,45 @@ fn one_frame_over_ranks_equals_one_process_byte_for_byte() {
     }
 }
 
+/// Dvr over 2 and 3 ranks: every channel of the PNG within one 8-bit level of one
+/// process's (each rank ends its rays' runs on its own opacity, not the whole ray's).
+#[test]
+fn dvr_over_ranks_is_within_one_level_of_one_process() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let sample = root().join("data/wake_small.qbk").display().to_string();
+    let sphere = root().join("data/sphere.obj").display().to_string();
+    let view = exe("qbricks-view");
+    let flags = [
+        "--mode", "dvr", "--mesh", &sphere, "--width", "160", "--height", "120",
+    ];
+    let mut one: Vec<&str> = vec![&view, "render", &sample, "-o", "one.png"];
+    one.extend(flags);
+    let o = run(d, 0, &one);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let want = image::open(d.join("one.png")).unwrap().to_rgb8();
+    for n in [2, 3] {
+        let out = format!("np{n}.png");
+        let mut args: Vec<&str> = vec![&view, "render", &sample, "-o", &out];
+        args.extend(flags);
+        let o = run(d, n, &args);
+        assert!(o.status.success(), "{n} ranks: {}", text(&o.stderr));
+        let got = image::open(d.join(&out)).unwrap().to_rgb8();
+        assert_eq!(got.dimensions(), want.dimensions());
+        let worst = got
+            .as_raw()
+            .iter()
+            .zip(want.as_raw())
+            .map(|(a, b)| (i32::from(*a) - i32::from(*b)).abs())
+            .max()
+            .unwrap();
+        assert!(
+            worst <= 1,
+            "{n} ranks: a channel {worst} levels from one process's"
+        );
+    }
+}
+
 /// What one frame over ranks cannot render alike is refused by rank 0 with the reason,
 /// and nothing is written; without mpirun the same binary renders it.
 #[test]
@@ -345,7 +384,7 @@ fn views_one_frame_over_ranks_cannot_render_are_refused_and_run_alone() {
     let sample = root().join("data/wake_small.qbk").display().to_string();
     let view = exe("qbricks-view");
     for (flags, says) in [
-        (vec!["--mode", "dvr"], "dvr mode"),
+        (vec!["--mode", "dvr", "--shadows"], "dvr with shadows"),
         (
             vec!["--pixel", "3,3"],
             "--pixel (one ray, explained) runs in one process",

@@ -273,6 +273,30 @@ impl<'s> RayCaster<'s> {
         self.surface_of(0, ray, bounds.t_lo, bounds.t_max, jit)
     }
 
+    /// Dvr of `ray` within `bounds` through the regions the caster is restricted to, as
+    /// runs (see [`Tracer::dvr_runs`]); shadows are not cast (a view over ranks has none).
+    pub(crate) fn dvr_runs(
+        &mut self,
+        ray: &Ray,
+        bounds: &RayBounds,
+        jit: f64,
+        runs: &mut Vec<(f64, Accum)>,
+    ) {
+        let scene = self.scene;
+        let o = scene.vol.to_local(ray.origin.to_array());
+        let d = ray.dir.to_array();
+        let (main, shadow, more) = (&mut self.main, &mut self.shadow, &mut self.more);
+        main.dvr_runs(
+            o,
+            d,
+            bounds.t_lo,
+            bounds.t_max,
+            jit,
+            &mut |p, e| shade_sample(scene, shadow, more, false, ray, p, e),
+            runs,
+        );
+    }
+
     /// Whether the view's first iso-surface lies on the volume part of a shadow ray.
     pub(crate) fn shadow_occluded(&mut self, q: &VolumeShadow) -> bool {
         self.shadow.iso_occluded(q.o, q.d, q.t0, q.t1)

@@ -10,6 +10,7 @@ use serde::{Deserialize, Serialize};
 
 use super::Exchange;
 use crate::film;
+use crate::integrate::Accum;
 use crate::mesh::MeshHit;
 use crate::ray::{
     base_colour, first_surface_through, lit, mesh_point, shadow_ray, FirstSurface, RayCaster,
@@ -68,13 +69,16 @@ pub struct RanksReport {
     pub ranks: Vec<RankReport>,
 }
 
-/// Refuses a view that one frame over `ranks` ranks cannot render bit for bit as one
-/// process does.
+/// Refuses a view that one frame over `ranks` ranks cannot render as one process does:
+/// bit for bit (iso), or within what early ray termination leaves (dvr: at most 1/512 of
+/// a colour, under one 8-bit level).
 pub fn check(scene: &Scene, ranks: usize) -> Result<(), Unsupported> {
-    let what = if scene.params.tf.mode == Mode::Dvr {
-        Some("dvr mode".to_string())
-    } else if scene.params.strategy != Strategy::Exact {
-        Some(format!("the `{}` strategy", scene.params.strategy.as_str()))
+    let dvr = scene.params.tf.mode == Mode::Dvr;
+    let strategy = scene.params.strategy;
+    let what = if dvr && scene.state.shadows {
+        Some("dvr with shadows".to_string())
+    } else if (dvr && strategy == Strategy::Bisect) || (!dvr && strategy != Strategy::Exact) {
+        Some(format!("the `{}` strategy", strategy.as_str()))
     } else if !scene.is_single_opaque() {
         Some("several iso-surfaces, a translucent one or slices".to_string())
     } else {
@@ -89,6 +93,9 @@ pub fn check(scene: &Scene, ranks: usize) -> Result<(), Unsupported> {
 /// Words of one crossing in a rank's message: ray, t, world point, normal, colour value,
 /// first-surface depth and value.
 const CROSSING_WORDS: usize = 12;
+/// Words of one dvr run in a rank's message: ray, distance of its first sample, colour
+/// (premultiplied), transmittance.
+const RUN_WORDS: usize = 6;
 /// Words of one shadow ray rank 0 sends: origin, direction, t0, t1.
 const SHADOW_WORDS: usize = 8;
 
@@ -162,6 +169,52 @@ enum Seen {
     Mesh(MeshHit),
     /// The nearest crossing: rank, index in that rank's message.
     Surface(u32, u32),
+    /// Dvr: the ranks' runs composited, and the mesh behind them.
+    Dvr(Accum, Option<MeshHit>),
+}
+
+/// The dvr runs of every rank (`parts[rank]`: records of [`RUN_WORDS`], ray after ray, each
+/// ray's front to back) composited per ray in the order of their first samples: runs lie on
+/// disjoint stretches of the ray (each rank's regions are KD subtrees), so that order is
+/// the ray's.
+fn composite_runs(parts: &[Vec<f64>], n_rays: usize) -> Result<Vec<Accum>, PartError> {
+    let mut out = vec![Accum::default(); n_rays];
+    let mut at = vec![0usize; parts.len()];
+    let mut here: Vec<(f64, Accum)> = Vec::new();
+    for (i, slot) in out.iter_mut().enumerate() {
+        here.clear();
+        for (rank, part) in parts.iter().enumerate() {
+            while let Some(rec) = part.get(at[rank] * RUN_WORDS..(at[rank] + 1) * RUN_WORDS) {
+                if rec[0] != i as f64 {
+                    break;
+                }
+                let acc = Accum {
+                    rgb: [rec[2], rec[3], rec[4]],
+                    transmittance: rec[5],
+                };
+                here.push((rec[1], acc));
+                at[rank] += 1;
+            }
+        }
+        here.sort_by(|a, b| a.0.total_cmp(&b.0));
+        for (_, run) in &here {
+            slot.then(run);
+        }
+    }
+    for (rank, part) in parts.iter().enumerate() {
+        if at[rank] * RUN_WORDS != part.len() {
+            return Err(PartError {
+                rank,
+                what: format!(
+                    "lists runs out of ray order or outside the frame's {n_rays} rays \
+                     (record {} of {})",
+                    at[rank],
+                    part.len() / RUN_WORDS
+                ),
+            });
+        }
+    }
+    Ok(out)
 }
 
 /// What the clip planes and meshes make of a camera ray (at rank 0).
@@ -193,7 +246,10 @@ pub fn render_part(
     let nodes = scene.accel.active_tree(vol).map(|t| t.owned_nodes(owned));
     let nodes = nodes.as_deref();
 
-    // 1. The first crossing of every ray in this rank's regions.
+    // 1. The first crossing of every ray in this rank's regions (iso), or its stretches
+    // through them composited (dvr).
+    let dvr = scene.params.tf.mode == Mode::Dvr;
+    let per = if dvr { RUN_WORDS } else { CROSSING_WORDS };
     struct Row {
         crossings: Vec<f64>,
         touched: Vec<u32>,
@@ -214,6 +270,7 @@ pub fn render_part(
                 let mut crossings = Vec::new();
                 let mut kinds = Vec::new();
                 let mut meshes = Vec::new();
+                let mut runs = Vec::new();
                 for x in 0..w {
                     for s in 0..spp {
                         let (ray, jit) = caster.camera_ray(x, y, s);
@@ -231,6 +288,17 @@ pub fn render_part(
                         let Some(bounds) = bounds else {
                             continue;
                         };
+                        if dvr {
+                            runs.clear();
+                            caster.dvr_runs(&ray, &bounds, jit, &mut runs);
+                            for (t, acc) in &runs {
+                                crossings.push(ray_index(x, y, s) as f64);
+                                crossings.push(*t);
+                                crossings.extend(acc.rgb);
+                                crossings.push(acc.transmittance);
+                            }
+                            continue;
+                        }
                         let Some(p) = caster.first_crossing(&ray, &bounds, jit) else {
                             continue;
                         };
@@ -279,13 +347,22 @@ pub fn render_part(
     let gathered = ex.gather(&to_bytes(&mine));
     drop(mine);
 
-    // At rank 0: the nearest crossing of each ray, and what every ray sees.
+    // At rank 0: the nearest crossing of each ray (iso), or its runs composited in ray
+    // order (dvr).
     let mut found: Vec<Vec<f64>> = Vec::new();
     let mut best = Vec::new();
-    if let Some(parts) = gathered {
+    let mut composited: Vec<Accum> = Vec::new();
+    if let (true, Some(parts)) = (dvr, &gathered) {
+        let parts = parts
+            .iter()
+            .enumerate()
+            .map(|(rank, b)| words(b, rank, per))
+            .collect::<Result<Vec<_>, _>>()?;
+        composited = composite_runs(&parts, n_rays)?;
+    } else if let Some(parts) = gathered {
         best = vec![(f64::INFINITY, u32::MAX, 0u32); n_rays];
         for (rank, bytes) in parts.iter().enumerate() {
-            let part = words(bytes, rank, CROSSING_WORDS)?;
+            let part = words(bytes, rank, per)?;
             for (k, rec) in part.chunks_exact(CROSSING_WORDS).enumerate() {
                 let (i, t) = (rec[0], rec[1]);
                 let Some(b) = (i >= 0.0 && (i as usize) < n_rays && i.fract() == 0.0)
@@ -325,11 +402,15 @@ pub fn render_part(
         Vec::new()
     };
     // What ray `i` sees, at rank 0.
-    let seen = |i: usize| match (kinds[i], best[i]) {
-        (CLIPPED, _) => Seen::Nothing,
-        (_, (_, rank, k)) if rank != u32::MAX => Seen::Surface(rank, k),
-        (MESH, _) => Seen::Mesh(meshes[mesh_of[i] as usize]),
-        _ => Seen::Nothing,
+    let mesh_at = |i: usize| (kinds[i] == MESH).then(|| meshes[mesh_of[i] as usize]);
+    let seen = |i: usize| match kinds[i] {
+        CLIPPED => Seen::Nothing,
+        _ if dvr => Seen::Dvr(composited[i], mesh_at(i)),
+        _ => match (best[i], mesh_at(i)) {
+            ((_, rank, k), _) if rank != u32::MAX => Seen::Surface(rank, k),
+            (_, Some(m)) => Seen::Mesh(m),
+            _ => Seen::Nothing,
+        },
     };
 
     // 2. Shadow rays: rank 0 sends those that reach the volume, every rank says whether
@@ -349,7 +430,8 @@ pub fn render_part(
                         let i = ray_index(x, y, s);
                         let (ray, _) = caster.camera_ray(x, y, s);
                         let (p, n) = match seen(i) {
-                            Seen::Nothing => continue,
+                            // A dvr view over ranks has no shadows.
+                            Seen::Nothing | Seen::Dvr(..) => continue,
                             Seen::Mesh(m) => mesh_point(&ray, &m),
                             Seen::Surface(rank, k) => {
                                 let c = crossing(rank, k);
@@ -459,6 +541,24 @@ pub fn render_part(
                             let (ray, _) = caster.camera_ray(x, y, s);
                             let v = &vis[i * n_lights..(i + 1) * n_lights];
                             let (colour, met) = match seen(i) {
+                                Seen::Dvr(acc, mesh) => {
+                                    if acc.alpha() >= 0.01 {
+                                        hits += 1;
+                                    }
+                                    let (back, met) = match mesh {
+                                        Some(m) => {
+                                            let (p, n) = mesh_point(&ray, &m);
+                                            let met = FirstSurface {
+                                                t: m.t as f32,
+                                                value: f32::NAN,
+                                            };
+                                            (lit(scene, m.colour, n, &ray, p, v), met)
+                                        }
+                                        None => (bg, FirstSurface::NONE),
+                                    };
+                                    let back = if acc.done() { [0.0; 3] } else { back };
+                                    (acc.over(back), met)
+                                }
                                 Seen::Nothing => (bg, FirstSurface::NONE),
                                 Seen::Mesh(m) => {
                                     let (p, n) = mesh_point(&ray, &m);
@@ -662,6 +762,87 @@ mod tests {
         }
     }
 
+    /// Dvr over 1 to 4 ranks: every 8-bit channel within one level of one process's
+    /// (early ray termination is per rank), with a mesh, a clip plane, jittered samples, and
+    /// the pre-integrated (`uniform`) and point-sampled `paper` strategies.
+    #[test]
+    fn dvr_over_ranks_is_within_one_level_of_one_process() {
+        let shell = |p: [f64; 3]| {
+            let r2: f64 = (0..3).map(|a| (p[a] - [10.3, 11.1, 9.7][a]).powi(2)).sum();
+            r2.sqrt() + 0.8 * (0.7 * p[0]).sin() * (0.5 * p[1]).cos()
+        };
+        let file = crate::testvol::nested(12, [0.0; 3], &[("r", &shell)], 4);
+        let view = crate::testvol::open(&file).expect("opens");
+        let vol = Volume::new(&view).expect("volume");
+        let sphere = Meshes::from_meshes(&[icosphere(glam::DVec3::new(12.0, 12.0, 12.0), 3.0, 2)]);
+        let none = Meshes::empty();
+        let level = |v: f32| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as i32;
+        for (case, preintegrated, strategy, with_mesh, clip, spp) in [
+            ("pre-integrated", true, Strategy::Uniform, false, false, 1),
+            (
+                "paper, mesh, clipped, 2 samples",
+                false,
+                Strategy::Paper,
+                true,
+                true,
+                2,
+            ),
+        ] {
+            let mut state = ViewState::default_for_volume(&vol);
+            state.mode = Mode::Dvr;
+            state.iso = 6.0;
+            state.transfer.sigma = 0.6;
+            state.transfer.peak_opacity = 0.6;
+            state.preintegrated = preintegrated;
+            state.strategy = strategy;
+            state.width = 48;
+            state.height = 40;
+            state.spp = spp;
+            if clip {
+                state.clip = vec![Plane {
+                    origin: [12.0, 12.0, 12.5],
+                    normal: [0.3, 0.0, -1.0],
+                }];
+            }
+            let meshes = if with_mesh { &sphere } else { &none };
+            let scene = Scene::new(&vol, &state, meshes).expect("scene");
+            check(&scene, 2).expect("a view ranks render");
+            let serial = crate::render::render(&scene);
+            assert!(
+                serial.hits > 100,
+                "{case}: the band shows ({} hits)",
+                serial.hits
+            );
+            for n in 1..=4 {
+                let (frame, reports) = over_ranks(&scene, n);
+                let worst = frame
+                    .rgb
+                    .iter()
+                    .zip(&serial.rgb)
+                    .flat_map(|(a, b)| (0..3).map(move |c| (level(a[c]) - level(b[c])).abs()))
+                    .max()
+                    .unwrap_or(0);
+                assert!(worst <= 1, "{case}, {n} ranks: {worst} levels apart");
+                if n == 1 {
+                    assert_eq!(frame.rgb, serial.rgb, "{case}: one rank is one process");
+                }
+                assert_eq!(
+                    bits(&frame.depth),
+                    bits(&serial.depth),
+                    "{case}, {n}: depth"
+                );
+                assert_eq!(frame.rays, serial.rays);
+                assert_eq!(frame.hits, serial.hits, "{case}, {n}: hits");
+                if n > 1 {
+                    assert!(
+                        reports.iter().all(|r| r.stats.samples > 0),
+                        "{case}: {reports:?}"
+                    );
+                }
+            }
+        }
+    }
+
     #[test]
     fn views_ranks_cannot_render_alike_are_refused_with_the_reason() {
         let f = |p: [f64; 3]| p[0];
@@ -671,9 +852,16 @@ mod tests {
         let none = Meshes::empty();
         let mut state = ViewState::default_for_volume(&vol);
         state.mode = Mode::Dvr;
+        state.shadows = true;
         let scene = Scene::new(&vol, &state, &none).expect("scene");
-        let e = check(&scene, 2).expect_err("dvr");
-        assert!(e.to_string().contains("dvr mode"), "{e}");
+        let e = check(&scene, 2).expect_err("dvr with shadows");
+        assert!(e.to_string().contains("dvr with shadows"), "{e}");
+        state.shadows = false;
+        state.preintegrated = false;
+        state.strategy = Strategy::Bisect;
+        let scene = Scene::new(&vol, &state, &none).expect("scene");
+        let e = check(&scene, 2).expect_err("dvr bisect");
+        assert!(e.to_string().contains("`bisect` strategy"), "{e}");
         let mut state = ViewState::default_for_volume(&vol);
         state.iso_opacity = 0.5;
         let scene = Scene::new(&vol, &state, &none).expect("scene");

@@ -21,7 +21,44 @@ impl Tracer<'_> {
         jitter: f64,
         shade: &mut S,
     ) -> Accum {
+        self.dvr_in(o, d, t0, t1, jitter, shade, None)
+    }
+
+    /// [`Tracer::dvr`] of one rank's share (the regions the tracer is
+    /// [restricted](Tracer::restrict) to; not `bisect`): every stretch of the ray through
+    /// the share, composited on its own, with the distance of its first sample, into
+    /// `runs`. The samples are those of the whole ray: the positions advance through the
+    /// other ranks' regions as they would be sampled, and where a stretch of this rank's
+    /// follows one of theirs directly, the last sample there (read from their data) is the
+    /// front of the first pre-integrated segment.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn dvr_runs<S: FnMut(&[f64; 3], &Eval) -> [f64; 3]>(
+        &mut self,
+        o: [f64; 3],
+        d: [f64; 3],
+        t0: f64,
+        t1: f64,
+        jitter: f64,
+        shade: &mut S,
+        runs: &mut Vec<(f64, Accum)>,
+    ) {
+        self.dvr_in(o, d, t0, t1, jitter, shade, Some(runs));
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn dvr_in<S: FnMut(&[f64; 3], &Eval) -> [f64; 3]>(
+        &mut self,
+        o: [f64; 3],
+        d: [f64; 3],
+        t0: f64,
+        t1: f64,
+        jitter: f64,
+        shade: &mut S,
+        mut runs: Option<&mut Vec<(f64, Accum)>>,
+    ) -> Accum {
         let mut acc = Accum::default();
+        // With `runs`: where the current run's first sample lies.
+        let mut run_start: Option<f64> = None;
         let Some((t0, t1)) = self.clip(&o, &d, t0, t1) else {
             return acc;
         };
@@ -69,6 +106,35 @@ impl Tracer<'_> {
                     prev = Some((seg.t1, class, false));
                 }
                 return true;
+            }
+            if !self.owns(seg.region) {
+                // Another rank's samples: the positions advance as they are taken there.
+                let mut pos = Positions::new(
+                    params.strategy,
+                    seg.t0,
+                    seg.t1,
+                    params.step * w,
+                    jitter,
+                    t_next,
+                );
+                let last = pos.by_ref().last();
+                t_next = pos.next_t();
+                if let Some((t, _)) = last {
+                    front = match params.preintegrated {
+                        Some(_) => {
+                            self.touch(seg.region);
+                            vol.eval_value(r, at(&o, &d, t), params.field)
+                        }
+                        None => None,
+                    };
+                }
+                if let (Some(runs), Some(t)) = (runs.as_deref_mut(), run_start.take()) {
+                    runs.push((t, std::mem::take(&mut acc)));
+                }
+                return true;
+            }
+            if runs.is_some() {
+                self.touch(seg.region);
             }
             if params.strategy == Strategy::Bisect && prev.is_none_or(|p| !p.2) {
                 // Entry sample: a band crossing between skipped space (or the clipped ray
@@ -137,6 +203,7 @@ impl Tracer<'_> {
                 });
                 if a > 0.0 {
                     if let Some(e) = vol.eval(r, p, params.field, params.colour_field) {
+                        run_start.get_or_insert(t);
                         acc.add(shade(&p, &e), a);
                         if acc.done() {
                             return false;
@@ -151,6 +218,9 @@ impl Tracer<'_> {
             true
         });
         self.stack = stack;
+        if let (Some(runs), Some(t)) = (runs, run_start) {
+            runs.push((t, std::mem::take(&mut acc)));
+        }
         acc
     }
 
