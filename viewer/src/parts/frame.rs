@@ -55,6 +55,9 @@ pub struct RankReport {
     pub bricks_owned: u64,
     /// The bricks whose values its rays read (the regions it searched or evaluated a hit in).
     pub bricks_touched: u64,
+    /// Bytes of its messages to rank 0 (crossings or dvr runs, shadow answers; rank 0's
+    /// own stay in place): what the compositing moves.
+    pub bytes_sent: u64,
     /// Its rays' work counters.
     pub stats: Stats,
 }
@@ -344,7 +347,10 @@ pub fn render_part(
     }
     drop(rows);
     let mut trace_ms = start.elapsed().as_secs_f64() * 1e3;
-    let gathered = ex.gather(&to_bytes(&mine));
+    let message = to_bytes(&mine);
+    let mut bytes_sent = message.len() as u64;
+    let gathered = ex.gather(&message);
+    drop(message);
     drop(mine);
 
     // At rank 0: the nearest crossing of each ray (iso), or its runs composited in ray
@@ -493,6 +499,7 @@ pub fn render_part(
             })
             .collect();
         trace_ms += t_answer.elapsed().as_secs_f64() * 1e3;
+        bytes_sent += answers.len() as u64;
         if let Some(all) = ex.gather(&answers) {
             for (rank, a) in all.iter().enumerate() {
                 if a.len() != pending.len() {
@@ -633,6 +640,7 @@ pub fn render_part(
         regions: owned.iter().filter(|o| **o).count() as u64,
         bricks_owned: bricks(owned),
         bricks_touched: bricks(&touched),
+        bytes_sent,
         stats,
     };
     let reports = ex.gather(&serde_json::to_vec(&report).unwrap_or_default());
