@@ -44,6 +44,7 @@ fn both(vol: &Volume, iso: f64, o: [f64; 3], d: [f64; 3], t: (f64, f64)) -> [Vec
         d,
         t.0,
         t.1,
+        None,
         &mut stack,
         |s, l, inexact, _| {
             let want = Lattices::of(vol, s.region as usize);
@@ -149,6 +150,7 @@ fn no_region_holds_the_value_so_the_tree_is_empty_and_trees_are_kept() {
             [1.0, 1.0, 1.0],
             0.0,
             1e3,
+            None,
             &mut stack,
             |_, _, _, _| {
                 n += 1;
@@ -184,6 +186,7 @@ fn from(vol: &Volume, tree: &ActiveTree, start: Start, o: [f64; 3], d: [f64; 3])
         d,
         0.0,
         f64::INFINITY,
+        None,
         &mut stack,
         |s, _, _, _| {
             out.push((s.region, s.t0.to_bits(), s.t1.to_bits()));

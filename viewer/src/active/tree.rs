@@ -71,6 +71,13 @@ pub(super) struct Walk {
 }
 
 impl Walk {
+    /// Whether leaf reference `c` holds a region `owned` marks.
+    fn leaf_owned(&self, c: u32, owned: &[bool]) -> bool {
+        self.leaves
+            .get((c & !LEAF_REF) as usize)
+            .is_some_and(|l| owned.get(l.region as usize).copied().unwrap_or(false))
+    }
+
     /// The walk over `nodes` (children before parents, root last).
     pub(super) fn of(nodes: &[ActiveNode]) -> Walk {
         let Some(root) = nodes.last() else {
@@ -230,26 +237,6 @@ impl ActiveTree {
         Start::Root
     }
 
-    /// Calls `f` for every leaf of the tree the ray `o + t d` (local frame) crosses
-    /// within `[t_min, t_max]`, front to back (a whole region, or one part of a region
-    /// where its dual cells can hold the value), with the region's range of the field,
-    /// its cell lattices, whether it has more than are listed, and its dual-cell mask;
-    /// `f` returns `false` to stop. `stack` is scratch space reused between calls.
-    #[allow(clippy::too_many_arguments)]
-    pub(crate) fn segments<F: FnMut(Segment, &[Lattice], bool, Option<&DualMask>) -> bool>(
-        &self,
-        vol: &Volume,
-        start: Start,
-        o: [f64; 3],
-        d: [f64; 3],
-        t_min: f64,
-        t_max: f64,
-        stack: &mut Vec<(u32, f64, f64)>,
-        f: F,
-    ) {
-        self.segments_in(vol, start, o, d, t_min, t_max, None, stack, f)
-    }
-
     /// Per inner node of the walk, whether a leaf under it holds a region `owned` marks:
     /// what [`ActiveTree::segments_in`] needs to step over the rest.
     pub(crate) fn owned_nodes(&self, owned: &[bool]) -> Vec<bool> {
@@ -257,11 +244,6 @@ impl ActiveTree {
         let mut keep = vec![false; walk.inner.len()];
         let Some(root) = walk.root else {
             return keep;
-        };
-        let leaf_owned = |r: u32| {
-            walk.leaves
-                .get((r & !LEAF_REF) as usize)
-                .is_some_and(|l| owned.get(l.region as usize).copied().unwrap_or(false))
         };
         // Post-order: a node is settled once both children are. Each node is pushed at
         // most twice, so a malformed walk cannot loop.
@@ -278,7 +260,7 @@ impl ActiveTree {
             if children_done {
                 keep[r as usize] = node.child.iter().any(|&c| {
                     if c & LEAF_REF != 0 {
-                        leaf_owned(c)
+                        walk.leaf_owned(c, owned)
                     } else {
                         keep.get(c as usize).copied().unwrap_or(false)
                     }
@@ -291,12 +273,18 @@ impl ActiveTree {
         keep
     }
 
-    /// [`ActiveTree::segments`] over the regions of one rank's share (`owned`: the
-    /// [`ActiveTree::owned_nodes`] and the regions it was made from) when given: the
-    /// subtrees without one are stepped over. A segment's bounds come from its leaf's own
-    /// box, not from the path to it, so those of the share are the same as without one.
+    /// Calls `f` for every leaf of the tree the ray `o + t d` (local frame) crosses
+    /// within `[t_min, t_max]`, front to back (a whole region, or one part of a region
+    /// where its dual cells can hold the value), with the region's range of the field,
+    /// its cell lattices, whether it has more than are listed, and its dual-cell mask;
+    /// `f` returns `false` to stop. `stack` is scratch space reused between calls.
+    ///
+    /// With `owned` (one rank's share: the [`ActiveTree::owned_nodes`] and the regions
+    /// they were made from) only the leaves of those regions are listed, and the subtrees
+    /// without one are stepped over. A segment's bounds come from its leaf's own box, not
+    /// from the path to it, so those of the share are the same as without one.
     #[allow(clippy::too_many_arguments)]
-    pub(crate) fn segments_in<F: FnMut(Segment, &[Lattice], bool, Option<&DualMask>) -> bool>(
+    pub(crate) fn segments<F: FnMut(Segment, &[Lattice], bool, Option<&DualMask>) -> bool>(
         &self,
         vol: &Volume,
         start: Start,
@@ -313,9 +301,7 @@ impl ActiveTree {
             None => true,
             Some((nodes, regions)) => {
                 if c & LEAF_REF != 0 {
-                    walk.leaves
-                        .get((c & !LEAF_REF) as usize)
-                        .is_some_and(|l| regions.get(l.region as usize).copied().unwrap_or(false))
+                    walk.leaf_owned(c, regions)
                 } else {
                     nodes.get(c as usize).copied().unwrap_or(false)
                 }

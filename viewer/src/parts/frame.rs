@@ -697,6 +697,38 @@ mod tests {
         out.swap_remove(0).expect("rank 0's frame")
     }
 
+    /// A wavy shell off the centre of two nested levels: it crosses both levels, many
+    /// regions and the level boundary, and shadows itself.
+    fn shell_file() -> format::BrickFile {
+        let shell = |p: [f64; 3]| {
+            let r2: f64 = (0..3).map(|a| (p[a] - [10.3, 11.1, 9.7][a]).powi(2)).sum();
+            r2.sqrt() + 0.8 * (0.7 * p[0]).sin() * (0.5 * p[1]).cos()
+        };
+        crate::testvol::nested(12, [0.0; 3], &[("r", &shell)], 4)
+    }
+
+    /// A sphere inside the shell.
+    fn sphere() -> Meshes {
+        Meshes::from_meshes(&[icosphere(glam::DVec3::new(12.0, 12.0, 12.0), 3.0, 2)])
+    }
+
+    /// A small view of the shell at `spp` samples per pixel, cut by a slanted plane when
+    /// `clip`.
+    fn shell_view(vol: &Volume, clip: bool, spp: u32) -> ViewState {
+        let mut state = ViewState::default_for_volume(vol);
+        state.iso = 6.0;
+        state.width = 48;
+        state.height = 40;
+        state.spp = spp;
+        if clip {
+            state.clip = vec![Plane {
+                origin: [12.0, 12.0, 12.5],
+                normal: [0.3, 0.0, -1.0],
+            }];
+        }
+        state
+    }
+
     fn bits(v: &[f32]) -> Vec<u32> {
         v.iter().map(|x| x.to_bits()).collect()
     }
@@ -706,34 +738,18 @@ mod tests {
     /// surface values and hit counts.
     #[test]
     fn a_frame_over_ranks_equals_one_process_bit_for_bit() {
-        // A wavy shell off the centre: it crosses both levels, many regions and the level
-        // boundary, and shadows itself.
-        let shell = |p: [f64; 3]| {
-            let r2: f64 = (0..3).map(|a| (p[a] - [10.3, 11.1, 9.7][a]).powi(2)).sum();
-            r2.sqrt() + 0.8 * (0.7 * p[0]).sin() * (0.5 * p[1]).cos()
-        };
-        let file = crate::testvol::nested(12, [0.0; 3], &[("r", &shell)], 4);
+        let file = shell_file();
         let view = crate::testvol::open(&file).expect("opens");
         let vol = Volume::new(&view).expect("volume");
-        let sphere = Meshes::from_meshes(&[icosphere(glam::DVec3::new(12.0, 12.0, 12.0), 3.0, 2)]);
+        let sphere = sphere();
         let none = Meshes::empty();
         for (case, shadows, with_mesh, clip, spp) in [
             ("plain", false, false, false, 1),
             ("shadows and mesh", true, true, false, 1),
             ("clipped, 2 samples", true, false, true, 2),
         ] {
-            let mut state = ViewState::default_for_volume(&vol);
-            state.iso = 6.0;
-            state.width = 48;
-            state.height = 40;
+            let mut state = shell_view(&vol, clip, spp);
             state.shadows = shadows;
-            state.spp = spp;
-            if clip {
-                state.clip = vec![Plane {
-                    origin: [12.0, 12.0, 12.5],
-                    normal: [0.3, 0.0, -1.0],
-                }];
-            }
             let meshes = if with_mesh { &sphere } else { &none };
             let scene = Scene::new(&vol, &state, meshes).expect("scene");
             check(&scene, 2).expect("a view ranks render");
@@ -775,14 +791,10 @@ mod tests {
     /// the pre-integrated (`uniform`) and point-sampled `paper` strategies.
     #[test]
     fn dvr_over_ranks_is_within_one_level_of_one_process() {
-        let shell = |p: [f64; 3]| {
-            let r2: f64 = (0..3).map(|a| (p[a] - [10.3, 11.1, 9.7][a]).powi(2)).sum();
-            r2.sqrt() + 0.8 * (0.7 * p[0]).sin() * (0.5 * p[1]).cos()
-        };
-        let file = crate::testvol::nested(12, [0.0; 3], &[("r", &shell)], 4);
+        let file = shell_file();
         let view = crate::testvol::open(&file).expect("opens");
         let vol = Volume::new(&view).expect("volume");
-        let sphere = Meshes::from_meshes(&[icosphere(glam::DVec3::new(12.0, 12.0, 12.0), 3.0, 2)]);
+        let sphere = sphere();
         let none = Meshes::empty();
         let level = |v: f32| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as i32;
         for (case, preintegrated, strategy, with_mesh, clip, spp) in [
@@ -796,22 +808,12 @@ mod tests {
                 2,
             ),
         ] {
-            let mut state = ViewState::default_for_volume(&vol);
+            let mut state = shell_view(&vol, clip, spp);
             state.mode = Mode::Dvr;
-            state.iso = 6.0;
             state.transfer.sigma = 0.6;
             state.transfer.peak_opacity = 0.6;
             state.preintegrated = preintegrated;
             state.strategy = strategy;
-            state.width = 48;
-            state.height = 40;
-            state.spp = spp;
-            if clip {
-                state.clip = vec![Plane {
-                    origin: [12.0, 12.0, 12.5],
-                    normal: [0.3, 0.0, -1.0],
-                }];
-            }
             let meshes = if with_mesh { &sphere } else { &none };
             let scene = Scene::new(&vol, &state, meshes).expect("scene");
             check(&scene, 2).expect("a view ranks render");

@@ -107,16 +107,16 @@ impl Tracer<'_> {
                 }
                 return true;
             }
+            let mut pos = Positions::new(
+                params.strategy,
+                seg.t0,
+                seg.t1,
+                params.step * w,
+                jitter,
+                t_next,
+            );
             if !self.owns(seg.region) {
                 // Another rank's samples: the positions advance as they are taken there.
-                let mut pos = Positions::new(
-                    params.strategy,
-                    seg.t0,
-                    seg.t1,
-                    params.step * w,
-                    jitter,
-                    t_next,
-                );
                 let last = pos.by_ref().last();
                 t_next = pos.next_t();
                 if let Some((t, _)) = last {
@@ -154,14 +154,6 @@ impl Tracer<'_> {
                     prev = Some((seg.t0, class, true));
                 }
             }
-            let mut pos = Positions::new(
-                params.strategy,
-                seg.t0,
-                seg.t1,
-                params.step * w,
-                jitter,
-                t_next,
-            );
             for (t, delta) in pos.by_ref() {
                 let p = at(&o, &d, t);
                 let v = vol.eval_value(r, p, params.field);

@@ -32,7 +32,7 @@ impl Tracer<'_> {
             Some(tree) => {
                 let mut gaps = Gaps::new(vol, &o, &d, t0, t1);
                 let share = self.owned.zip(self.owned_nodes).map(|(r, n)| (n, r));
-                tree.segments_in(
+                tree.segments(
                     vol,
                     start,
                     o,

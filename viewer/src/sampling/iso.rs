@@ -201,9 +201,17 @@ impl Tracer<'_> {
             true
         };
         match tree {
-            Some(tree) => tree.segments(vol, start, o, d, t0, t1, &mut stack, |seg, _, _, _| {
-                visit(seg)
-            }),
+            Some(tree) => tree.segments(
+                vol,
+                start,
+                o,
+                d,
+                t0,
+                t1,
+                None,
+                &mut stack,
+                |seg, _, _, _| visit(seg),
+            ),
             None => segments_skipping(vol, packed, o, d, t0, t1, &mut stack, &skip, visit),
         }
         self.stack = stack;
