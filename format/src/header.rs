@@ -40,6 +40,7 @@
 //! | 1 | first version: header above, schema of `format::schema` |
 //! | 2 | per-node value ranges and fullness of the KD-tree (`kd_ranges`, `kd_full`), so the viewer traverses the archive without building tables at open |
 //! | 3 | lean structure: regions without boxes (a region's box is its KD leaf's cell) and without `finest_level`, 16-byte inner KD nodes with leaves as child references (`kd_root`, `kd_axes`), no stored per-node ranges; the checksum hashes 1 MiB chunks |
+//! | 4 | 64-bit relative pointers (rkyv `pointer_width_64`, flag bit 3 instead of bit 2): an archive may pass 2 GiB, as a billion cells' fields do; the schema is that of version 3 |
 //!
 //! ```
 //! use qbricks_format::header::{Header, HEADER_LEN, MAGIC};
@@ -47,7 +48,7 @@
 //! let bytes = h.to_bytes();
 //! assert_eq!(bytes.len(), HEADER_LEN);
 //! assert_eq!(&bytes[0..8], MAGIC);
-//! assert_eq!(&bytes[8..12], &3u32.to_le_bytes());
+//! assert_eq!(&bytes[8..12], &4u32.to_le_bytes());
 //! assert_eq!(&bytes[16..24], &7u64.to_le_bytes());
 //! assert_eq!(Header::parse(&bytes).unwrap(), h);
 //! ```
@@ -58,7 +59,7 @@ use crate::error::FormatErrorKind;
 pub const MAGIC: &[u8; 8] = b"QBRICKS\0";
 
 /// The format version this build writes and reads.
-pub const FORMAT_VERSION: u32 = 3;
+pub const FORMAT_VERSION: u32 = 4;
 
 /// Size of the header; also the payload's offset (a multiple of [`PAYLOAD_ALIGN`]).
 pub const HEADER_LEN: usize = 48;
@@ -70,11 +71,16 @@ pub(crate) const PAYLOAD_ALIGN: usize = 16;
 pub(crate) const FLAG_LITTLE_ENDIAN: u32 = 1 << 0;
 /// Flag bit: archive primitives are naturally aligned (rkyv default, not `unaligned`).
 pub(crate) const FLAG_ALIGNED: u32 = 1 << 1;
-/// Flag bit: relative pointers are 32-bit (rkyv feature `pointer_width_32`).
+/// Flag bit: relative pointers are 32-bit (rkyv feature `pointer_width_32`; formats 1–3).
+#[cfg(test)]
 pub(crate) const FLAG_POINTER_WIDTH_32: u32 = 1 << 2;
+/// Flag bit: relative pointers (and archived sizes) are 64-bit (rkyv feature
+/// `pointer_width_64`; format 4 on).
+pub(crate) const FLAG_POINTER_WIDTH_64: u32 = 1 << 3;
 
-/// The flags of archives written by this build (rkyv 0.8 defaults).
-pub(crate) const FLAGS: u32 = FLAG_LITTLE_ENDIAN | FLAG_ALIGNED | FLAG_POINTER_WIDTH_32;
+/// The flags of archives written by this build (rkyv 0.8, little-endian, aligned, 64-bit
+/// relative pointers).
+pub(crate) const FLAGS: u32 = FLAG_LITTLE_ENDIAN | FLAG_ALIGNED | FLAG_POINTER_WIDTH_64;
 
 const _: () = assert!(HEADER_LEN & (PAYLOAD_ALIGN - 1) == 0);
 
@@ -358,12 +364,13 @@ mod tests {
             e,
             FormatErrorKind::UnsupportedVersion {
                 found: 2,
-                supported: 3
+                supported: 4
             }
         ));
 
         let mut bad = file.clone();
-        bad[12] ^= FLAG_POINTER_WIDTH_32 as u8;
+        // A version-3 file's flags: 32-bit pointers.
+        bad[12] ^= (FLAG_POINTER_WIDTH_32 | FLAG_POINTER_WIDTH_64) as u8;
         assert!(matches!(
             Header::parse(&bad),
             Err(FormatErrorKind::UnsupportedFlags { .. })

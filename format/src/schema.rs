@@ -40,11 +40,12 @@ use rkyv::{Archive, Deserialize, Serialize};
 /// cells of 1 mm are a million kilometres.
 pub const MAX_REACH_LOG2: i32 = 40;
 
-/// Most bytes an archive can hold. Its relative pointers are 32-bit (see `header`'s
-/// flags), and the root, written last, points back to the start of the first array, so
-/// everything must lie within 2 GiB of it; rkyv panics while writing an archive past that
-/// rather than failing, so writers check the size first.
-pub const MAX_ARCHIVE_BYTES: u64 = i32::MAX as u64;
+/// Most bytes an archive may hold: 1 TiB. Since format 4 its relative pointers are
+/// 64-bit (see `header`'s flags), so the root, written last, reaches arrays of any size
+/// (format 3's 32-bit pointers stopped at 2 GiB, which 262 M cells of two fields pass, and
+/// rkyv panics while writing past the pointers' reach); this bound only keeps an estimate
+/// gone wrong from being written. What a machine can bake is bounded by its memory first.
+pub const MAX_ARCHIVE_BYTES: u64 = 1 << 40;
 
 /// Root of the archive.
 #[derive(Archive, Serialize, Deserialize, Debug, Clone, PartialEq)]

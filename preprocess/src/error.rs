@@ -186,8 +186,8 @@ pub enum BakeError {
         voxel_size: f64,
         finest: f64,
     },
-    /// The file would be larger than the format can address ([`format::MAX_ARCHIVE_BYTES`]).
-    #[error("{leaf_cells} leaf cells with {fields} field(s) make a .qbk archive of about {} MiB, more than the {} MiB its 32-bit offsets reach; bake a part of the data, or fewer fields", bytes >> 20, format::MAX_ARCHIVE_BYTES >> 20)]
+    /// The file would be larger than a `.qbk` may be ([`format::MAX_ARCHIVE_BYTES`]).
+    #[error("{leaf_cells} leaf cells with {fields} field(s) make a .qbk archive of about {} MiB, more than the {} MiB a .qbk may hold; bake a part of the data, or fewer fields", bytes >> 20, format::MAX_ARCHIVE_BYTES >> 20)]
     TooLargeForFormat {
         leaf_cells: u64,
         fields: u64,

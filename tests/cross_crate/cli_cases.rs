@@ -572,7 +572,13 @@ fn populate(dir: &Path, case: &Case) {
     }
     if wanted("flip.qbk") {
         let mut bytes = std::fs::read(data.join("wake_small.qbk")).expect("read qbk");
-        bytes[48] ^= 0xff;
+        // The provenance's source name, made invalid UTF-8 (wherever the layout puts it; its
+        // last byte, as the first of a short string held inline also marks it as such).
+        let at = bytes
+            .windows(14)
+            .position(|w| w == b"wake_small.vdb")
+            .expect("the source name is in the file");
+        bytes[at + 13] ^= 0xff;
         std::fs::write(dir.join("flip.qbk"), bytes).expect("write flipped");
     }
     if wanted("huge.vdb") {

@@ -1,6 +1,6 @@
 //! Assembly stage: the [`BrickFile`] a bake writes (fields with their ranges and
 //! histograms, levels, bricks with snapped supports, regions, KD-tree, provenance), and
-//! the bound on its size that the format's 32-bit offsets set, checked before it is built.
+//! the bound on its size ([`format::MAX_ARCHIVE_BYTES`]), checked before it is built.
 
 use format::{Aabb, Brick, BrickFile, Field, Level, Provenance, Region, SourceGrid, ValueRange};
 
@@ -26,7 +26,7 @@ pub(super) fn archive_bytes(bricks: &Bricks, fields: &FieldValues, kd: &Kd) -> u
         .saturating_add(1 << 20)
 }
 
-/// Refuses an archive of `bytes` that the format cannot address.
+/// Refuses an archive of `bytes` larger than a `.qbk` may be.
 pub(super) fn check_archive(leaf_cells: u64, fields: u64, bytes: u64) -> Result<(), BakeError> {
     if bytes > format::MAX_ARCHIVE_BYTES {
         return Err(BakeError::TooLargeForFormat {

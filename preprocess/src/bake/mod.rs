@@ -666,17 +666,19 @@ pub(crate) fn clamp_nonfinite(vals: &mut [f32]) -> Option<(u64, usize)> {
 mod tests {
     use super::*;
 
-    /// A 640³ tile baked (10 GB, two minutes) and then panicked in the writer: 262 M
-    /// cells of two fields and their regions are more than 2 GiB, which the format's
-    /// 32-bit offsets cannot reach. Such an archive is refused instead.
+    /// A 640³ tile (262 M cells of two fields, 2.2 GB) once panicked in the writer, past
+    /// format 3's 32-bit offsets; format 4's reach any size a machine can bake, and an
+    /// archive beyond the format's bound (1 TiB) is refused instead.
     #[test]
-    fn an_archive_past_the_formats_offsets_is_refused() {
+    fn an_archive_past_the_formats_bound_is_refused() {
         assert!(check_archive(1000, 2, 8000).is_ok());
-        let e = check_archive(262_144_000, 2, 2_200_000_000).expect_err("too large");
+        assert!(check_archive(262_144_000, 2, 2_200_000_000).is_ok());
+        assert!(check_archive(1 << 30, 2, 9_700_000_000).is_ok());
+        let e = check_archive(1 << 40, 2, (1 << 40) + (1 << 20)).expect_err("too large");
         assert_eq!(
             e.to_string(),
-            "262144000 leaf cells with 2 field(s) make a .qbk archive of about 2098 MiB, more \
-             than the 2047 MiB its 32-bit offsets reach; bake a part of the data, or fewer fields"
+            "1099511627776 leaf cells with 2 field(s) make a .qbk archive of about 1048577 MiB, \
+             more than the 1048576 MiB a .qbk may hold; bake a part of the data, or fewer fields"
         );
     }
 }
