@@ -24,9 +24,10 @@ use crate::transfer::Mode;
 /// A view one frame over ranks cannot render: what it has, and what to do instead.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error(
-    "one frame over {ranks} MPI ranks renders one opaque iso-surface found with the `exact` \
-     strategy (meshes, clip planes and shadows included); this view has {what}: render it \
-     without mpirun, or share the frames of a sequence ('frame_####.qbk') over the ranks"
+    "one frame over {ranks} MPI ranks renders one opaque iso-surface (`exact`, with shadows) \
+     or a dvr band (`uniform` or `paper`, without shadows), meshes and clip planes included; \
+     this view has {what}: render it without mpirun, or share the frames of a sequence \
+     ('frame_####.qbk') over the ranks"
 )]
 pub struct Unsupported {
     pub ranks: usize,
