@@ -46,6 +46,18 @@ pub enum LimitError {
         limit: u64,
         why: String,
     },
+    #[error(
+        "{what} needs up to {} MiB, more than the {} MiB free in {}",
+        need >> 20,
+        free >> 20,
+        dir.display()
+    )]
+    Disk {
+        what: String,
+        need: u64,
+        free: u64,
+        dir: std::path::PathBuf,
+    },
 }
 
 /// `value` if it lies in `min..=max`, else the error naming `flag`.

@@ -29,7 +29,9 @@ use std::io::{self, Write};
 use std::path::{Component, Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
+use crate::limits::LimitError;
 use crate::signals;
+use std::fmt::Display;
 
 /// Set once a write to [`QuietStdout`] found the reader gone.
 static STDOUT_CLOSED: AtomicBool = AtomicBool::new(false);
@@ -186,6 +188,51 @@ impl Target {
     pub fn is_stream(&self) -> bool {
         matches!(self, Target::Into { .. })
     }
+
+    /// The directory the temporary file is made in, and the name it is made from.
+    fn staging(&self) -> (PathBuf, String) {
+        let (dir, name) = match self {
+            Target::Replace(end) => (
+                match end.parent() {
+                    Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+                    _ => PathBuf::from("."),
+                },
+                end.file_name(),
+            ),
+            // Not next to the target: `/dev` or `/proc/self/fd` is no place for it.
+            Target::Into { path: end, .. } => (std::env::temp_dir(), end.file_name()),
+        };
+        let name = name
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "output".to_string());
+        (dir, name)
+    }
+}
+
+/// Refuses to start an output of up to `need` bytes for `what` (`the VDB file`) at `path`
+/// when the file system its temporary file goes to (see [`write_atomic`]) has less room
+/// for it: a long write is better refused at once than failed at the end. Where the free
+/// space cannot be read, the write is let through (it still fails cleanly, leaving
+/// nothing behind, if the disk fills).
+pub fn check_space(what: impl Display, path: &Path, need: u64) -> Result<(), LimitError> {
+    let Ok(target) = Target::of(path) else {
+        // Said by the write itself, with its own message.
+        return Ok(());
+    };
+    let (dir, _) = target.staging();
+    let Ok(st) = rustix::fs::statvfs(&dir) else {
+        return Ok(());
+    };
+    let free = st.f_bavail.saturating_mul(st.f_frsize);
+    if need <= free {
+        return Ok(());
+    }
+    Err(LimitError::Disk {
+        what: what.to_string(),
+        need,
+        free,
+        dir,
+    })
 }
 
 /// The path a chain of symlinks in the last component of `path` ends at (`path` itself
@@ -259,20 +306,7 @@ impl Pending {
             ));
         }
         let target = Target::of(path)?;
-        let (dir, name) = match &target {
-            Target::Replace(end) => (
-                match end.parent() {
-                    Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-                    _ => PathBuf::from("."),
-                },
-                end.file_name(),
-            ),
-            // Not next to the target: `/dev` or `/proc/self/fd` is no place for it.
-            Target::Into { path: end, .. } => (std::env::temp_dir(), end.file_name()),
-        };
-        let name = name
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "output".to_string());
+        let (dir, name) = target.staging();
         Ok(Pending {
             tmp: TempFile::create(&dir, &name)?,
             target,
@@ -379,6 +413,39 @@ pub fn is_broken_pipe(err: &(dyn std::error::Error + 'static)) -> bool {
 
 #[cfg(test)]
 mod tests {
+    /// An output is refused when its file system has less room than it needs, and the
+    /// error names the directory its temporary file would go to; a stream's temporary
+    /// file goes to the temp dir.
+    #[test]
+    fn space_is_checked_where_the_temporary_file_goes() {
+        use super::{check_space, LimitError};
+        let dir = tempfile::tempdir().expect("tempdir");
+        let out = dir.path().join("out.vdb");
+        let free = {
+            let st = rustix::fs::statvfs(dir.path()).expect("statvfs");
+            st.f_bavail * st.f_frsize
+        };
+        check_space("a small file", &out, 1 << 10).expect("room for a kilobyte");
+        match check_space("a huge file", &out, free + (1 << 30)) {
+            Err(e @ LimitError::Disk { .. }) => {
+                let text = e.to_string();
+                assert!(text.starts_with("a huge file needs up to "), "{text}");
+                assert!(
+                    text.ends_with(&format!("free in {}", dir.path().display())),
+                    "{text}"
+                );
+            }
+            other => panic!("expected a disk error, got {other:?}"),
+        }
+        let LimitError::Disk { dir: tmp, .. } =
+            check_space("into a device", std::path::Path::new("/dev/null"), u64::MAX)
+                .expect_err("no file system has 16 EiB free")
+        else {
+            panic!("expected a disk error");
+        };
+        assert_eq!(tmp, std::env::temp_dir());
+    }
+
     #[derive(Debug, thiserror::Error)]
     #[error("writing the report")]
     struct Wrapped(#[source] std::io::Error);

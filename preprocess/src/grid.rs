@@ -134,14 +134,6 @@ impl AnyGrid {
         with_grid!(self, g => g.active_voxel_count())
     }
 
-    pub(crate) fn leaf_count(&self) -> usize {
-        with_grid!(self, g => g.leaves.len())
-    }
-
-    pub(crate) fn tile_count(&self) -> usize {
-        with_grid!(self, g => g.tiles.len())
-    }
-
     /// A vec3 grid (single or double precision).
     pub(crate) fn is_vector(&self) -> bool {
         matches!(self, AnyGrid::Vec3s(_) | AnyGrid::Vec3d(_))

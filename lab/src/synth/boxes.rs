@@ -30,8 +30,9 @@
 //! handles); every box lies within the bake's reach of the origin
 //! ([`preprocess::error::MAX_REACH`] finest cells); and there are at most
 //! [`MAX_OBSTACLES`] obstacles, each with a finite centre and a finite positive radius. The
-//! leaves the boxes take are checked against the same memory limits as any other scene
-//! ([`super::MAX_LEAF_BYTES`] and the machine's).
+//! leaves the boxes take are checked against the same limits as any other scene's: sampled
+//! into memory, [`super::MAX_LEAF_BYTES`] and the machine's memory; written by `synth`,
+//! [`super::MAX_FILE_BYTES`], the machine's memory for the leaves' shapes and the disk.
 
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -216,7 +217,7 @@ impl BoxLayout {
     }
 
     /// Every check but the memory's; grids finest first.
-    fn check(&self) -> Result<Vec<GridLayout>, LayoutError> {
+    pub(crate) fn check(&self) -> Result<Vec<GridLayout>, LayoutError> {
         let n = self.boxes.len();
         if n == 0 || n > MAX_LEVELS as usize {
             return Err(LayoutError::BoxCount {

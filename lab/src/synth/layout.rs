@@ -3,6 +3,7 @@
 
 use super::boxes::LATTICE_EPS;
 use super::*;
+use preprocess::vdb::write::NodeCounts;
 
 pub(super) const WAKE_DOMAIN: Aabb = Aabb {
     min: [-2.0, -2.0, -2.0],
@@ -105,7 +106,11 @@ impl GridLayout {
     /// obstacles an upper bound, since blocks with no active voxel are dropped), saturating
     /// at `u64::MAX`.
     pub(crate) fn leaf_count(&self) -> u64 {
-        let d = i64::from(LEAF_DIM);
+        self.block_count(i64::from(LEAF_DIM))
+    }
+
+    /// Blocks of `d`³ voxels, aligned to multiples of `d`, that the box touches.
+    fn block_count(&self, d: i64) -> u64 {
         saturating_product((0..3).map(|a| {
             if self.hi[a] <= self.lo[a] {
                 0
@@ -113,6 +118,16 @@ impl GridLayout {
                 (self.hi[a] - 1).div_euclid(d) - self.lo[a].div_euclid(d) + 1
             }
         }))
+    }
+
+    /// The nodes a grid on this box has at most (no tiles): what bounds its file size.
+    pub(crate) fn node_counts(&self) -> NodeCounts {
+        NodeCounts {
+            leaves: self.leaf_count(),
+            lower: self.block_count(128),
+            upper: self.block_count(4096),
+            tiles: 0,
+        }
     }
 
     pub(crate) fn transform(&self) -> Transform {
@@ -128,8 +143,21 @@ impl GridLayout {
     }
 }
 
-/// The grids (finest first) that [`scene_grids`] fills, without sampling anything.
+/// The grids (finest first) that [`scene_grids`] fills, without sampling anything; refused
+/// when they would not fit in memory ([`check_memory`]).
 pub fn scene_layout(scene: &str, n0: u32, levels: u32) -> Result<Vec<GridLayout>, SynthError> {
+    let out = scene_boxes(scene, n0, levels)?;
+    check_memory(&Request::n0(scene, n0), &out, false)?;
+    Ok(out)
+}
+
+/// The grids (finest first) of `scene` laid out by `n0` and `levels`, with no bound on
+/// their size.
+pub(crate) fn scene_boxes(
+    scene: &str,
+    n0: u32,
+    levels: u32,
+) -> Result<Vec<GridLayout>, SynthError> {
     let (domain, core, multi) = match scene {
         "wake" => (WAKE_DOMAIN, WAKE_CORE, true),
         "wake-single" => (WAKE_DOMAIN, WAKE_CORE, false),
@@ -192,7 +220,6 @@ pub fn scene_layout(scene: &str, n0: u32, levels: u32) -> Result<Vec<GridLayout>
         });
     }
     out.reverse();
-    check_memory(&Request::n0(scene, n0), &out, false)?;
     Ok(out)
 }
 
@@ -208,6 +235,7 @@ pub(crate) fn check_memory(
     layouts: &[GridLayout],
     speed_grids: bool,
 ) -> Result<(u64, u64), SynthError> {
+    check_index_range(layouts)?;
     let per_leaf = leaf_bytes::<Vec3>() + if speed_grids { leaf_bytes::<f32>() } else { 0 };
     let leaves = layouts
         .iter()
@@ -226,28 +254,64 @@ pub(crate) fn check_memory(
     Ok((leaves, bytes))
 }
 
-/// [`check_memory`], and then the peak of writing the scene (leaves and the file's encoded
-/// grids) against the shared memory limit ([`files::limits::check_memory`]), which depends
-/// on the machine and `ulimit -v`.
-pub(super) fn check_write_memory(
+/// Refuses a scene `synth` cannot write, before anything is sampled: index boxes past a
+/// VDB file's `i32` coordinates, a file over [`MAX_FILE_BYTES`] (bounded with every value
+/// stored raw: a velocity grid and `scalars` float grids on each layout), and shapes the
+/// machine's memory cannot hold while the values stream ([`files::limits::check_memory`]).
+/// Returns the file's bound.
+pub(super) fn check_write(
     request: &Request,
     layouts: &[GridLayout],
-    speed_grids: bool,
-) -> Result<(), SynthError> {
-    let (leaves, bytes) = check_memory(request, layouts, speed_grids)?;
-    let (num, den) = PEAK_PER_LEAF_BYTE;
+    scalars: u64,
+) -> Result<u64, SynthError> {
+    check_index_range(layouts)?;
+    let leaves = layouts
+        .iter()
+        .fold(0u64, |acc, l| acc.saturating_add(l.leaf_count()));
+    let bytes = layouts.iter().fold(0u64, |acc, l| {
+        let nodes = l.node_counts();
+        acc.saturating_add(nodes.bound(12))
+            .saturating_add(scalars.saturating_mul(nodes.bound(4)))
+    });
+    if bytes > MAX_FILE_BYTES {
+        return Err(SynthError::FileTooLarge {
+            what: request.what.clone(),
+            grids: layouts.len(),
+            leaves,
+            bytes,
+            limit: MAX_FILE_BYTES,
+            hint: request.hint,
+        });
+    }
     limits::check_memory(
         format!(
-            "{} in {} grid(s) ({leaves} leaves, sampled and written)",
+            "{} in {} grid(s) ({leaves} leaves, written a batch at a time)",
             request.what,
             layouts.len()
         ),
-        bytes.saturating_mul(num) / den,
+        leaves.saturating_mul(WRITE_BYTES_PER_LEAF),
     )
     .map_err(|error| SynthError::Memory {
         error,
         hint: request.hint,
-    })
+    })?;
+    Ok(bytes)
+}
+
+/// Refuses a grid whose leaves would not have `i32` origins.
+pub(super) fn check_index_range(layouts: &[GridLayout]) -> Result<(), SynthError> {
+    let fits =
+        |v: i64| v >= i64::from(i32::MIN) && v <= i64::from(i32::MAX) - 2 * i64::from(LEAF_DIM);
+    for l in layouts {
+        if !(l.lo.iter().chain(&l.hi).all(|&v| fits(v))) {
+            return Err(SynthError::IndexRange {
+                grid: l.name.clone(),
+                lo: l.lo,
+                hi: l.hi,
+            });
+        }
+    }
+    Ok(())
 }
 
 fn check_range(what: &'static str, found: u32, min: u32, max: u32) -> Result<(), SynthError> {

@@ -45,31 +45,35 @@ mod tests;
 mod write;
 
 pub use boxes::{BoxLayout, LayoutError, LevelBox, Side, MAX_LAYOUT_BYTES, MAX_OBSTACLES};
-use layout::check_write_memory;
+use layout::check_write;
 pub(crate) use layout::Request;
 #[cfg(test)]
 use layout::{check_memory, WAKE_CORE, WAKE_DOMAIN};
 pub use layout::{scene_layout, GridLayout, Obstacle};
 use preprocess::bake::memory::leaf_bytes;
-use preprocess::grid::{leaf_offset, AnyGrid, Grid, Leaf, Transform, Vec3, LEAF_DIM, LEAF_VOXELS};
+use preprocess::grid::{leaf_offset, Grid, Leaf, Transform, Vec3, LEAF_DIM, LEAF_VOXELS};
+use preprocess::vdb::write::source::{AnySource, GridSource, LeafShape};
 use preprocess::vdb::write::{
-    write_vdb_with, Compression, MetaMap, MetaValue, WriteError, WriteOptions,
+    write_sources, Compression, MetaMap, MetaValue, WriteError, WriteOptions,
 };
-pub use write::{write_scene, GridSummary, SynthOptions};
+pub use write::{write_scene, write_scene_with, GridSummary, SynthOptions};
 
-/// Most bytes of leaves a scene may allocate (velocity grids, plus the speed grids when
-/// asked for). Leaves are counted whole, as `sample_grid` allocates them, partial leaves at
-/// box edges included: a voxel count alone underestimates memory (a leaf of 3-vectors takes
-/// about 6.2 kB however few of its 512 voxels are active), and `synth` holds every grid in
-/// memory until the file is written. 4 GiB of leaves is a peak of about 10 GB once the
-/// writer's buffers are added, well past any scene the tests or the README use (the largest,
-/// `wake --n0 160 --levels 3`, takes 140 MB) and below what the project's machines have.
+/// Most bytes of leaves a scene sampled into memory ([`scene_grids`]) may allocate
+/// (velocity grids, plus the speed grids when asked for). Leaves are counted whole, as
+/// `sample_grid` allocates them, partial leaves at box edges included: a voxel count alone
+/// underestimates memory (a leaf of 3-vectors takes about 6.2 kB however few of its 512
+/// voxels are active). `synth` itself does not hold its grids (it writes them a batch of
+/// leaves at a time, see [`write_scene`]) and is bounded by [`MAX_FILE_BYTES`] instead.
 pub(crate) const MAX_LEAF_BYTES: u64 = 4 << 30;
 
-/// What `synth` holds at its peak per byte of leaves: the grids and, while the file is
-/// written, every grid's encoded body (at most as large as its leaves); measured 2.0 (a
-/// 256³ Lamb–Oseen grid, 204 MB of leaves, 413 MB resident at the peak), taken as 2.5.
-const PEAK_PER_LEAF_BYTE: (u64, u64) = (5, 2);
+/// Most bytes a file `synth` writes may take (an upper bound: values stored raw), as the
+/// bake's own bound on what it writes: 1 TiB, past any disk the project's machines have.
+pub const MAX_FILE_BYTES: u64 = 1 << 40;
+
+/// What `synth` holds per leaf while it writes: the leaf's shape twice (the grid's list and
+/// the values' source), its place in the tree (B-tree entry, buffer order) and allocator
+/// rounding; measured about 150 bytes, taken as 256.
+const WRITE_BYTES_PER_LEAF: u64 = 256;
 
 #[derive(Debug, Error)]
 pub enum SynthError {
@@ -99,8 +103,8 @@ pub enum SynthError {
         limit: u64,
         hint: &'static str,
     },
-    /// Within [`MAX_LEAF_BYTES`] but over what this machine (or `ulimit -v`) leaves: the
-    /// shared limit of every command.
+    /// Within the fixed bounds but over what this machine (memory, or `ulimit -v`) or the
+    /// output's disk leaves: the shared limits of every command.
     #[error("{error}; {hint}")]
     Memory {
         error: LimitError,
@@ -109,6 +113,27 @@ pub enum SynthError {
     /// A `--boxes` layout that cannot be sampled.
     #[error(transparent)]
     Layout(#[from] LayoutError),
+    /// Over [`MAX_FILE_BYTES`], whatever the machine.
+    #[error(
+        "{what} in {grids} grid(s) would write {leaves} leaves, up to {} GiB, more than the limit of {} GiB; {hint}",
+        bytes >> 30,
+        limit >> 30
+    )]
+    FileTooLarge {
+        what: String,
+        grids: usize,
+        leaves: u64,
+        bytes: u64,
+        limit: u64,
+        hint: &'static str,
+    },
+    /// A grid whose index box a VDB file cannot address (coordinates are `i32`).
+    #[error("grid {grid:?}: index box {lo:?}..{hi:?} is past the 32-bit coordinates of a VDB file; move the boxes nearer the origin or use coarser cells")]
+    IndexRange {
+        grid: String,
+        lo: [i64; 3],
+        hi: [i64; 3],
+    },
 }
 
 /// Samples scene `scene` onto its grids (see the module docs for the layout), finest first.
@@ -178,13 +203,13 @@ pub(crate) fn sample_grid_with(
     layout: &GridLayout,
     staggered: bool,
 ) -> Grid<Vec3> {
-    let origins = leaf_origins(layout);
-    let leaves = origins
+    let leaves = leaf_shapes(layout)
         .par_iter()
-        .map(|&origin| sample_leaf(flow, layout, origin, staggered))
-        // Only a block inside an obstacle has no active voxel: not stored, as OpenVDB
-        // prunes it.
-        .filter(|leaf| leaf.active != [0; 8])
+        .map(|shape| Leaf {
+            origin: shape.origin,
+            active: shape.active,
+            values: Box::new(velocity_values(flow, layout, shape, staggered)),
+        })
         .collect();
     Grid {
         name: layout.name.clone(),
@@ -195,14 +220,24 @@ pub(crate) fn sample_grid_with(
     }
 }
 
-fn sample_leaf(
-    flow: &dyn Flow,
-    layout: &GridLayout,
-    origin: [i64; 3],
-    staggered: bool,
-) -> Leaf<Vec3> {
+/// The leaves of `layout`'s box that hold an active voxel, in the order the grids list
+/// them: every 8³ block the box touches, less those wholly inside an obstacle (not stored,
+/// as OpenVDB prunes them).
+pub(crate) fn leaf_shapes(layout: &GridLayout) -> Vec<LeafShape> {
+    leaf_origins(layout)
+        .par_iter()
+        .map(|&origin| LeafShape {
+            // Index boxes lie inside i32 (`check_index_range`).
+            origin: origin.map(|v| v as i32),
+            active: leaf_mask(layout, origin),
+        })
+        .filter(|shape| shape.active != [0; 8])
+        .collect()
+}
+
+/// Which voxels of the leaf at `origin` are active.
+fn leaf_mask(layout: &GridLayout, origin: [i64; 3]) -> [u64; 8] {
     let mut active = [0u64; 8];
-    let mut values = Box::new([[0.0f32; 3]; LEAF_VOXELS]);
     let inside = |a: usize, v: i64| v >= layout.lo[a] && v < layout.hi[a];
     for x in 0..8usize {
         let i = origin[0] + x as i64;
@@ -216,83 +251,91 @@ fn sample_leaf(
             }
             for z in 0..8usize {
                 let k = origin[2] + z as i64;
-                if !inside(2, k) {
-                    continue;
+                if inside(2, k) && layout.is_active([i, j, k]) {
+                    let n = leaf_offset(x, y, z);
+                    active[n >> 6] |= 1u64 << (n & 63);
                 }
-                if !layout.is_active([i, j, k]) {
-                    continue;
-                }
-                let n = leaf_offset(x, y, z);
-                let p = layout.centre([i, j, k]);
-                values[n] = if staggered {
-                    std::array::from_fn(|c| {
-                        let mut f = p;
-                        f[c] -= 0.5 * layout.voxel_size;
-                        flow.velocity(f)[c] as f32
-                    })
-                } else {
-                    let u = flow.velocity(p);
-                    [u[0] as f32, u[1] as f32, u[2] as f32]
-                };
-                active[n >> 6] |= 1u64 << (n & 63);
             }
         }
     }
-    Leaf {
-        // Index boxes stay far inside i32 (checked by MAX_LEAF_BYTES and the n0 range).
-        origin: origin.map(|v| v as i32),
-        active,
-        values,
-    }
+    active
 }
 
-/// A float grid `name` over `layout`'s box with `f` at the voxel centres.
-pub(crate) fn sample_scalar(
-    name: &str,
+/// Index coordinate of voxel `n` of the leaf `shape`.
+fn voxel_ijk(shape: &LeafShape, n: usize) -> [i64; 3] {
+    let o = shape.origin.map(i64::from);
+    [
+        o[0] + (n >> 6) as i64,
+        o[1] + ((n >> 3) & 7) as i64,
+        o[2] + (n & 7) as i64,
+    ]
+}
+
+fn is_set(active: &[u64; 8], n: usize) -> bool {
+    (active[n >> 6] >> (n & 63)) & 1 == 1
+}
+
+/// The velocity at the leaf's active voxels (see [`sample_grid_with`]); inactive voxels
+/// hold the background (0, 0, 0).
+pub(crate) fn velocity_values(
+    flow: &dyn Flow,
     layout: &GridLayout,
-    f: impl Fn([f64; 3]) -> f64 + Sync,
-) -> Grid<f32> {
-    let leaves = leaf_origins(layout)
-        .par_iter()
-        .map(|&o| {
-            let mut active = [0u64; 8];
-            let values = Box::new(std::array::from_fn(|n| {
-                let ijk = [
-                    o[0] + (n >> 6) as i64,
-                    o[1] + ((n >> 3) & 7) as i64,
-                    o[2] + (n & 7) as i64,
-                ];
-                if !layout.is_active(ijk) {
-                    return 0.0;
-                }
-                active[n >> 6] |= 1u64 << (n & 63);
-                f(layout.centre(ijk)) as f32
-            }));
-            Leaf {
-                origin: o.map(|v| v as i32),
-                active,
-                values,
-            }
-        })
-        .filter(|leaf| leaf.active != [0; 8])
-        .collect();
-    Grid {
-        name: name.to_string(),
-        transform: layout.transform(),
-        background: 0.0,
-        leaves,
-        tiles: Vec::new(),
+    shape: &LeafShape,
+    staggered: bool,
+) -> [Vec3; LEAF_VOXELS] {
+    std::array::from_fn(|n| {
+        if !is_set(&shape.active, n) {
+            return [0.0; 3];
+        }
+        let p = layout.centre(voxel_ijk(shape, n));
+        if staggered {
+            std::array::from_fn(|c| {
+                let mut f = p;
+                f[c] -= 0.5 * layout.voxel_size;
+                flow.velocity(f)[c] as f32
+            })
+        } else {
+            let u = flow.velocity(p);
+            [u[0] as f32, u[1] as f32, u[2] as f32]
+        }
+    })
+}
+
+/// `f` at the leaf's active voxel centres, 0 elsewhere.
+pub(crate) fn scalar_values(
+    layout: &GridLayout,
+    shape: &LeafShape,
+    f: &(impl Fn([f64; 3]) -> f64 + ?Sized),
+) -> [f32; LEAF_VOXELS] {
+    std::array::from_fn(|n| {
+        if is_set(&shape.active, n) {
+            f(layout.centre(voxel_ijk(shape, n))) as f32
+        } else {
+            0.0
+        }
+    })
+}
+
+/// `|u|` of each velocity, as [`speed_grid`] takes it.
+pub(crate) fn speeds(values: &[Vec3; LEAF_VOXELS]) -> [f32; LEAF_VOXELS] {
+    std::array::from_fn(|n| {
+        let [x, y, z] = values[n];
+        (x * x + y * y + z * z).sqrt()
+    })
+}
+
+/// The speed grid's name for a velocity grid `name` (`vel…` → `speed…`).
+pub(crate) fn speed_name(name: &str) -> String {
+    match name.strip_prefix("vel") {
+        Some(rest) => format!("speed{rest}"),
+        None => format!("{name}_speed"),
     }
 }
 
 /// `|u|` of a velocity grid, same leaves and active masks, named `speed…` for `vel…`.
 pub fn speed_grid(grid: &Grid<Vec3>) -> Grid<f32> {
-    let name = match grid.name.strip_prefix("vel") {
-        Some(rest) => format!("speed{rest}"),
-        None => format!("{}_speed", grid.name),
-    };
     Grid {
-        name,
+        name: speed_name(&grid.name),
         transform: grid.transform,
         background: 0.0,
         leaves: grid
@@ -301,10 +344,7 @@ pub fn speed_grid(grid: &Grid<Vec3>) -> Grid<f32> {
             .map(|l| Leaf {
                 origin: l.origin,
                 active: l.active,
-                values: Box::new(std::array::from_fn(|n| {
-                    let [x, y, z] = l.values[n];
-                    (x * x + y * y + z * z).sqrt()
-                })),
+                values: Box::new(speeds(&l.values)),
             })
             .collect(),
         tiles: Vec::new(),

@@ -1,7 +1,7 @@
 //! `qbricks-lab synth`.
 
 use std::path::PathBuf;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use std::io::Write;
 
@@ -10,7 +10,8 @@ use clap::ValueEnum;
 use files::guard::Guard;
 use files::input::{read_whole, Limits};
 use files::output::QuietStdout;
-use lab::synth::{write_scene, BoxLayout, SynthOptions, MAX_LAYOUT_BYTES};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use lab::synth::{write_scene_with, BoxLayout, SynthOptions, MAX_LAYOUT_BYTES};
 use preprocess::sequence::FramePattern;
 use preprocess::vdb::write::Compression;
 
@@ -87,33 +88,53 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 guard.output("output", path);
             }
             guard.check()?;
-            let layout = read_layout(file)?;
-            // Checked here, so that a refusal names the file.
-            layout
-                .grids(&args.scene)
-                .with_context(|| format!("{}", file.display()))?;
-            Some(layout)
+            Some(read_layout(file)?)
         }
     };
+    let base = SynthOptions {
+        scene: args.scene.clone(),
+        n0: args.n0,
+        levels: args.levels,
+        compression: match args.compression {
+            CompressionArg::Zip => Compression::Zip,
+            CompressionArg::Mask => Compression::ActiveMask,
+            CompressionArg::None => Compression::None,
+        },
+        speed_grids: args.float,
+        staggered: args.staggered,
+        frame: 1,
+        boxes,
+    };
+    // Checked once, before any frame, so that a refusal names the layout file.
+    if let (Some(file), Err(e)) = (&args.boxes, base.check()) {
+        return Err(anyhow::Error::new(e).context(format!("{}", file.display())));
+    }
     let mut out = QuietStdout::new();
     for (frame, path) in outputs {
         let start = Instant::now();
         let opts = SynthOptions {
-            scene: args.scene.clone(),
-            n0: args.n0,
-            levels: args.levels,
-            compression: match args.compression {
-                CompressionArg::Zip => Compression::Zip,
-                CompressionArg::Mask => Compression::ActiveMask,
-                CompressionArg::None => Compression::None,
-            },
-            speed_grids: args.float,
-            staggered: args.staggered,
             frame,
-            boxes: boxes.clone(),
+            ..base.clone()
         };
-        let (grids, bytes) =
-            write_scene(&path, &opts).with_context(|| format!("synth {}", args.scene))?;
+        // A bar with the time left, on a terminal, once a write takes more than a second.
+        let bar = ProgressBar::with_draw_target(None, ProgressDrawTarget::hidden());
+        bar.set_style(
+            ProgressStyle::with_template(
+                "{elapsed:>4} [{bar:30}] {percent:>3}% of {len} leaves, {eta} left",
+            )
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        );
+        let mut shown = false;
+        let (grids, bytes) = write_scene_with(&path, &opts, &mut |done, total| {
+            bar.set_length(total);
+            bar.set_position(done);
+            if !shown && start.elapsed() > Duration::from_secs(1) {
+                shown = true;
+                bar.set_draw_target(ProgressDrawTarget::stderr());
+            }
+        })
+        .with_context(|| format!("synth {}", args.scene))?;
+        bar.finish_and_clear();
         for g in &grids {
             writeln!(
                 out,

@@ -3,8 +3,9 @@
 //! caller gives, every grid gets the entries OpenVDB itself writes (`class`, `value_type`,
 //! `file_bbox_min`, …) so that OpenVDB tools show the file as they would one of their own.
 
+use super::source::{GridSource, LeafShape};
 use super::{write_string, Compression, MetaMap, MetaValue, Unwritable};
-use crate::grid::{Grid, Tile};
+use crate::grid::Tile;
 use crate::vdb::codec::VdbValue;
 
 /// OpenVDB type name and little-endian bytes of a metadata value; `None` for `Other` (a
@@ -76,7 +77,7 @@ pub(super) fn write_meta_map(out: &mut Vec<u8>, meta: &MetaMap) -> Result<(), Un
 
 /// The entries OpenVDB writes for a grid, then `extra` (which overrides them).
 pub(super) fn grid_metadata<V: VdbValue>(
-    grid: &Grid<V>,
+    grid: &GridSource<'_, V>,
     compression: Compression,
     extra: Option<&MetaMap>,
 ) -> MetaMap {
@@ -108,7 +109,7 @@ pub(super) fn grid_metadata<V: VdbValue>(
 }
 
 /// Inclusive index-space bounding box of the active voxels and tiles.
-fn active_bbox<V: VdbValue>(grid: &Grid<V>) -> Option<([i32; 3], [i32; 3])> {
+fn active_bbox<V: VdbValue>(grid: &GridSource<'_, V>) -> Option<([i32; 3], [i32; 3])> {
     let mut lo = [i32::MAX; 3];
     let mut hi = [i32::MIN; 3];
     let mut any = false;
@@ -120,11 +121,11 @@ fn active_bbox<V: VdbValue>(grid: &Grid<V>) -> Option<([i32; 3], [i32; 3])> {
         }
     };
     for leaf in &grid.leaves {
-        for (ijk, _) in leaf.active_voxels() {
-            add(ijk, ijk);
+        if let Some((a, b)) = leaf_bbox(leaf) {
+            add(a, b);
         }
     }
-    for t in &grid.tiles {
+    for t in grid.tiles.iter() {
         let Tile { origin, size, .. } = *t;
         let far = origin.map(|v| v.saturating_add(size as i32 - 1));
         add(origin, far);
@@ -132,9 +133,74 @@ fn active_bbox<V: VdbValue>(grid: &Grid<V>) -> Option<([i32; 3], [i32; 3])> {
     any.then_some((lo, hi))
 }
 
+/// Inclusive box of a leaf's active voxels, read from its mask a word at a time: voxel
+/// `n = x·64 + y·8 + z` is bit `n % 64` of word `x`, so word `x` is active when non-zero,
+/// `y` when byte `y` of the words' union is, and `z` when bit `z` of its bytes' union is.
+fn leaf_bbox(leaf: &LeafShape) -> Option<([i32; 3], [i32; 3])> {
+    let xs: Vec<i32> = (0..8)
+        .filter(|&x| leaf.active[x] != 0)
+        .map(|x| x as i32)
+        .collect();
+    let (&x0, &x1) = (xs.first()?, xs.last()?);
+    let union = leaf.active.iter().fold(0u64, |a, w| a | w);
+    let bytes = union.to_le_bytes();
+    let ys: Vec<i32> = (0..8)
+        .filter(|&y| bytes[y] != 0)
+        .map(|y| y as i32)
+        .collect();
+    let zbits = bytes.iter().fold(0u8, |a, b| a | b);
+    let (z0, z1) = (
+        zbits.trailing_zeros() as i32,
+        7 - zbits.leading_zeros() as i32,
+    );
+    let o = leaf.origin;
+    Some((
+        [o[0] + x0, o[1] + ys[0], o[2] + z0],
+        [o[0] + x1, o[1] + ys[ys.len() - 1], o[2] + z1],
+    ))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The mask-word box equals the box of the voxels `Leaf::active_voxels` lists.
+    #[test]
+    fn leaf_box_from_mask_words_equals_voxel_box() {
+        use crate::grid::{Leaf, LEAF_VOXELS};
+        let mut state = 0x9E37_79B9_7F4A_7C15u64;
+        for case in 0..400 {
+            let mut active = [0u64; 8];
+            // Sparse, dense, single voxels and empty leaves.
+            let voxels = [0, 1, 2, 5, 40, 300][case % 6];
+            for _ in 0..voxels {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                let n = (state % LEAF_VOXELS as u64) as usize;
+                active[n >> 6] |= 1 << (n & 63);
+            }
+            let origin = [8 * (case as i32 % 5) - 16, -8, 4096];
+            let leaf = Leaf {
+                origin,
+                active,
+                values: Box::new([0.0f32; LEAF_VOXELS]),
+            };
+            let mut want: Option<([i32; 3], [i32; 3])> = None;
+            for (p, _) in leaf.active_voxels() {
+                let (lo, hi) = want.get_or_insert((p, p));
+                for a in 0..3 {
+                    lo[a] = lo[a].min(p[a]);
+                    hi[a] = hi[a].max(p[a]);
+                }
+            }
+            assert_eq!(
+                leaf_bbox(&LeafShape { origin, active }),
+                want,
+                "case {case}"
+            );
+        }
+    }
 
     #[test]
     fn metadata_encodes_as_openvdb_types_and_refuses_unknown_ones() {

@@ -27,6 +27,12 @@
 //! `files::output::write_atomic` (temporary name in the target directory, synced, renamed
 //! over the target).
 //!
+//! Grids are written from [`source::GridSource`]s: their shapes (leaf origins and masks)
+//! are placed and the topology written first, then the leaf values are asked for and
+//! encoded one batch of [`BATCH_LEAVES`] at a time, so memory holds the shapes and one
+//! batch, never the file. The grid descriptors' offsets, known only once a grid's buffers
+//! are written, are filled in at the end (OpenVDB's own writer seeks back the same way).
+//!
 //! The modules mirror the reader's, record by record: this one writes the header and the
 //! grid descriptors and puts each grid's record together; [`metadata`], [`transform`] and
 //! [`tree`] write those parts of a grid, [`values`] the values of one node, [`compress`] one
@@ -35,19 +41,25 @@
 
 mod compress;
 mod metadata;
+pub mod source;
 mod transform;
 mod tree;
 mod values;
 
 use std::collections::BTreeMap;
 use std::fs::File;
-use std::io::{BufWriter, Write};
+use std::io::{BufWriter, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
 use thiserror::Error;
 
 use super::codec::{CompressionFlags, VdbValue, MAGIC};
-use crate::grid::{AnyGrid, Grid, Transform};
+use crate::grid::{AnyGrid, Transform};
+use source::{with_source, AnySource, GridSource};
+
+/// Leaves whose values are made and encoded together (in parallel) before they are
+/// written: 4096 leaves of 3-vectors are 25 MB of values, and as much again encoded.
+pub const BATCH_LEAVES: usize = 4096;
 
 /// `OPENVDB_FILE_VERSION_MULTIPASS_IO`: the newest format before half-float grid types.
 pub(crate) const FILE_VERSION: u32 = 224;
@@ -183,23 +195,33 @@ pub fn write_vdb_with(
     grids: &[AnyGrid],
     options: &WriteOptions,
 ) -> Result<u64, WriteError> {
-    // Encode every grid in memory first: offsets are then known before anything is written.
+    let sources: Vec<AnySource<'_>> = grids.iter().map(AnySource::of).collect();
+    write_sources(path, &sources, options, &mut |_| {})
+}
+
+/// Writes `grids` to `path`, asking for their leaf values a batch at a time (see the module
+/// docs); `progress` is told the leaves written so far, of all grids, after every batch.
+/// Returns the file size in bytes.
+pub fn write_sources(
+    path: &Path,
+    grids: &[AnySource<'_>],
+    options: &WriteOptions,
+    progress: &mut dyn FnMut(u64),
+) -> Result<u64, WriteError> {
+    // Every grid's head (metadata, transform, topology) first: whatever a grid cannot hold
+    // is found before a byte is written.
     let names = unique_names(grids);
-    let mut bodies = Vec::with_capacity(grids.len());
+    let mut heads = Vec::with_capacity(grids.len());
     for (index, grid) in grids.iter().enumerate() {
         let extra = options.grid_metadata.get(index);
-        let body = match grid {
-            AnyGrid::Float(g) => encode_grid(g, options.compression, extra),
-            AnyGrid::Double(g) => encode_grid(g, options.compression, extra),
-            AnyGrid::Vec3s(g) => encode_grid(g, options.compression, extra),
-            AnyGrid::Vec3d(g) => encode_grid(g, options.compression, extra),
-        }
-        .map_err(|reason| WriteError::InvalidGrid {
-            path: path.to_path_buf(),
-            grid: grid.name().to_string(),
-            reason,
-        })?;
-        bodies.push(body);
+        let head = with_source!(grid, g => encode_head(g, options.compression, extra)).map_err(
+            |reason| WriteError::InvalidGrid {
+                path: path.to_path_buf(),
+                grid: grid.name().to_string(),
+                reason,
+            },
+        )?;
+        heads.push(head);
     }
 
     // Header and file metadata.
@@ -222,50 +244,124 @@ pub fn write_vdb_with(
     })?;
     head.extend_from_slice(&(grids.len() as i32).to_le_bytes());
 
-    // Grid descriptors with their offsets, each followed by the grid body.
-    let mut pos = head.len() as u64;
-    let mut chunks: Vec<Vec<u8>> = Vec::with_capacity(grids.len());
-    for ((grid, name), body) in grids.iter().zip(&names).zip(&bodies) {
-        let mut desc = Vec::new();
-        write_string(&mut desc, name);
-        write_string(&mut desc, tree_type(grid));
-        write_string(&mut desc, ""); // instance parent
-        let grid_pos = pos + desc.len() as u64 + 24;
-        let block_pos = grid_pos + body.head.len() as u64;
-        let end_pos = block_pos + body.buffers.iter().map(|b| b.len() as u64).sum::<u64>();
-        for p in [grid_pos, block_pos, end_pos] {
-            desc.extend_from_slice(&(p as i64).to_le_bytes());
-        }
-        pos = end_pos;
-        chunks.push(desc);
-    }
-
+    let flags = options.compression.flags();
     write_atomically(path, |out| {
         out.write_all(&head)?;
-        for (desc, body) in chunks.iter().zip(&bodies) {
-            out.write_all(desc)?;
-            out.write_all(&body.head)?;
-            for b in &body.buffers {
-                out.write_all(b)?;
+        let mut pos = head.len() as u64;
+        let mut done = 0u64;
+        // Where each descriptor's three offsets go, and their values.
+        let mut offsets: Vec<(u64, [u64; 3])> = Vec::with_capacity(grids.len());
+        for ((grid, name), (grid_head, order)) in grids.iter().zip(&names).zip(&heads) {
+            let mut desc = Vec::new();
+            write_string(&mut desc, name);
+            write_string(&mut desc, tree_type(grid));
+            write_string(&mut desc, ""); // instance parent
+            let at = pos + desc.len() as u64;
+            desc.extend_from_slice(&[0; 24]); // grid, block and end offsets, filled in below
+            out.write_all(&desc)?;
+            pos += desc.len() as u64;
+            let grid_pos = pos;
+            out.write_all(grid_head)?;
+            pos += grid_head.len() as u64;
+            let block_pos = pos;
+            for batch in order.chunks(BATCH_LEAVES) {
+                let buffers = with_source!(grid, g => tree::leaf_buffers(g, batch, flags));
+                for b in &buffers {
+                    out.write_all(b)?;
+                    pos += b.len() as u64;
+                }
+                done += batch.len() as u64;
+                progress(done);
+            }
+            offsets.push((at, [grid_pos, block_pos, pos]));
+        }
+        for (at, values) in offsets {
+            out.seek(SeekFrom::Start(at))?;
+            for p in values {
+                out.write_all(&(p as i64).to_le_bytes())?;
             }
         }
-        Ok(())
-    })?;
-    Ok(pos)
+        out.seek(SeekFrom::Start(pos))?;
+        Ok(pos)
+    })
 }
 
-fn tree_type(grid: &AnyGrid) -> &'static str {
+/// Most bytes [`write_sources`] writes for `grids` with any compression: every value
+/// stored raw, internal nodes' included, and room for the file's and grids' metadata.
+/// What a disk must have free for the file.
+pub fn size_bound(grids: &[AnySource<'_>]) -> u64 {
+    grids.iter().fold(FILE_META_BYTES, |acc, grid| {
+        let (value, leaves, tiles) = with_source!(grid, g => (
+            std::mem::size_of_val(&g.background) as u64,
+            &g.leaves,
+            g.tiles.len() as u64,
+        ));
+        let nodes = |shift: u32| {
+            let mut keys: Vec<[i32; 3]> = leaves
+                .iter()
+                .map(|l| l.origin.map(|v| v >> shift))
+                .collect();
+            keys.sort_unstable();
+            keys.dedup();
+            keys.len() as u64
+        };
+        let counts = NodeCounts {
+            leaves: leaves.len() as u64,
+            lower: nodes(7),
+            upper: nodes(12),
+            tiles,
+        };
+        acc.saturating_add(counts.bound(value))
+    })
+}
+
+/// Room for a file's header and metadata, and for one grid's descriptor, metadata and
+/// transform: what [`NodeCounts::bound`] adds besides the nodes.
+const FILE_META_BYTES: u64 = 64 << 10;
+
+/// How many nodes of each kind a grid has: what bounds its size in a file.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct NodeCounts {
+    pub leaves: u64,
+    /// Lower internal nodes (128³ voxels each).
+    pub lower: u64,
+    /// Upper internal nodes (4096³ voxels each), the root's children.
+    pub upper: u64,
+    /// Active tiles at any level.
+    pub tiles: u64,
+}
+
+impl NodeCounts {
+    /// Most bytes the grid takes in a file, with values of `value_bytes` each stored raw:
+    /// per node its masks, compression byte and values, and a compressed block's size
+    /// prefix; per leaf also its mask in the topology.
+    pub fn bound(&self, value_bytes: u64) -> u64 {
+        let node = |slots: u64| slots / 4 + 1 + 8 + slots * value_bytes;
+        [
+            (self.upper, node(32 * 32 * 32) + 12),
+            (self.lower, node(16 * 16 * 16)),
+            (self.leaves, 64 + node(512)),
+            (self.tiles, 12 + value_bytes + 1),
+        ]
+        .iter()
+        .fold(FILE_META_BYTES, |acc, &(n, bytes)| {
+            acc.saturating_add(n.saturating_mul(bytes))
+        })
+    }
+}
+
+fn tree_type(grid: &AnySource<'_>) -> &'static str {
     match grid {
-        AnyGrid::Float(_) => f32::TREE_TYPE,
-        AnyGrid::Double(_) => f64::TREE_TYPE,
-        AnyGrid::Vec3s(_) => <[f32; 3]>::TREE_TYPE,
-        AnyGrid::Vec3d(_) => <[f64; 3]>::TREE_TYPE,
+        AnySource::Float(_) => f32::TREE_TYPE,
+        AnySource::Double(_) => f64::TREE_TYPE,
+        AnySource::Vec3s(_) => <[f32; 3]>::TREE_TYPE,
+        AnySource::Vec3d(_) => <[f64; 3]>::TREE_TYPE,
     }
 }
 
 /// Descriptor names as OpenVDB makes them: a name used more than once, or empty, gets a
 /// suffix `"\x1e<n>"` so every descriptor is unique.
-fn unique_names(grids: &[AnyGrid]) -> Vec<String> {
+fn unique_names(grids: &[AnySource<'_>]) -> Vec<String> {
     let mut count: BTreeMap<&str, usize> = BTreeMap::new();
     for g in grids {
         *count.entry(g.name()).or_default() += 1;
@@ -292,14 +388,15 @@ fn unique_names(grids: &[AnyGrid]) -> Vec<String> {
 
 /// Writes through `f` with [`files::output::write_atomic`] (temporary file next to
 /// `path`, synced, renamed over it; removed on error or SIGINT/SIGTERM).
-fn write_atomically(
+fn write_atomically<T>(
     path: &Path,
-    f: impl FnOnce(&mut BufWriter<&mut File>) -> std::io::Result<()>,
-) -> Result<(), WriteError> {
+    f: impl FnOnce(&mut BufWriter<&mut File>) -> std::io::Result<T>,
+) -> Result<T, WriteError> {
     files::output::write_atomic(path, |file| {
         let mut out = BufWriter::with_capacity(1 << 20, file);
-        f(&mut out)?;
-        out.flush()
+        let value = f(&mut out)?;
+        out.flush()?;
+        Ok(value)
     })
     .map_err(|source| WriteError::Io {
         path: path.to_path_buf(),
@@ -308,7 +405,7 @@ fn write_atomically(
 }
 
 /// A deterministic UUID-shaped tag: two FNV-1a hashes of the grid names and shapes.
-fn uuid(grids: &[AnyGrid], names: &[String]) -> String {
+fn uuid(grids: &[AnySource<'_>], names: &[String]) -> String {
     let mut text = String::new();
     for (g, name) in grids.iter().zip(names) {
         let (t, leaves, tiles) = (g.transform(), g.leaf_count(), g.tile_count());
@@ -345,20 +442,14 @@ fn write_string(out: &mut Vec<u8>, s: &str) {
     out.extend_from_slice(s.as_bytes());
 }
 
-/// A grid's record after its descriptor, encoded: offsets follow from the lengths.
-struct EncodedGrid {
-    /// Compression flags, metadata, transform, topology.
-    head: Vec<u8>,
-    /// Leaf buffers in tree order.
-    buffers: Vec<Vec<u8>>,
-}
-
-/// Compression flags, grid metadata, transform, then the tree (see [`tree`]).
-fn encode_grid<V: VdbValue>(
-    grid: &Grid<V>,
+/// A grid's record after its descriptor up to its leaf buffers (compression flags, grid
+/// metadata, transform, topology), and the order in which the buffers follow it (leaf
+/// indices of the source).
+fn encode_head<V: VdbValue>(
+    grid: &GridSource<'_, V>,
     compression: Compression,
     extra: Option<&MetaMap>,
-) -> Result<EncodedGrid, Unwritable> {
+) -> Result<(Vec<u8>, Vec<usize>), Unwritable> {
     let t = grid.transform;
     transform::check_transform(&t)?;
     let nodes = tree::build_tree(grid)?;
@@ -370,6 +461,6 @@ fn encode_grid<V: VdbValue>(
         &metadata::grid_metadata(grid, compression, extra),
     )?;
     transform::write_transform(&mut head, &t);
-    let buffers = tree::write_tree(&mut head, &nodes, flags);
-    Ok(EncodedGrid { head, buffers })
+    let order = tree::write_topology(&mut head, &nodes, &grid.leaves, flags);
+    Ok((head, order))
 }

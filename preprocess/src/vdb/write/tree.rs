@@ -3,41 +3,44 @@
 //! internal nodes, 8³ leaves), then written as topology (every node depth first, internal
 //! values included, leaves as their value masks) followed by the leaf buffers in the same
 //! order. Placing everything first is what catches overlapping or misaligned input before
-//! a byte is written.
+//! a byte is written. Only the leaves' shapes (origin and active mask) are placed: their
+//! values are asked for one batch at a time while the buffers are written, so a grid
+//! larger than memory can be written from a function that samples it.
 
 use std::collections::BTreeMap;
 
 use rayon::prelude::*;
 
+use super::source::{GridSource, LeafShape};
 use super::values::write_values;
 use super::Unwritable;
-use crate::grid::{Grid, Leaf, LEAF_VOXELS};
+use crate::grid::LEAF_VOXELS;
 use crate::vdb::codec::{CompressionFlags, VdbValue};
 
-/// Leaves, lower internal nodes (16³ children of 8³) and upper internal nodes (32³
-/// children of 128³), keyed by their index inside the parent, in the order OpenVDB visits
-/// them.
-struct Lower<'a, V> {
-    leaves: BTreeMap<usize, &'a Leaf<V>>,
+/// Leaves (by their index in the source), lower internal nodes (16³ children of 8³) and
+/// upper internal nodes (32³ children of 128³), keyed by their index inside the parent, in
+/// the order OpenVDB visits them.
+struct Lower<V> {
+    leaves: BTreeMap<usize, usize>,
     tiles: BTreeMap<usize, V>,
 }
 
-struct Upper<'a, V> {
-    children: BTreeMap<usize, Lower<'a, V>>,
+struct Upper<V> {
+    children: BTreeMap<usize, Lower<V>>,
     tiles: BTreeMap<usize, V>,
 }
 
-enum RootEntry<'a, V> {
-    Child(Upper<'a, V>),
+enum RootEntry<V> {
+    Child(Upper<V>),
     Tile(V),
 }
 
-type Root<'a, V> = BTreeMap<[i32; 3], RootEntry<'a, V>>;
+type Root<V> = BTreeMap<[i32; 3], RootEntry<V>>;
 
 /// A grid's tiles and leaves placed in their nodes; root entries sorted by origin, as
 /// OpenVDB's root table is.
-pub(super) struct Tree<'a, V> {
-    root: Root<'a, V>,
+pub(super) struct Tree<V> {
+    root: Root<V>,
     background: V,
 }
 
@@ -59,8 +62,8 @@ fn root_key(p: [i32; 3]) -> [i32; 3] {
 
 /// Places every tile and leaf of `grid` in its node, refusing overlaps, misaligned origins
 /// and tile sizes a 5-4-3 tree does not have.
-pub(super) fn build_tree<V: VdbValue>(grid: &Grid<V>) -> Result<Tree<'_, V>, Unwritable> {
-    let mut root: Root<'_, V> = BTreeMap::new();
+pub(super) fn build_tree<V: VdbValue>(grid: &GridSource<'_, V>) -> Result<Tree<V>, Unwritable> {
+    let mut root: Root<V> = BTreeMap::new();
     // Root tiles first, so that anything placed inside one is reported.
     for t in grid.tiles.iter().filter(|t| t.size == 4096) {
         check_aligned(t.origin, 4096, "tile")?;
@@ -103,7 +106,7 @@ pub(super) fn build_tree<V: VdbValue>(grid: &Grid<V>) -> Result<Tree<'_, V>, Unw
             }
         }
     }
-    for leaf in &grid.leaves {
+    for (index, leaf) in grid.leaves.iter().enumerate() {
         check_aligned(leaf.origin, 8, "leaf")?;
         let u = upper_of(&mut root, leaf.origin)?;
         let ui = upper_index(leaf.origin);
@@ -123,7 +126,7 @@ pub(super) fn build_tree<V: VdbValue>(grid: &Grid<V>) -> Result<Tree<'_, V>, Unw
                 origin: leaf.origin,
             });
         }
-        if lower.leaves.insert(li, leaf).is_some() {
+        if lower.leaves.insert(li, index).is_some() {
             return Err(Unwritable::TwoLeaves {
                 origin: leaf.origin,
             });
@@ -136,10 +139,7 @@ pub(super) fn build_tree<V: VdbValue>(grid: &Grid<V>) -> Result<Tree<'_, V>, Unw
 }
 
 /// The upper internal node holding `origin`, created if missing.
-fn upper_of<'m, 'a, V>(
-    root: &'m mut Root<'a, V>,
-    origin: [i32; 3],
-) -> Result<&'m mut Upper<'a, V>, Unwritable> {
+fn upper_of<V>(root: &mut Root<V>, origin: [i32; 3]) -> Result<&mut Upper<V>, Unwritable> {
     let entry = root.entry(root_key(origin)).or_insert_with(|| {
         RootEntry::Child(Upper {
             children: BTreeMap::new(),
@@ -159,25 +159,17 @@ fn check_aligned(origin: [i32; 3], size: i32, what: &'static str) -> Result<(), 
     Ok(())
 }
 
-/// Writes the topology of `tree` to `out` and returns the leaf buffers (value mask and
-/// compressed values) in the same order.
-pub(super) fn write_tree<V: VdbValue>(
+/// Writes the topology of `tree` to `out` and returns the source's leaf indices in the
+/// order their buffers follow it.
+pub(super) fn write_topology<V: VdbValue>(
     out: &mut Vec<u8>,
-    tree: &Tree<'_, V>,
+    tree: &Tree<V>,
+    shapes: &[LeafShape],
     flags: CompressionFlags,
-) -> Vec<Vec<u8>> {
-    let leaves = write_topology(out, &tree.root, tree.background, flags);
-    write_leaf_buffers(&leaves, tree.background, flags)
-}
-
-/// Buffer count, background, root tiles, then each root child's internal nodes depth first
-/// down to the leaves' value masks. Returns the leaves in the order visited.
-fn write_topology<'a, V: VdbValue>(
-    out: &mut Vec<u8>,
-    root: &Root<'a, V>,
-    background: V,
-    flags: CompressionFlags,
-) -> Vec<&'a Leaf<V>> {
+) -> Vec<usize> {
+    let (root, background) = (&tree.root, tree.background);
+    // Buffer count, background, root tiles, then each root child's internal nodes depth
+    // first down to the leaves' value masks.
     out.extend_from_slice(&1i32.to_le_bytes()); // buffer count
     background.put(out);
     let tiles = root
@@ -222,7 +214,8 @@ fn write_topology<'a, V: VdbValue>(
                 flags,
             );
             for &leaf in lower.leaves.values() {
-                leaf.active
+                shapes[leaf]
+                    .active
                     .iter()
                     .for_each(|w| out.extend_from_slice(&w.to_le_bytes()));
                 leaves.push(leaf);
@@ -232,25 +225,29 @@ fn write_topology<'a, V: VdbValue>(
     leaves
 }
 
-/// One buffer per leaf (value mask again, then values), encoded in parallel, kept in order.
-fn write_leaf_buffers<V: VdbValue>(
-    leaves: &[&Leaf<V>],
-    background: V,
+/// The buffers (value mask again, then values) of the source's leaves `batch`, encoded in
+/// parallel, in order.
+pub(super) fn leaf_buffers<V: VdbValue>(
+    grid: &GridSource<'_, V>,
+    batch: &[usize],
     flags: CompressionFlags,
 ) -> Vec<Vec<u8>> {
-    leaves
+    batch
         .par_iter()
-        .map(|leaf| {
+        .map(|&index| {
+            let shape = &grid.leaves[index];
+            let values = (grid.values)(index);
             let mut out = Vec::with_capacity(64 + 1 + LEAF_VOXELS * V::SIZE);
-            leaf.active
+            shape
+                .active
                 .iter()
                 .for_each(|w| out.extend_from_slice(&w.to_le_bytes()));
             write_values(
                 &mut out,
-                &leaf.values[..],
-                &leaf.active[..],
+                &values[..],
+                &shape.active[..],
                 None,
-                background,
+                grid.background,
                 flags,
             );
             out
@@ -301,7 +298,7 @@ fn write_internal<V: VdbValue>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::grid::{Tile, Transform};
+    use crate::grid::{Grid, Leaf, Tile, Transform};
 
     #[test]
     fn node_indices_follow_openvdb_bit_layout() {
@@ -333,12 +330,12 @@ mod tests {
             tiles: Vec::new(),
         };
         assert!(matches!(
-            build_tree(&g),
+            build_tree(&GridSource::of(&g)),
             Err(Unwritable::TwoLeaves { origin: [0, 0, 0] })
         ));
         g.leaves = vec![leaf([4, 0, 0])];
         assert!(matches!(
-            build_tree(&g),
+            build_tree(&GridSource::of(&g)),
             Err(Unwritable::Misaligned { size: 8, .. })
         ));
         g.leaves = vec![leaf([8, 0, 0])];
@@ -348,10 +345,10 @@ mod tests {
             value: 1.0,
         }];
         assert!(matches!(
-            build_tree(&g),
+            build_tree(&GridSource::of(&g)),
             Err(Unwritable::InsideUpperTile { what: "leaf", .. })
         ));
         g.tiles[0].origin = [128, 0, 0];
-        assert!(build_tree(&g).is_ok());
+        assert!(build_tree(&GridSource::of(&g)).is_ok());
     }
 }
