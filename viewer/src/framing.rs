@@ -27,18 +27,43 @@ pub const DEFAULT_FILL: f64 = 0.8;
 /// by that bounding box is one entry. For Q iso-surfaces around vortex cores these boxes follow the cores closely,
 /// while regions' ranges (which cover whole bricks and their neighbours) do not, and the
 /// list's corners give the camera the structure's silhouette far better than one box
-/// (a ring's box has empty corners). One pass over the cells, split over the bricks on
-/// all cores: it runs when a file is opened.
+/// (a ring's box has empty corners). It runs when a file is opened, split over the bricks
+/// on all cores, and reads only the cells of bricks that can hold the value: a brick every
+/// region of which ranges below `iso` has all its cells below it, so it adds its whole
+/// box to the second set without a read ([`bricks_below`]). On a file larger than memory
+/// that keeps the first frame's reads to the pages near the surface.
 pub fn surface_boxes(vol: &Volume, f: usize, iso: f64) -> Vec<([f64; 3], [f64; 3])> {
-    use rayon::prelude::*;
     if f >= vol.fields.len() || !iso.is_finite() {
         return Vec::new();
     }
+    surface_boxes_of(vol, f, iso, &bricks_below(vol, f, iso))
+}
+
+/// [`surface_boxes`], reading the cells of every brick but those `below_only` marks.
+fn surface_boxes_of(
+    vol: &Volume,
+    f: usize,
+    iso: f64,
+    below_only: &[bool],
+) -> Vec<([f64; 3], [f64; 3])> {
+    use rayon::prelude::*;
     let per_brick: Vec<(Vec<Aabb>, Aabb)> = (0..vol.brick_count() as u32)
         .into_par_iter()
         .map(|b| {
             let br = vol.brick(b);
             let [nx, ny, nz] = br.dims;
+            if below_only[b as usize] {
+                // The box the loop below would grow from every cell, from its corners.
+                let last = [nx, ny, nz].map(|n| (n - 1).max(0) as f64);
+                let mut below = Aabb::default();
+                if nx > 0 && ny > 0 && nz > 0 {
+                    for c in [[0.0; 3], last] {
+                        let centre: [f64; 3] = std::array::from_fn(|a| br.origin[a] + c[a] * br.w);
+                        below.grow(centre, br.w);
+                    }
+                }
+                return (Vec::new(), below);
+            }
             let nb = br.dims.map(|n| (n + BLOCK - 1) / BLOCK);
             let mut above = vec![Aabb::default(); (nb[0] * nb[1] * nb[2]) as usize];
             let mut below = Aabb::default();
@@ -82,6 +107,25 @@ pub fn surface_boxes(vol: &Volume, f: usize, iso: f64) -> Vec<([f64; 3], [f64; 3
             (0..3).all(|a| lo[a] <= hi[a]).then_some((lo, hi))
         })
         .collect()
+}
+
+/// Per brick, whether every region that lists it has field `f`'s range below `iso`
+/// (strictly, and not NaN): then so has every cell of the brick, since each cell lies in
+/// the support of one of them. One pass over the regions' brick lists and ranges, which
+/// are small beside the values.
+fn bricks_below(vol: &Volume, f: usize, iso: f64) -> Vec<bool> {
+    // 0: listed by no region yet, 1: every region so far below, 2: some region not.
+    let mut state = vec![0u8; vol.brick_count()];
+    for r in 0..vol.region_count() {
+        let [_, max] = vol.range(r, f);
+        let below = f64::from(max) < iso;
+        for id in vol.region_brick_ids(r) {
+            if let Some(s) = state.get_mut(id.to_native() as usize) {
+                *s = if below && *s != 2 { 1 } else { 2 };
+            }
+        }
+    }
+    state.into_iter().map(|s| s == 1).collect()
 }
 
 /// Side, in cells, of the blocks of a brick that [`surface_boxes`] bounds separately:
@@ -457,5 +501,42 @@ mod tests {
         assert!(surface_boxes(&vol, 0, 2.0).is_empty(), "above the maximum");
         assert!(surface_boxes(&vol, 0, -1e9).is_empty(), "below the minimum");
         assert!(surface_boxes(&vol, 5, 0.0).is_empty(), "no such field");
+    }
+
+    /// Bricks whose regions all range below the value are not read, and the boxes are the
+    /// same as when every cell is read: on three levels, at values that cut many bricks,
+    /// few, none, and at a brick's exact maximum.
+    #[test]
+    fn bricks_below_the_value_are_not_read_and_change_nothing() {
+        use crate::testvol;
+        let waves = |p: [f64; 3]| (0.4 * p[0]).sin() * (0.3 * p[1]).cos() + 0.05 * p[2];
+        let file = testvol::nested(16, [0.0; 3], &[("q", &waves)], 4);
+        let view = testvol::open(&file).expect("open");
+        let vol = Volume::new(&view).expect("volume");
+        let max = (0..vol.region_count())
+            .map(|r| vol.range(r, 0)[1])
+            .fold(f32::NEG_INFINITY, f32::max);
+        let mut skipped_some = false;
+        for iso in [-0.5, 0.0, 0.5, 0.9, f64::from(max), f64::from(max) + 1.0] {
+            let below = bricks_below(&vol, 0, iso);
+            let skipped = below.iter().filter(|&&b| b).count();
+            skipped_some |= skipped > 0 && skipped < below.len();
+            let read_all = vec![false; vol.brick_count()];
+            assert_eq!(
+                surface_boxes(&vol, 0, iso),
+                surface_boxes_of(&vol, 0, iso, &read_all),
+                "iso {iso}: {skipped} of {} bricks skipped",
+                below.len()
+            );
+            // A skipped brick has no cell at or above the value.
+            for (b, _) in below.iter().enumerate().filter(|(_, &s)| s) {
+                let br = vol.brick(b as u32);
+                let n = (br.dims[0] * br.dims[1] * br.dims[2]) as usize;
+                for idx in br.first..br.first + n {
+                    assert!(f64::from(vol.value(0, idx)) < iso, "brick {b}");
+                }
+            }
+        }
+        assert!(skipped_some, "no value skipped part of the bricks");
     }
 }

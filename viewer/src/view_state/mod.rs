@@ -195,13 +195,19 @@ impl ViewState {
     /// [`ViewState::default_for`] the field ranges of an opened volume, with the camera
     /// framing the iso surface ([`ViewState::frame_surface`]).
     pub fn default_for_volume(vol: &crate::volume::Volume) -> ViewState {
-        let mut s = ViewState::default_for(
+        let mut s = ViewState::default_unframed(vol);
+        s.frame_surface(vol);
+        s
+    }
+
+    /// [`ViewState::default_for`] the field ranges of an opened volume, the camera on the
+    /// whole data: for a caller that places or frames the camera itself.
+    pub(crate) fn default_unframed(vol: &crate::volume::Volume) -> ViewState {
+        ViewState::default_for(
             vol.to_world(vol.bounds_min),
             vol.to_world(vol.bounds_max),
             &vol.fields,
-        );
-        s.frame_surface(vol);
-        s
+        )
     }
 
     /// World boxes whose union holds the surface of the view's iso field and value

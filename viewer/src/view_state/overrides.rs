@@ -464,6 +464,12 @@ impl Overrides {
         self.eye.is_some() || self.look_at.is_some() || self.up.is_some() || self.ortho.is_some()
     }
 
+    /// Whether the flags give the camera's whole pose (`--eye`, `--look-at` and `--up`),
+    /// so that nothing of a framed camera but its projection would be left.
+    pub fn places_whole_camera(&self) -> bool {
+        self.eye.is_some() && self.look_at.is_some() && self.up.is_some()
+    }
+
     /// Applies `--iso-field` and `--colour-field` against the fields the data has
     /// (`fields`: their ranges, a sequence's ranges for a sequence), after
     /// [`Overrides::apply`], as [`ViewCommand::IsoField`] and [`ViewCommand::ColourField`]:

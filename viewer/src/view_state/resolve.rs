@@ -46,7 +46,17 @@ impl Overrides {
         given: Option<ViewState>,
     ) -> Result<ResolvedView, ResolveError> {
         let from_file = given.is_some();
-        let mut state = given.unwrap_or_else(|| ViewState::default_for_volume(vol));
+        let mut state = match given {
+            Some(state) => state,
+            // Framing reads the cells near the surface, which on a large file is most of
+            // the set-up: it is done once, below, for the flags' own iso value, field and
+            // size. Only a camera the flags place in part (`--up` alone, say) starts from
+            // the defaults' framing; one placed in full needs none.
+            None if self.places_camera() && !self.places_whole_camera() => {
+                ViewState::default_for_volume(vol)
+            }
+            None => ViewState::default_unframed(vol),
+        };
         let notes = self.apply(&mut state, from_file)?;
         self.apply_fields(&mut state, &vol.fields)
             .map_err(|error| ResolveError::Field {
