@@ -14,6 +14,7 @@ pub mod kdtree;
 pub mod levels;
 pub mod measures;
 pub mod nonfinite;
+pub mod progress;
 pub mod reconstruct;
 pub mod regions;
 pub mod request;

@@ -8,10 +8,11 @@ use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
 use files::output::QuietStdout;
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::{HumanDuration, ProgressBar, ProgressStyle};
 use qbricks_preprocess::bake::DEFAULT_MAX_BRICK;
 use qbricks_preprocess::derive::Stencil;
 use qbricks_preprocess::inputs::Layout;
+use qbricks_preprocess::progress;
 use qbricks_preprocess::request::{bake_one, summary_json, BakePlan, BakeRequest};
 
 #[derive(clap::Args)]
@@ -93,8 +94,9 @@ pub fn run(args: Args, plan: Plan) -> anyhow::Result<()> {
     let Plan { start, bake } = plan;
     let input_name = args.input.display().to_string();
 
-    // Progress: on a terminal a spinner naming the stage, shown once the bake has taken a
-    // second (short bakes stay silent); with --progress elsewhere, plain stage lines.
+    // Progress: on a terminal a bar naming the stage, with the share done and the time
+    // left (`preprocess::progress`), shown once the bake has taken a second (short bakes
+    // stay silent); with --progress elsewhere, plain stage lines.
     let show = !args.quiet && (args.progress || std::io::stderr().is_terminal());
     let terminal = std::io::stderr().is_terminal();
     let bar: OnceLock<ProgressBar> = OnceLock::new();
@@ -111,15 +113,26 @@ pub fn run(args: Args, plan: Plan) -> anyhow::Result<()> {
             return;
         }
         let b = bar.get_or_init(|| {
-            let b = ProgressBar::new_spinner().with_elapsed(start.elapsed());
+            let b = ProgressBar::new(1000).with_elapsed(start.elapsed());
             b.set_style(
-                ProgressStyle::with_template("{spinner} {elapsed:>4} {msg}")
+                ProgressStyle::with_template("{spinner} {elapsed:>4} [{bar:24}] {msg}")
                     .unwrap_or_else(|_| ProgressStyle::default_spinner()),
             );
             b.enable_steady_tick(Duration::from_millis(120));
             b
         });
-        b.set_message(name.to_string());
+        let done = progress::done_at(name).unwrap_or(0.0);
+        b.set_position((done * 1000.0) as u64);
+        b.set_message(
+            match progress::seconds_left(name, start.elapsed().as_secs_f64()) {
+                Some(left) if left < 1.0 => format!("{name}, under a second left"),
+                Some(left) => format!(
+                    "{name}, about {} left",
+                    HumanDuration(Duration::from_secs_f64(left))
+                ),
+                None => name.to_string(),
+            },
+        );
     };
 
     let (output, summary) = bake_one(
