@@ -144,6 +144,35 @@ impl Crossing {
     }
 }
 
+/// A stretch of one ray that one rank composited (dvr), as rank 0 reads it.
+#[derive(Debug, Clone, Copy)]
+struct Run {
+    ray: usize,
+    /// Distance of its first sample: where it lies on the ray.
+    t: f64,
+    acc: Accum,
+}
+
+impl Run {
+    fn encode(&self, out: &mut Vec<f64>) {
+        out.push(self.ray as f64);
+        out.push(self.t);
+        out.extend(self.acc.rgb);
+        out.push(self.acc.transmittance);
+    }
+
+    fn decode(w: &[f64]) -> Run {
+        Run {
+            ray: w[0] as usize,
+            t: w[1],
+            acc: Accum {
+                rgb: [w[2], w[3], w[4]],
+                transmittance: w[5],
+            },
+        }
+    }
+}
+
 fn to_bytes(words: &[f64]) -> Vec<u8> {
     words.iter().flat_map(|w| w.to_le_bytes()).collect()
 }
@@ -189,14 +218,12 @@ fn composite_runs(parts: &[Vec<f64>], n_rays: usize) -> Result<Vec<Accum>, PartE
         here.clear();
         for (rank, part) in parts.iter().enumerate() {
             while let Some(rec) = part.get(at[rank] * RUN_WORDS..(at[rank] + 1) * RUN_WORDS) {
+                // Compared as sent: a record whose ray is not an integer is out of order.
                 if rec[0] != i as f64 {
                     break;
                 }
-                let acc = Accum {
-                    rgb: [rec[2], rec[3], rec[4]],
-                    transmittance: rec[5],
-                };
-                here.push((rec[1], acc));
+                let run = Run::decode(rec);
+                here.push((run.t, run.acc));
                 at[rank] += 1;
             }
         }
@@ -295,11 +322,9 @@ pub fn render_part(
                         if dvr {
                             runs.clear();
                             caster.dvr_runs(&ray, &bounds, jit, &mut runs);
-                            for (t, acc) in &runs {
-                                crossings.push(ray_index(x, y, s) as f64);
-                                crossings.push(*t);
-                                crossings.extend(acc.rgb);
-                                crossings.push(acc.transmittance);
+                            for &(t, acc) in &runs {
+                                let ray = ray_index(x, y, s);
+                                Run { ray, t, acc }.encode(&mut crossings);
                             }
                             continue;
                         }

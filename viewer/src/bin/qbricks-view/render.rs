@@ -247,10 +247,16 @@ fn run_over_ranks(
     renderer: &Renderer,
     open_ms: f64,
 ) -> anyhow::Result<()> {
-    let frame_of = |scene: &Scene| -> anyhow::Result<Option<(Frame, Vec<parts::RankReport>)>> {
+    // The regions this rank owns follow from the view (their cost is the iso value's), so
+    // they are cut once per scene, not once per frame of `--repeat`.
+    let owned_in = |scene: &Scene| -> anyhow::Result<Vec<bool>> {
         ranks.agree(parts::check(scene, ranks.size()).map_err(anyhow::Error::from))?;
-        let owned = parts::owned_regions(scene, ranks.rank(), ranks.size());
-        let part = parts::render_part(scene, &owned, ranks, renderer);
+        Ok(parts::owned_regions(scene, ranks.rank(), ranks.size()))
+    };
+    let frame_of = |scene: &Scene,
+                    owned: &[bool]|
+     -> anyhow::Result<Option<(Frame, Vec<parts::RankReport>)>> {
+        let part = parts::render_part(scene, owned, ranks, renderer);
         part.with_context(|| path.display().to_string())
     };
     if args.view.wants_visible_range() {
@@ -258,7 +264,7 @@ fn run_over_ranks(
         let first = visible_range_view(&state);
         let scene = ranks
             .agree(Scene::new(vol, &first, meshes).with_context(|| path.display().to_string()))?;
-        if let Some((frame, _)) = frame_of(&scene)? {
+        if let Some((frame, _)) = frame_of(&scene, &owned_in(&scene)?)? {
             if let Some(note) = args
                 .view
                 .fit_visible_colours_to(&frame, vol, &mut state)
@@ -270,11 +276,12 @@ fn run_over_ranks(
     }
     let scene =
         ranks.agree(Scene::new(vol, &state, meshes).with_context(|| path.display().to_string()))?;
+    let owned = owned_in(&scene)?;
     let mut times = Vec::new();
     let mut last = None;
     for _ in 0..args.repeat.max(1) {
         let t = Instant::now();
-        last = frame_of(&scene)?;
+        last = frame_of(&scene, &owned)?;
         times.push(t.elapsed().as_secs_f64() * 1e3);
     }
     // The other ranks are done: rank 0 has the frame.
