@@ -178,6 +178,7 @@ pub fn bake_file(
     let (brick_file, summary) =
         bake_with_progress(grids, &opts, stage).with_context(|| input_name.clone())?;
     stopped()?;
+    crate::bake::memory::return_freed();
     stage("writing");
     format::writer::write(output, &brick_file)?;
     Ok(summary)

@@ -160,6 +160,13 @@ impl Input {
         }
     }
 
+    /// The cell sets, the values dropped.
+    fn into_sets(self) -> Vec<CellSet> {
+        match self {
+            Input::Vector(s, _, _) | Input::Scalar(s, _, _) => s,
+        }
+    }
+
     fn sets_mut(&mut self) -> &mut [CellSet] {
         match self {
             Input::Vector(s, _, _) | Input::Scalar(s, _, _) => s,
@@ -234,6 +241,11 @@ fn run(
     if opts.max_brick == 0 {
         return Err(BakeError::BadMaxBrick(opts.max_brick));
     }
+    // What a stage dropped is given back before the next one allocates.
+    let stage = |name: &str| {
+        memory::return_freed();
+        stage(name);
+    };
     stage("selecting grids");
     let selection = select_input(grids, opts)?;
 
@@ -273,9 +285,13 @@ fn run(
         &mut warnings,
     )?;
     let nonfinite_derived = clamp_fields(&mut fields, &bricks, sets, opts.strict, &mut warnings)?;
+    // The cells' values are in the fields now: from here on only the sets' cells are read,
+    // so the input values (24 bytes a cell for a velocity) are dropped before the regions.
+    let nonfinite = cells.nonfinite;
+    let sets = cells.input.into_sets();
 
     stage("building regions");
-    let (bounds, tree) = build_regions(sets, &bricks, selection.widths[0]);
+    let (bounds, tree) = build_regions(&sets, &bricks, selection.widths[0]);
     let kd = kd_tree(&tree, &bricks, &fields.values)?;
 
     stage("assembling");
@@ -296,7 +312,7 @@ fn run(
         bricks: bricks.boxes.len() as u64,
         regions: file.regions.len() as u64,
         kd_nodes: file.kd_nodes.len() as u64,
-        nonfinite: cells.nonfinite,
+        nonfinite,
         nonfinite_derived,
         fields: field_summaries,
         warnings,
