@@ -7,7 +7,7 @@ mod common;
 
 use std::process::Output;
 
-use common::qbricks_bake;
+use common::{peak_memory, qbricks_bake};
 use format::BrickFileView;
 
 fn run(args: &[&str]) -> Output {
@@ -153,7 +153,6 @@ fn moved_commands_exit_2_naming_qbricks_lab() {
 /// 151 MB), where it held 47 (193 MB) when freed leaves stayed in the allocator's heaps.
 /// Memory is measured, not time: the child's maximum resident set from `wait4`.
 #[test]
-#[allow(unsafe_code)]
 fn bake_peak_memory_stays_near_its_cells() {
     use qbricks_preprocess::grid::{AnyGrid, Grid, Leaf, Transform, LEAF_VOXELS};
     use qbricks_preprocess::vdb::write::{write_vdb, Compression};
@@ -207,20 +206,9 @@ fn bake_peak_memory_stays_near_its_cells() {
         .env("RAYON_NUM_THREADS", "2")
         .spawn()
         .expect("run qbricks-bake");
-    let pid = child.id() as libc::pid_t;
-    let mut status = 0;
-    // SAFETY: `rusage` is plain data that `wait4` fills; the child is ours and not waited
-    // for elsewhere (`child` is only dropped, which does not wait).
-    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
-    let reaped = unsafe { libc::wait4(pid, &mut status, 0, &mut usage) };
-    assert_eq!(reaped, pid);
-    assert!(
-        libc::WIFEXITED(status) && libc::WEXITSTATUS(status) == 0,
-        "{status}"
-    );
-    drop(child);
+    let peak = peak_memory(child);
     assert!(qbk.exists());
     let cells = 160.0f64.powi(3);
-    let per_cell = usage.ru_maxrss as f64 * 1024.0 / cells; // kilobytes on Linux
+    let per_cell = peak as f64 / cells;
     assert!(per_cell < 42.0, "{per_cell:.1} bytes a cell at the peak");
 }

@@ -81,7 +81,7 @@ pub fn write_scene(
 ///
 /// The grids are never held: their leaves' shapes are laid out first, and the values are
 /// sampled a batch of leaves at a time while the file is written
-/// ([`preprocess::vdb::write::write_sources`]), so memory stays near the shapes (about 150
+/// ([`preprocess::vdb::write::write_sources`]), so memory stays near the shapes (about 300
 /// bytes a leaf) and one batch whatever the scene's size. `progress` is told the leaves
 /// written so far, out of the total it is first given (`progress(0, total)`).
 ///

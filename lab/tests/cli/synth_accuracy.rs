@@ -3,7 +3,7 @@
 
 use std::process::Output;
 
-use crate::common::qbricks_lab;
+use crate::common::{peak_memory, qbricks_lab};
 
 fn run(args: &[&str]) -> Output {
     qbricks_lab().args(args).output().expect("run qbricks-lab")
@@ -271,7 +271,6 @@ fn accuracy_prints_every_key_and_plots_a_png() {
 /// 206 MB of leaves and the encoded file beside them: 413 MB at the peak; streamed, about
 /// 45 MB). Memory is measured, not time: the child's maximum resident set from `wait4`.
 #[test]
-#[allow(unsafe_code)]
 fn synth_memory_stays_below_the_file_it_writes() {
     let dir = tempfile::tempdir().expect("tempdir");
     let out = dir.path().join("abc.vdb");
@@ -281,20 +280,8 @@ fn synth_memory_stays_below_the_file_it_writes() {
         .stdout(std::process::Stdio::null())
         .spawn()
         .expect("run qbricks-lab");
-    let pid = child.id() as libc::pid_t;
-    let mut status = 0;
-    // SAFETY: `rusage` is plain data that `wait4` fills; the child is ours and not waited
-    // for elsewhere (`child` is only dropped, which does not wait).
-    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
-    let reaped = unsafe { libc::wait4(pid, &mut status, 0, &mut usage) };
-    assert_eq!(reaped, pid);
-    assert!(
-        libc::WIFEXITED(status) && libc::WEXITSTATUS(status) == 0,
-        "{status}"
-    );
-    drop(child);
+    let peak = peak_memory(child);
     let file = std::fs::metadata(&out).expect("output").len();
-    let peak = usage.ru_maxrss as u64 * 1024; // kilobytes on Linux
     assert!(file > 150 << 20, "{file}");
     assert!(
         peak < file / 2,

@@ -9,7 +9,7 @@ pub mod vdb;
 
 // Each test binary uses some of these.
 #[allow(unused_imports)]
-pub use support::{have_pyopenvdb, Rng};
+pub use support::{have_pyopenvdb, peak_memory, Rng};
 
 use std::path::PathBuf;
 use std::process::Command;

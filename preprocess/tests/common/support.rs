@@ -32,3 +32,23 @@ impl Rng {
         self.next_u64() % n
     }
 }
+
+/// Waits for `child`, checks that it exited with status 0, and returns its peak resident
+/// memory in bytes (the maximum resident set `wait4` reports): for tests that bound a
+/// program's memory, which is measured, not its time.
+#[allow(unsafe_code)]
+pub fn peak_memory(child: std::process::Child) -> u64 {
+    let pid = child.id() as libc::pid_t;
+    let mut status = 0;
+    // SAFETY: `rusage` is plain data that `wait4` fills; the child is ours and not waited
+    // for elsewhere (`child` is only dropped, which does not wait).
+    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+    let reaped = unsafe { libc::wait4(pid, &mut status, 0, &mut usage) };
+    assert_eq!(reaped, pid, "wait4");
+    assert!(
+        libc::WIFEXITED(status) && libc::WEXITSTATUS(status) == 0,
+        "exit status {status}"
+    );
+    drop(child);
+    usage.ru_maxrss as u64 * 1024 // kilobytes on Linux
+}
