@@ -6,8 +6,8 @@
 //!
 //! The estimate follows what the pipeline allocates:
 //! - the decoded grids' leaves ([`GridFootprint::decoded`]): they and the cells made from
-//!   them are both held while a grid is converted, the bake's peak since the memory each
-//!   stage frees is given back before the next ([`return_freed`]);
+//!   them are both held while a grid is converted, the bake's peak since what the bake
+//!   drops afterwards is given back to the system ([`return_freed`]);
 //! - per slot of every 8³ block a cell set takes ([`GridFootprint::blocks`], 512 slots
 //!   each, inactive slots included): the cells' values, 24 bytes for a velocity, 72 for a
 //!   staggered one (faces kept beside the centred values), 8 for a scalar; plus the masks;
@@ -19,8 +19,11 @@
 //! (none) and 47.3 (zip) bytes per cell (estimate 52.4), 55.7 with five fields
 //! (estimate 64.4). The figures are in docs/baking.md.
 
-/// Gives the pages of freed allocations back to the system; called between a bake's
-/// stages. The decoded grids are millions of 6 kB leaves: once converted to cells they are
+/// Gives the pages of freed allocations back to the system; called where a bake has just
+/// dropped much (the decoded grids, the input values, the cells before the file is
+/// written), not between every stage: each call consolidates the allocator's free lists,
+/// about 3 % of a small bake's time when it ran before all nine stages. The decoded grids
+/// are millions of 6 kB leaves: once converted to cells they are
 /// freed, but glibc's allocator keeps freed small blocks in its heaps, so without this the
 /// bake's resident memory kept them to the end (a 56.6 M-cell bake peaked at 2.60 GB
 /// instead of 2.14 GB, the leaves' 12 bytes a cell held through the later stages). Only the

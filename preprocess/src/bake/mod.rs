@@ -241,11 +241,6 @@ fn run(
     if opts.max_brick == 0 {
         return Err(BakeError::BadMaxBrick(opts.max_brick));
     }
-    // What a stage dropped is given back before the next one allocates.
-    let stage = |name: &str| {
-        memory::return_freed();
-        stage(name);
-    };
     stage("selecting grids");
     let selection = select_input(grids, opts)?;
 
@@ -260,6 +255,9 @@ fn run(
         &mut warnings,
     )?;
 
+    // The decoded grids are cells now: their leaves go back to the system before the
+    // fields are allocated.
+    memory::return_freed();
     stage("classifying leaf cells");
     let leaf_cells = classify(&mut cells.input);
     // The values alone: a file the format cannot hold is refused before its fields are
@@ -289,6 +287,7 @@ fn run(
     // so the input values (24 bytes a cell for a velocity) are dropped before the regions.
     let nonfinite = cells.nonfinite;
     let sets = cells.input.into_sets();
+    memory::return_freed();
 
     stage("building regions");
     let (bounds, tree) = build_regions(&sets, &bricks, selection.widths[0]);
