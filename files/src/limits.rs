@@ -181,6 +181,25 @@ pub fn vec_of<T: Clone + Default>(what: impl Display, n: usize) -> Result<Vec<T>
     Ok(v)
 }
 
+/// A vector of `n` zero values, checked as [`vec_of`], whose pages the system hands out
+/// only as they are first written: a large one costs no resident memory up front, so a
+/// caller that fills it while freeing what it fills it from (the bake's cells from the
+/// decoded leaves) never holds both whole.
+pub fn zeroed_vec_of<T: bytemuck::Zeroable>(
+    what: impl Display,
+    n: usize,
+) -> Result<Vec<T>, LimitError> {
+    let need = (n as u64).saturating_mul(std::mem::size_of::<T>() as u64);
+    let limit = memory_limit();
+    check_memory_within(&what, need, limit.clone())?;
+    bytemuck::allocation::try_zeroed_vec(n).map_err(|()| LimitError::Memory {
+        what: what.to_string(),
+        need,
+        limit: limit.bytes,
+        why: "the system refused the allocation".to_string(),
+    })
+}
+
 /// An empty vector with room for `n` values, checked as [`vec_of`].
 pub fn with_capacity<T>(what: impl Display, n: usize) -> Result<Vec<T>, LimitError> {
     let need = (n as u64).saturating_mul(std::mem::size_of::<T>() as u64);

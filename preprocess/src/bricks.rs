@@ -247,7 +247,7 @@ mod tests {
             leaves,
             tiles: vec![],
         };
-        CellSet::from_grid(&grid, 0, f64::from).expect("small").0
+        CellSet::from_grid(grid, 0, f64::from).expect("small").0
     }
 
     /// Every leaf cell in exactly one brick, every brick dense with leaf cells and inside

@@ -26,7 +26,7 @@ use serde::Serialize;
 
 use rayon::prelude::*;
 
-use crate::cells::{CellSet, BLOCK_CELLS};
+use crate::cells::{CellSet, SlotValues, BLOCK_CELLS};
 
 /// Gradient stencil at grid edges and next to missing cells (`--stencil`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Default, clap::ValueEnum)]
@@ -49,10 +49,10 @@ pub fn speed(u: &[f64; 3]) -> f64 {
 pub(crate) struct VelocityField<'a> {
     pub sets: &'a [CellSet],
     /// Cell-centred velocity per slot (for a staggered grid: [`centre_from_faces`]).
-    pub values: &'a [Vec<[f64; 3]>],
+    pub values: &'a [SlotValues<[f64; 3]>],
     /// Per grid: the face values of a staggered grid (as stored), `None` for a
     /// cell-centred one. May be shorter than `sets` (missing entries: cell-centred).
-    pub faces: &'a [Option<Vec<[f64; 3]>>],
+    pub faces: &'a [Option<SlotValues<[f64; 3]>>],
 }
 
 /// Cell-centred velocity of a staggered grid from its face values (see the module docs):
@@ -61,7 +61,7 @@ pub(crate) struct VelocityField<'a> {
 /// neighbour) the value is extrapolated linearly from the two lower faces (second order,
 /// like the one-sided differences), or is the lower face alone when only it exists.
 /// Inactive slots hold zero.
-pub(crate) fn centre_from_faces(set: &CellSet, faces: &[[f64; 3]]) -> Vec<[f64; 3]> {
+pub(crate) fn centre_from_faces(set: &CellSet, faces: &SlotValues<[f64; 3]>) -> Vec<[f64; 3]> {
     let mut out = vec![[0.0; 3]; faces.len()];
     out.par_chunks_mut(BLOCK_CELLS)
         .enumerate()
@@ -72,12 +72,12 @@ pub(crate) fn centre_from_faces(set: &CellSet, faces: &[[f64; 3]]) -> Vec<[f64; 
                     continue;
                 }
                 let ijk = set.ijk(slot);
-                let f = faces[slot];
+                let f = faces.get(slot);
                 for c in 0..3 {
                     v[c] = match set.active_neighbour(slot, ijk, c, 1) {
-                        Some(up) => 0.5 * (f[c] + faces[up][c]),
+                        Some(up) => 0.5 * (f[c] + faces.get(up)[c]),
                         None => match set.active_neighbour(slot, ijk, c, -1) {
-                            Some(down) => 1.5 * f[c] - 0.5 * faces[down][c],
+                            Some(down) => 1.5 * f[c] - 0.5 * faces.get(down)[c],
                             None => f[c],
                         },
                     };
@@ -91,18 +91,25 @@ pub(crate) fn centre_from_faces(set: &CellSet, faces: &[[f64; 3]]) -> Vec<[f64; 
 /// difference of the cell's two faces over one cell; without the upper face, the
 /// second-order one-sided difference over the faces `i − ½`, `i − 3/2`, `i − 5/2`
 /// (weights 2, −3, 1), or the first-order one over two faces, or zero.
-fn face_derivative(set: &CellSet, faces: &[[f64; 3]], slot: usize, ijk: [i32; 3], a: usize) -> f64 {
+fn face_derivative(
+    set: &CellSet,
+    faces: &SlotValues<[f64; 3]>,
+    slot: usize,
+    ijk: [i32; 3],
+    a: usize,
+) -> f64 {
     let h = set.width;
-    let f0 = faces[slot][a];
+    let face = |s: usize| faces.get(s)[a];
+    let f0 = face(slot);
     if let Some(up) = set.active_neighbour(slot, ijk, a, 1) {
-        return (faces[up][a] - f0) / h;
+        return (face(up) - f0) / h;
     }
     match (
         set.active_neighbour(slot, ijk, a, -1),
         set.active_neighbour(slot, ijk, a, -2),
     ) {
-        (Some(m), Some(mm)) => (2.0 * f0 - 3.0 * faces[m][a] + faces[mm][a]) / h,
-        (Some(m), None) => (f0 - faces[m][a]) / h,
+        (Some(m), Some(mm)) => (2.0 * f0 - 3.0 * face(m) + face(mm)) / h,
+        (Some(m), None) => (f0 - face(m)) / h,
         _ => 0.0,
     }
 }
@@ -162,7 +169,7 @@ pub(crate) fn reconstruct(f: &VelocityField, p: [f64; 3], choice: CellChoice) ->
                         CellChoice::Active => set.active_slot(ijk),
                     };
                     if let Some(s) = slot {
-                        let v = vals[s];
+                        let v = vals.get(s);
                         for c in 0..3 {
                             sum[c] += h * v[c];
                         }
@@ -191,8 +198,8 @@ pub(crate) fn gradient(
     let set = &f.sets[s];
     let vals = &f.values[s];
     let h = set.width;
-    let u0 = vals[slot];
-    let at = |a: usize, d: i32| set.active_neighbour(slot, ijk, a, d).map(|t| vals[t]);
+    let u0 = vals.get(slot);
+    let at = |a: usize, d: i32| set.active_neighbour(slot, ijk, a, d).map(|t| vals.get(t));
     let mut g = [[0.0; 3]; 3];
     for a in 0..3 {
         let up = set.active_neighbour(slot, ijk, a, 1);
@@ -201,14 +208,14 @@ pub(crate) fn gradient(
             // Interior cell (nearly all of them): the central difference straight from the
             // value array, without the `Option` copies of the general case below, which
             // cost more than the arithmetic.
-            let (p, m) = (&vals[p], &vals[m]);
+            let (p, m) = (vals.get(p), vals.get(m));
             for i in 0..3 {
                 g[i][a] = (p[i] - m[i]) / (2.0 * h);
             }
             continue;
         }
-        let mut plus = up.map(|t| vals[t]);
-        let mut minus = down.map(|t| vals[t]);
+        let mut plus = up.map(|t| vals.get(t));
+        let mut minus = down.map(|t| vals.get(t));
         if stencil == Stencil::CrossLevel && (plus.is_none() || minus.is_none()) {
             let centre = set.centre(ijk);
             let mut p = centre;

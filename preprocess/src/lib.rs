@@ -9,6 +9,7 @@ pub mod derive;
 pub mod error;
 pub mod fields;
 pub mod grid;
+pub mod heap;
 pub mod inputs;
 pub mod kdtree;
 pub mod levels;

@@ -148,9 +148,10 @@ fn moved_commands_exit_2_naming_qbricks_lab() {
 }
 
 /// A bake gives the memory its stages free back before the next stage allocates (the
-/// decoded leaves once they are cells, the input values once they are fields): its peak is
-/// the cells' conversion, about 37 bytes a cell on a dense 160³ velocity grid (4.1 M cells,
-/// 151 MB), where it held 47 (193 MB) when freed leaves stayed in the allocator's heaps.
+/// decoded leaves as they become cells, the input values once they are fields) and keeps a
+/// single-precision velocity single: its peak is the fields' derivation, about 26 bytes a
+/// cell on a dense 160³ velocity grid (4.1 M cells, 106 MB). It held 47 when freed leaves
+/// stayed in the allocator's heaps, and 37 with the velocity widened to f64.
 /// Memory is measured, not time: the child's maximum resident set from `wait4`.
 #[test]
 fn bake_peak_memory_stays_near_its_cells() {
@@ -210,5 +211,8 @@ fn bake_peak_memory_stays_near_its_cells() {
     assert!(qbk.exists());
     let cells = 160.0f64.powi(3);
     let per_cell = peak as f64 / cells;
-    assert!(per_cell < 42.0, "{per_cell:.1} bytes a cell at the peak");
+    // 25.8 measured: 12 bytes of single-precision velocity and 8 of fields a cell, and a
+    // fixed 20 MB. Widening the velocity to f64, or holding the decoded leaves beside the
+    // cells, gave 37.
+    assert!(per_cell < 30.0, "{per_cell:.1} bytes a cell at the peak");
 }

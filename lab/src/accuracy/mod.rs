@@ -33,7 +33,7 @@ use files::limits::{check_memory, with_capacity, LimitError};
 
 use crate::analytic::{self, Exact, Flow};
 use crate::synth::{scene_grids, scene_layout, SynthError};
-use preprocess::bake::memory::{bake_bytes, GridFootprint, CELL_BYTES, VELOCITY_SLOT_BYTES};
+use preprocess::bake::memory::{bake_bytes, GridFootprint, CELL_BYTES, SINGLE_VELOCITY_SLOT_BYTES};
 use preprocess::bake::{bake, BakeError, BakeOptions};
 use preprocess::derive::Stencil;
 use preprocess::fields::FieldKind;
@@ -166,7 +166,7 @@ pub fn memory_needed(scene: &str, n0: u32, levels: u32, fields: u64) -> Result<u
         .map(|l| {
             (
                 GridFootprint::leaves::<Vec3>(l.leaf_count(), l.voxel_count()),
-                VELOCITY_SLOT_BYTES,
+                SINGLE_VELOCITY_SLOT_BYTES,
             )
         })
         .collect();

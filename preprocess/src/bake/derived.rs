@@ -64,7 +64,7 @@ pub(super) fn derive_fields(
                 let v = &vals[b.set];
                 let mut hits = vec![0u64; kinds.len()];
                 b.for_each_cell(set, |i, ijk, slot| {
-                    let u = slot.map(|s| v[s]).unwrap_or_default();
+                    let u = slot.map(|s| v.get(s)).unwrap_or_default();
                     // One gradient for every measure made from it.
                     let g = match slot.filter(|&s| needs_gradient && set.is_active(s)) {
                         Some(s) => gradient(&field, b.set, ijk, s, opts.stencil),
@@ -139,7 +139,7 @@ pub(super) fn derive_fields(
                 let set = &sets[b.set];
                 let v = &vals[b.set];
                 b.for_each_cell(set, |i, _, slot| {
-                    out[0][i] = slot.map(|s| v[s]).unwrap_or_default() as f32;
+                    out[0][i] = slot.map(|s| v.get(s)).unwrap_or_default() as f32;
                 });
             })?;
             Ok(FieldValues {

@@ -2,7 +2,7 @@
 //! velocity's leaf-cell centres. Their own grids need not share the velocity's lattice, so
 //! they are sampled, not copied.
 
-use crate::cells::CellSet;
+use crate::cells::{CellSet, SlotValues};
 use crate::error::BakeError;
 use crate::grid::AnyGrid;
 
@@ -12,7 +12,7 @@ use super::{fix_nonfinite, Cells};
 /// among grids of the same name.
 pub(super) struct ExtraGrid {
     pub(super) name: String,
-    grids: Vec<(CellSet, Vec<f64>, f64)>,
+    grids: Vec<(CellSet, SlotValues<f64>, f64)>,
 }
 
 impl ExtraGrid {
@@ -62,7 +62,7 @@ impl ExtraGrid {
                 match set.active_slot(ijk) {
                     Some(s) => {
                         any = true;
-                        sum += w * vals[s];
+                        sum += w * vals.get(s);
                     }
                     None => sum += w * bg,
                 }
@@ -84,25 +84,28 @@ impl ExtraGrid {
 /// the velocity), one entry per field name.
 pub(super) fn extra_fields(
     names: &[String],
-    grids: &[AnyGrid],
+    mut grids: Vec<AnyGrid>,
     strict: bool,
     warnings: &mut Vec<String>,
 ) -> Result<Vec<ExtraGrid>, BakeError> {
     let mut out = Vec::with_capacity(names.len());
     for name in names {
-        let mine: Vec<&AnyGrid> = grids.iter().filter(|g| g.name() == name).collect();
+        let mine: Vec<AnyGrid>;
+        (mine, grids) = grids.into_iter().partition(|g| g.name() == name);
         let mut sets = Vec::with_capacity(mine.len());
         let mut vals = Vec::with_capacity(mine.len());
         let mut bgs = Vec::with_capacity(mine.len());
         for g in mine {
             let (set, v, bg) = match g {
                 AnyGrid::Float(g) => {
-                    let (s, v) = CellSet::from_grid(g, 0, f64::from)?;
-                    (s, v, f64::from(g.background))
+                    let bg = f64::from(g.background);
+                    let (s, v) = CellSet::from_grid(g, 0, |v: f32| v)?;
+                    (s, SlotValues::Narrow(v), bg)
                 }
                 AnyGrid::Double(g) => {
+                    let bg = g.background;
                     let (s, v) = CellSet::from_grid(g, 0, |v: f64| v)?;
-                    (s, v, g.background)
+                    (s, SlotValues::Wide(v), bg)
                 }
                 _ => continue,
             };
@@ -111,16 +114,16 @@ pub(super) fn extra_fields(
             bgs.push(if bg.is_finite() { bg } else { 0.0 });
         }
         fix_nonfinite(&sets, &mut vals, strict, warnings)?;
-        let mut grids: Vec<(CellSet, Vec<f64>, f64)> = sets
+        let mut sorted: Vec<(CellSet, SlotValues<f64>, f64)> = sets
             .into_iter()
             .zip(vals)
             .zip(bgs)
             .map(|((s, v), b)| (s, v, b))
             .collect();
-        grids.sort_by(|a, b| a.0.width.total_cmp(&b.0.width));
+        sorted.sort_by(|a, b| a.0.width.total_cmp(&b.0.width));
         out.push(ExtraGrid {
             name: name.clone(),
-            grids,
+            grids: sorted,
         });
     }
     Ok(out)

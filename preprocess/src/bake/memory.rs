@@ -4,39 +4,22 @@
 //! way through. A file of a few kilobytes can hold a single active tile of 640³ voxels:
 //! nothing about the file's size says what the bake will take, only its cells do.
 //!
-//! The estimate follows what the pipeline allocates:
-//! - the decoded grids' leaves ([`GridFootprint::decoded`]): they and the cells made from
-//!   them are both held while a grid is converted, the bake's peak since what the bake
-//!   drops afterwards is given back to the system ([`return_freed`]);
+//! The estimate follows what the pipeline holds, stage by stage, and takes the largest:
+//! - while a grid becomes cells, its decoded leaves ([`GridFootprint::decoded`]) are freed
+//!   as its cells' values are written ([`crate::cells::CellSet::from_grid`]), so a grid
+//!   costs the larger of the two, not their sum; the extra fields' grids wait decoded;
 //! - per slot of every 8³ block a cell set takes ([`GridFootprint::blocks`], 512 slots
-//!   each, inactive slots included): the cells' values, 24 bytes for a velocity, 72 for a
-//!   staggered one (faces kept beside the centred values), 8 for a scalar; plus the masks;
-//! - per active cell: 4 bytes for every baked field and [`CELL_BYTES`] for bricks,
-//!   supports, regions, their ranges and what the allocator rounds up.
+//!   each, inactive slots included): the cells' values at the precision the file stored
+//!   ([`slot_bytes`]: 12 bytes for a single-precision velocity, 24 for a double one, the
+//!   centred values beside the faces of a staggered one); plus the masks;
+//! - per active cell, once the fields are derived: 4 bytes for every baked field and
+//!   [`CELL_BYTES`] for bricks, supports, regions, their ranges and what the allocator
+//!   rounds up.
 //!
-//! Measured peaks (`/usr/bin/time -v`, maximum resident set, 2 threads) against it: one
-//! 384³ tile 38.8 bytes per cell (estimate 40); a 256³ Lamb–Oseen grid of leaves 43.3
-//! (none) and 47.3 (zip) bytes per cell (estimate 52.4), 55.7 with five fields
-//! (estimate 64.4). The figures are in docs/baking.md.
+//! Measured peaks (`/usr/bin/time -v`, maximum resident set, 2 threads) against it are in
+//! docs/baking.md.
 
-/// Gives the pages of freed allocations back to the system; called where a bake has just
-/// dropped much (the decoded grids, the input values, the cells before the file is
-/// written), not between every stage: each call consolidates the allocator's free lists,
-/// about 3 % of a small bake's time when it ran before all nine stages. The decoded grids
-/// are millions of 6 kB leaves: once converted to cells they are
-/// freed, but glibc's allocator keeps freed small blocks in its heaps, so without this the
-/// bake's resident memory kept them to the end (a 56.6 M-cell bake peaked at 2.60 GB
-/// instead of 2.14 GB, the leaves' 12 bytes a cell held through the later stages). Only the
-/// release is asked for: nothing the bake computes depends on it.
-#[allow(unsafe_code)]
-pub fn return_freed() {
-    #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    // SAFETY: `malloc_trim` takes no pointers; it releases only memory the allocator holds
-    // free, and is safe to call from any thread at any time.
-    unsafe {
-        libc::malloc_trim(0);
-    }
-}
+pub use crate::heap::return_freed;
 
 use crate::cells::BLOCK_CELLS;
 use crate::error::BakeError;
@@ -53,13 +36,30 @@ pub const FIELD_BYTES: u64 = 4;
 /// Bytes per block besides its values: active and leaf masks, origin, index entry.
 const BLOCK_BYTES: u64 = 2 * 64 + 12 + 16;
 
-/// Bytes per cell-set slot of a cell-centred velocity (`[f64; 3]`).
+/// Bytes per cell-set slot of a double-precision velocity (`[f64; 3]`).
 pub const VELOCITY_SLOT_BYTES: u64 = 24;
-/// A staggered velocity keeps its face values beside the centred ones, and makes the
-/// centred ones from them while both exist.
-pub const STAGGERED_SLOT_BYTES: u64 = 3 * VELOCITY_SLOT_BYTES;
-/// Bytes per slot of a scalar grid (`f64`), baked on its own or as an extra field.
+/// Bytes per slot of a single-precision velocity, kept as it came (`[f32; 3]`).
+pub const SINGLE_VELOCITY_SLOT_BYTES: u64 = 12;
+/// Bytes per slot of a scalar grid, double (`f64`) or single (`f32`), baked on its own or
+/// as an extra field.
 pub const SCALAR_SLOT_BYTES: u64 = 8;
+pub const SINGLE_SCALAR_SLOT_BYTES: u64 = 4;
+
+/// Bytes per cell-set slot of `grid`'s values: as stored, and for a staggered grid (one of
+/// `staggered`) the cell-centred values made from its faces beside them.
+pub fn slot_bytes(grid: &AnyGrid, staggered: &[String]) -> u64 {
+    let stored = match grid {
+        AnyGrid::Float(_) => SINGLE_SCALAR_SLOT_BYTES,
+        AnyGrid::Double(_) => SCALAR_SLOT_BYTES,
+        AnyGrid::Vec3s(_) => SINGLE_VELOCITY_SLOT_BYTES,
+        AnyGrid::Vec3d(_) => VELOCITY_SLOT_BYTES,
+    };
+    if grid.is_vector() && staggered.iter().any(|s| s == grid.name()) {
+        stored + VELOCITY_SLOT_BYTES
+    } else {
+        stored
+    }
+}
 
 /// What one grid brings into a bake.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -129,32 +129,45 @@ pub fn leaf_bytes<V>() -> u64 {
     (std::mem::size_of::<Leaf<V>>() + std::mem::size_of::<[V; LEAF_VOXELS]>()) as u64
 }
 
-/// The estimated peak of a bake: `grids` with `slot_bytes` per slot of their cell sets
-/// (see the module docs), baked into `fields` fields, with the scalar grids `extras`
-/// resampled as extra fields.
-pub fn bake_bytes(grids: &[(GridFootprint, u64)], extras: &[GridFootprint], fields: u64) -> u64 {
-    let slots = |f: &GridFootprint| f.blocks.saturating_mul(BLOCK_CELLS as u64);
-    let mut total = 0u64;
-    for (f, slot_bytes) in grids {
-        total = total
-            .saturating_add(f.decoded)
-            .saturating_add(slots(f).saturating_mul(*slot_bytes))
-            .saturating_add(f.blocks.saturating_mul(BLOCK_BYTES))
-            .saturating_add(
-                f.cells.saturating_mul(
-                    fields
-                        .saturating_mul(FIELD_BYTES)
-                        .saturating_add(CELL_BYTES),
-                ),
-            );
-    }
-    for f in extras {
-        total = total
-            .saturating_add(f.decoded)
-            .saturating_add(slots(f).saturating_mul(SCALAR_SLOT_BYTES))
-            .saturating_add(f.blocks.saturating_mul(BLOCK_BYTES));
-    }
-    total
+/// The estimated peak of a bake: `grids` with their bytes per slot of their cell sets (see
+/// the module docs), baked into `fields` fields, with the scalar grids `extras` (and their
+/// bytes per slot) resampled as extra fields: the largest of what the three stages that
+/// allocate most hold.
+pub fn bake_bytes(
+    grids: &[(GridFootprint, u64)],
+    extras: &[(GridFootprint, u64)],
+    fields: u64,
+) -> u64 {
+    let values = |(f, slot_bytes): &(GridFootprint, u64)| {
+        f.blocks
+            .saturating_mul(BLOCK_CELLS as u64)
+            .saturating_mul(*slot_bytes)
+    };
+    let masks = |(f, _): &(GridFootprint, u64)| f.blocks.saturating_mul(BLOCK_BYTES);
+    let sum = |list: &[(GridFootprint, u64)], each: &dyn Fn(&(GridFootprint, u64)) -> u64| {
+        list.iter().map(each).fold(0u64, u64::saturating_add)
+    };
+    // The velocity (or scalar) grids become cells, the extra fields' grids still decoded.
+    let converting = sum(grids, &|g| {
+        values(g).max(g.0.decoded).saturating_add(masks(g))
+    })
+    .saturating_add(sum(extras, &|e| e.0.decoded));
+    // The extra fields' grids become cells beside the velocity's.
+    let extra = sum(grids, &|g| values(g).saturating_add(masks(g)))
+        .saturating_add(sum(extras, &|e| {
+            values(e).max(e.0.decoded).saturating_add(masks(e))
+        }));
+    // The fields, bricks and regions beside all the cells.
+    let per_cell = fields
+        .saturating_mul(FIELD_BYTES)
+        .saturating_add(CELL_BYTES);
+    let derived = sum(grids, &|g| {
+        values(g)
+            .saturating_add(masks(g))
+            .saturating_add(g.0.cells.saturating_mul(per_cell))
+    })
+    .saturating_add(sum(extras, &|e| values(e).saturating_add(masks(e))));
+    converting.max(extra).max(derived)
 }
 
 /// Refuses, before any cell is made, a bake of `grids` (and of the scalar grids `extras`
@@ -173,20 +186,9 @@ pub(super) fn check_bake_memory(
     } else {
         1
     };
-    let per_grid: Vec<(GridFootprint, u64)> = grids
-        .iter()
-        .map(|g| {
-            let slot = if !g.is_vector() {
-                SCALAR_SLOT_BYTES
-            } else if opts.staggered.iter().any(|s| s == g.name()) {
-                STAGGERED_SLOT_BYTES
-            } else {
-                VELOCITY_SLOT_BYTES
-            };
-            (GridFootprint::of(g), slot)
-        })
-        .collect();
-    let extras: Vec<GridFootprint> = extras.iter().map(GridFootprint::of).collect();
+    let footprint = |g: &AnyGrid| (GridFootprint::of(g), slot_bytes(g, &opts.staggered));
+    let per_grid: Vec<(GridFootprint, u64)> = grids.iter().map(footprint).collect();
+    let extras: Vec<(GridFootprint, u64)> = extras.iter().map(footprint).collect();
     let need = bake_bytes(&per_grid, &extras, fields);
     let mut names: Vec<&str> = grids.iter().map(AnyGrid::name).collect();
     names.dedup();

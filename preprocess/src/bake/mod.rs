@@ -15,7 +15,7 @@ use format::{Aabb, BrickFile, SourceGrid};
 use files::limits::LimitError;
 
 use crate::bricks::{make_bricks, BrickBox};
-use crate::cells::{classify_leaves, CellSet};
+use crate::cells::{classify_leaves, CellSet, SlotValues, Widen};
 use crate::derive::{centre_from_faces, Stencil};
 use crate::error::{field_grid_not_found, grid_labels, GridCount, GridCounts};
 use crate::fields::{region_ranges, FieldKind, RangeInput};
@@ -149,8 +149,12 @@ pub fn bake_with_progress(
 /// Cell sets and values of the selected grids.
 enum Input {
     /// Cell sets, cell-centred velocities, and the face values of staggered grids.
-    Vector(Vec<CellSet>, Vec<Vec<[f64; 3]>>, Vec<Option<Vec<[f64; 3]>>>),
-    Scalar(Vec<CellSet>, Vec<Vec<f64>>, String),
+    Vector(
+        Vec<CellSet>,
+        Vec<SlotValues<[f64; 3]>>,
+        Vec<Option<SlotValues<[f64; 3]>>>,
+    ),
+    Scalar(Vec<CellSet>, Vec<SlotValues<f64>>, String),
 }
 
 impl Input {
@@ -174,15 +178,15 @@ impl Input {
     }
 }
 
-/// Cell sets of the grids that `one` converts, in file order (rayon keeps the order, so
-/// the output does not depend on the thread count).
+/// Cell sets of the grids (consumed) that `one` converts, in file order (rayon keeps the
+/// order, so the output does not depend on the thread count).
 fn to_sets<T: Send>(
-    grids: &[AnyGrid],
+    grids: Vec<AnyGrid>,
     levels: &[u32],
-    one: impl Fn(&AnyGrid, u32) -> Option<Result<(CellSet, Vec<T>), LimitError>> + Sync,
-) -> Result<(Vec<CellSet>, Vec<Vec<T>>), BakeError> {
+    one: impl Fn(AnyGrid, u32) -> Option<Result<(CellSet, T), LimitError>> + Sync,
+) -> Result<(Vec<CellSet>, Vec<T>), BakeError> {
     Ok(grids
-        .par_iter()
+        .into_par_iter()
         .zip(levels)
         .filter_map(|(g, &l)| one(g, l))
         .collect::<Result<Vec<_>, _>>()?
@@ -193,16 +197,18 @@ fn to_sets<T: Send>(
 /// Replaces the non-finite values of every set by the average of their finite neighbours,
 /// with one warning naming every grid that had some (with its count), or refuses them with
 /// `strict`. Returns how many there were.
-fn fix_nonfinite<T: CellValue>(
+fn fix_nonfinite<T: CellValue + Widen>(
     sets: &[CellSet],
-    values: &mut [Vec<T>],
+    values: &mut [SlotValues<T>],
     strict: bool,
     warnings: &mut Vec<String>,
 ) -> Result<u64, BakeError> {
     let labels = grid_labels(sets.iter().map(|s| s.name.as_str()));
     let mut found = Vec::new();
-    for ((set, vals), label) in sets.iter().zip(values.iter()).zip(labels) {
-        let rep = nonfinite::count(set, vals);
+    let mut any = vec![false; sets.len()];
+    for (((set, vals), label), any) in sets.iter().zip(values.iter()).zip(labels).zip(&mut any) {
+        let rep = nonfinite::count(set, |s| vals.get(s));
+        *any = rep.count > 0;
         if rep.count > 0 {
             found.push(GridCount {
                 grid: label,
@@ -222,8 +228,14 @@ fn fix_nonfinite<T: CellValue>(
             grids,
         });
     }
-    for (set, vals) in sets.iter().zip(values.iter_mut()) {
-        nonfinite::replace(set, vals);
+    // Repaired values are means, which no f32 holds: only those grids are widened.
+    for ((set, vals), _) in sets
+        .iter()
+        .zip(values.iter_mut())
+        .zip(&any)
+        .filter(|(_, &a)| a)
+    {
+        nonfinite::replace(set, vals.wide_mut());
     }
     warnings.push(format!(
         "replaced {total} non-finite values by the average of their finite neighbours: {grids}"
@@ -427,8 +439,7 @@ fn read_cells(
         Input::Vector(sets, vals, _) => fix_nonfinite(sets, vals, opts.strict, warnings)?,
         Input::Scalar(sets, vals, _) => fix_nonfinite(sets, vals, opts.strict, warnings)?,
     };
-    let extras = extra_fields(extra_names, &extra_grids, opts.strict, warnings)?;
-    drop(extra_grids);
+    let extras = extra_fields(extra_names, extra_grids, opts.strict, warnings)?;
     // Staggered grids: keep the (repaired) face values, bake from cell-centred ones.
     if let Input::Vector(sets, vals, faces) = &mut input {
         *faces = sets
@@ -436,7 +447,7 @@ fn read_cells(
             .zip(vals.iter_mut())
             .map(|(set, v)| {
                 opts.staggered.contains(&set.name).then(|| {
-                    let centred = centre_from_faces(set, v);
+                    let centred = SlotValues::Wide(centre_from_faces(set, v));
                     std::mem::replace(v, centred)
                 })
             })
@@ -458,9 +469,14 @@ fn cell_sets(grids: Vec<AnyGrid>, levels: &[u32], opts: &BakeOptions) -> Result<
                 return Err(BakeError::NoFields);
             }
         }
-        let (sets, vals) = to_sets(&grids, levels, |g, l| match g {
-            AnyGrid::Vec3s(g) => Some(CellSet::from_grid(g, l, |v: [f32; 3]| v.map(f64::from))),
-            AnyGrid::Vec3d(g) => Some(CellSet::from_grid(g, l, |v: [f64; 3]| v)),
+        // Single-precision velocities stay single (see `SlotValues`).
+        let (sets, vals) = to_sets(grids, levels, |g, l| match g {
+            AnyGrid::Vec3s(g) => Some(
+                CellSet::from_grid(g, l, |v: [f32; 3]| v).map(|(s, v)| (s, SlotValues::Narrow(v))),
+            ),
+            AnyGrid::Vec3d(g) => Some(
+                CellSet::from_grid(g, l, |v: [f64; 3]| v).map(|(s, v)| (s, SlotValues::Wide(v))),
+            ),
             _ => None,
         })?;
         Ok(Input::Vector(sets, vals, Vec::new()))
@@ -469,9 +485,13 @@ fn cell_sets(grids: Vec<AnyGrid>, levels: &[u32], opts: &BakeOptions) -> Result<
         if opts.fields.is_some() {
             return Err(BakeError::FieldsForScalar { grid: name });
         }
-        let (sets, vals) = to_sets(&grids, levels, |g, l| match g {
-            AnyGrid::Float(g) => Some(CellSet::from_grid(g, l, f64::from)),
-            AnyGrid::Double(g) => Some(CellSet::from_grid(g, l, |v: f64| v)),
+        let (sets, vals) = to_sets(grids, levels, |g, l| match g {
+            AnyGrid::Float(g) => {
+                Some(CellSet::from_grid(g, l, |v: f32| v).map(|(s, v)| (s, SlotValues::Narrow(v))))
+            }
+            AnyGrid::Double(g) => {
+                Some(CellSet::from_grid(g, l, |v: f64| v).map(|(s, v)| (s, SlotValues::Wide(v))))
+            }
             _ => None,
         })?;
         Ok(Input::Scalar(sets, vals, name))

@@ -12,7 +12,7 @@
 
 use rayon::prelude::*;
 
-use crate::cells::CellSet;
+use crate::cells::{CellSet, SlotValues, Widen};
 use crate::error::grid_labels;
 
 use super::Input;
@@ -49,9 +49,9 @@ struct Overlap {
     at: [i32; 3],
 }
 
-fn warnings<T: Sync>(
+fn warnings<T: Widen>(
     sets: &[CellSet],
-    vals: &[Vec<T>],
+    vals: &[SlotValues<T>],
     diff: impl Fn(&T, &T) -> f64 + Sync,
     size: impl Fn(&T) -> f64 + Sync,
 ) -> Vec<String> {
@@ -106,11 +106,11 @@ fn boxes_meet(a: &CellSet, b: &CellSet) -> bool {
 
 /// The overlap of `a`'s leaf cells with `b`'s, block by block in parallel (summed in block
 /// order, so the result does not depend on the thread count).
-fn overlap<T: Sync>(
+fn overlap<T: Widen>(
     a: &CellSet,
-    av: &[T],
+    av: &SlotValues<T>,
     b: &CellSet,
-    bv: &[T],
+    bv: &SlotValues<T>,
     diff: &(impl Fn(&T, &T) -> f64 + Sync),
     size: &(impl Fn(&T) -> f64 + Sync),
 ) -> Overlap {
@@ -156,8 +156,9 @@ fn overlap<T: Sync>(
                     continue;
                 };
                 o.cells += 1;
-                let d = diff(&av[slot], &bv[s]);
-                if d > SAME * size(&av[slot]).max(size(&bv[s])) {
+                let (u, v) = (av.get(slot), bv.get(s));
+                let d = diff(&u, &v);
+                if d > SAME * size(&u).max(size(&v)) {
                     o.differing += 1;
                     if d > o.largest {
                         o.largest = d;

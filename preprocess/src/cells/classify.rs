@@ -358,7 +358,7 @@ mod tests {
                 }
                 let mut g = grid(&format!("g{i}"), w, 0.0, &cells);
                 g.transform = Transform { voxel_size: [w; 3], translation: [offset * w; 3] };
-                sets.push(CellSet::from_grid(&g, level, |v| v).expect("small").0);
+                sets.push(CellSet::from_grid(g, level, |v| v).expect("small").0);
             }
             let expect = classify_reference(&sets);
             classify_leaves(&mut sets);
@@ -417,8 +417,8 @@ mod tests {
         }
         let fine = grid("fine", 1.0, 0.5, &fine_cells);
         let coarse = grid("coarse", 2.0, 0.0, &[[0, 0, 0], [1, 0, 0]]);
-        let (f, _) = CellSet::from_grid(&fine, 0, |v| v).expect("small");
-        let (c, _) = CellSet::from_grid(&coarse, 1, |v| v).expect("small");
+        let (f, _) = CellSet::from_grid(fine.clone(), 0, |v| v).expect("small");
+        let (c, _) = CellSet::from_grid(coarse.clone(), 1, |v| v).expect("small");
         let mut sets = vec![f, c];
         classify_leaves(&mut sets);
         assert_eq!(sets[1].leaf_count(), 1, "cell 0 covered, cell 1 kept");
@@ -427,8 +427,8 @@ mod tests {
 
         // Fine lattice shifted by half a fine cell: coarse cell only partially covered.
         let fine2 = grid("fine", 1.0, 0.0, &fine_cells);
-        let (f2, _) = CellSet::from_grid(&fine2, 0, |v| v).expect("small");
-        let (c2, _) = CellSet::from_grid(&coarse, 1, |v| v).expect("small");
+        let (f2, _) = CellSet::from_grid(fine2.clone(), 0, |v| v).expect("small");
+        let (c2, _) = CellSet::from_grid(coarse.clone(), 1, |v| v).expect("small");
         let mut sets = vec![f2, c2];
         classify_leaves(&mut sets);
         assert_eq!(sets[1].leaf_count(), 2);

@@ -14,9 +14,11 @@ use crate::grid::{leaf_offset, Grid, Transform, LEAF_VOXELS};
 
 mod classify;
 mod index;
+mod values;
 
 pub(crate) use classify::classify_leaves;
 use index::BlockIndex;
+pub(crate) use values::{SlotValues, Widen};
 
 /// Cells per block (one VDB leaf).
 pub(crate) const BLOCK_CELLS: usize = LEAF_VOXELS;
@@ -46,6 +48,10 @@ fn bit(mask: &[u64; 8], n: usize) -> bool {
     (mask[n >> 6] >> (n & 63)) & 1 == 1
 }
 
+/// Decoded leaf values [`CellSet::from_grid`] frees before it hands them back to the system
+/// (a few hundred `malloc_trim` calls for a billion cells).
+const RELEASE_BYTES: usize = 256 << 20;
+
 /// One input grid's cells on its lattice.
 #[derive(Debug, Clone)]
 pub(crate) struct CellSet {
@@ -72,8 +78,14 @@ impl CellSet {
     /// [`crate::bake::memory`]), and the two allocations that grow with it (the blocks'
     /// values and masks) are fallible, so an estimate that falls short is an error, not an
     /// abort.
-    pub(crate) fn from_grid<V: Copy, T: Copy + Default>(
-        grid: &Grid<V>,
+    ///
+    /// The grid is consumed leaf by leaf: each leaf's values are freed once copied, and
+    /// handed back to the system every [`RELEASE_BYTES`], while the values' pages become
+    /// resident only as they are written ([`limits::zeroed_vec_of`]). So the grid and its
+    /// cells are never both held whole: the conversion's peak is the larger of the two,
+    /// not their sum.
+    pub(crate) fn from_grid<V: Copy, T: Copy + Default + bytemuck::Zeroable>(
+        grid: Grid<V>,
         level: u32,
         conv: impl Fn(V) -> T,
     ) -> Result<(CellSet, Vec<T>), LimitError> {
@@ -117,7 +129,7 @@ impl CellSet {
         let index = BlockIndex::new(&blocks);
         let what = || format!("the cells of grid \"{}\"", grid.name);
         let mut active: Vec<[u64; 8]> = limits::vec_of(what(), blocks.len())?;
-        let mut values: Vec<T> = limits::vec_of(what(), blocks.len() * BLOCK_CELLS)?;
+        let mut values: Vec<T> = limits::zeroed_vec_of(what(), blocks.len() * BLOCK_CELLS)?;
         let put = |active: &mut [[u64; 8]], values: &mut [T], ijk: [i32; 3], v: T| {
             if let Some(b) = index.get(block_origin(ijk)) {
                 let n = offset_in_block(ijk);
@@ -136,7 +148,14 @@ impl CellSet {
                 }
             }
         }
-        for leaf in &grid.leaves {
+        let leaf_bytes = std::mem::size_of::<[V; LEAF_VOXELS]>();
+        let mut freed = 0usize;
+        for leaf in grid.leaves {
+            freed += leaf_bytes;
+            if freed >= RELEASE_BYTES {
+                crate::heap::return_freed();
+                freed = 0;
+            }
             if !is_block_origin(leaf.origin) {
                 for (ijk, v) in leaf.active_voxels() {
                     put(&mut active, &mut values, ijk, conv(v));
@@ -408,7 +427,7 @@ mod tests {
                 value: 2.0,
             }],
         };
-        let (s, v) = CellSet::from_grid(&g, 0, |x| x).expect("small");
+        let (s, v) = CellSet::from_grid(g, 0, |x| x).expect("small");
         assert_eq!(s.blocks, vec![[0, 0, 0], [8, 0, 0]]);
         assert_eq!(s.active_count(), 513);
         let at = |ijk| s.active_slot(ijk).map(|slot| v[slot]);
@@ -434,7 +453,7 @@ mod tests {
                 value: 2.0,
             }],
         };
-        let (s, v) = CellSet::from_grid(&g, 0, |x| x).expect("small");
+        let (s, v) = CellSet::from_grid(g, 0, |x| x).expect("small");
         assert_eq!(s.active_count(), 512);
         let slot = s.active_slot([-1, 7, 15]).expect("inside tile");
         assert_eq!(v[slot], 2.0);
