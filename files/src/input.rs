@@ -216,6 +216,116 @@ fn reserve(data: &mut Vec<u8>, extra: u64) -> Result<(), InputErrorKind> {
         .ok_or(InputErrorKind::OutOfMemory { bytes: total })
 }
 
+/// An input's whole bytes: a regular file mapped read-only, anything else read into
+/// memory ([`map_whole`]).
+pub enum Whole {
+    Mapped(memmap2::Mmap),
+    Read(Vec<u8>),
+}
+
+impl Default for Whole {
+    fn default() -> Self {
+        Whole::Read(Vec::new())
+    }
+}
+
+impl std::fmt::Debug for Whole {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let how = match self {
+            Whole::Mapped(_) => "mapped",
+            Whole::Read(_) => "read",
+        };
+        write!(f, "{} bytes, {how}", self.len())
+    }
+}
+
+impl std::ops::Deref for Whole {
+    type Target = [u8];
+    fn deref(&self) -> &[u8] {
+        match self {
+            Whole::Mapped(map) => map,
+            Whole::Read(data) => data,
+        }
+    }
+}
+
+impl Whole {
+    /// Says that the bytes in `range` will not be read again: the mapped pages wholly
+    /// inside it leave this process's resident memory. They stay in the page cache, and a
+    /// later read of them reads the file again, so nothing is lost if they are read after
+    /// all. A reader that decodes a large file front to back calls this behind itself, so
+    /// that the file never sits in memory whole beside what it is decoded into. Bytes read
+    /// into memory stay.
+    pub fn release(&self, range: std::ops::Range<usize>) {
+        let Whole::Mapped(map) = self else {
+            return;
+        };
+        let page = page_size();
+        let start = range.start.div_ceil(page) * page;
+        let end = (range.end.min(map.len()) / page) * page;
+        if start < end {
+            release_pages(map, start, end - start);
+        }
+    }
+}
+
+fn page_size() -> usize {
+    rustix::param::page_size()
+}
+
+/// Drops the pages `offset..offset + len` of a read-only map from the resident set.
+#[allow(unsafe_code)]
+fn release_pages(map: &memmap2::Mmap, offset: usize, len: usize) {
+    // SAFETY: `MADV_DONTNEED` is unsafe in general because it discards the contents of
+    // private or anonymous pages that were written; this map is read-only and backed by
+    // its file, so the pages are only unmapped and a later read faults them in again from
+    // the file, with the same bytes. Advice the kernel refuses changes nothing, so its
+    // error is ignored.
+    let _ = unsafe { map.unchecked_advise_range(memmap2::UncheckedAdvice::DontNeed, offset, len) };
+}
+
+/// Maps `file` (a regular file) read-only.
+///
+/// The mapping shows the file's current contents, not a snapshot: bytes another process
+/// overwrites are read as they are then, and reading a page past the end of a file
+/// another process truncated raises `SIGBUS`, which kills the process (this cannot be
+/// caught safely in Rust). Both programs accept that risk, as OpenVDB's own mapped reading
+/// does: their writers never change a file in place (they write a new file and rename it),
+/// and every byte read is bounds-checked and validated before it is trusted.
+#[allow(unsafe_code)]
+pub fn map_read_only(file: &File) -> std::io::Result<memmap2::Mmap> {
+    // SAFETY: `Mmap::map` is unsafe because the mapped bytes may change under us if the
+    // file is modified or truncated by another process, which breaks the immutability a
+    // `&[u8]` promises: the documented risk above, accepted.
+    unsafe { memmap2::Mmap::map(file) }
+}
+
+/// The whole of `path`: a regular file mapped read-only ([`map_read_only`]: its pages are
+/// read as they are used, and can be let go once used, see [`Whole::release`]) within
+/// `limits.file`, anything else read as [`read_whole`] reads it, within `limits.stream`.
+pub fn map_whole(path: &Path, limits: Limits) -> Result<Whole, InputError> {
+    let err = |kind| InputError {
+        path: path.to_path_buf(),
+        kind,
+    };
+    let (file, meta, kind) = open(path).map_err(err)?;
+    if kind != Kind::Regular || meta.len() == 0 {
+        drop(file);
+        return read_whole(path, limits).map(Whole::Read);
+    }
+    // Mapped or read, a file is decoded into at least its own size.
+    let size = meta.len();
+    if size > limits.file {
+        return Err(err(InputErrorKind::TooLarge {
+            size,
+            limit: limits.file,
+        }));
+    }
+    map_read_only(&file)
+        .map(Whole::Mapped)
+        .map_err(|e| err(e.into()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -220,7 +220,13 @@ pub fn check_space(what: impl Display, path: &Path, need: u64) -> Result<(), Lim
         return Ok(());
     };
     let (dir, _) = target.staging();
-    let Ok(st) = rustix::fs::statvfs(&dir) else {
+    check_space_in(what, &dir, need)
+}
+
+/// Refuses to start writing up to `need` bytes for `what` into directory `dir` when its
+/// file system has less room (as [`check_space`]).
+pub fn check_space_in(what: impl Display, dir: &Path, need: u64) -> Result<(), LimitError> {
+    let Ok(st) = rustix::fs::statvfs(dir) else {
         return Ok(());
     };
     let free = st.f_bavail.saturating_mul(st.f_frsize);
@@ -231,8 +237,18 @@ pub fn check_space(what: impl Display, path: &Path, need: u64) -> Result<(), Lim
         what: what.to_string(),
         need,
         free,
-        dir,
+        dir: dir.to_path_buf(),
     })
+}
+
+/// The directory [`write_atomic`] makes `path`'s temporary file in: beside it, or the
+/// system's temporary directory for a device or a descriptor. Where a writer of `path` may
+/// keep scratch files that the output itself would have room for.
+pub fn staging_dir(path: &Path) -> PathBuf {
+    match Target::of(path) {
+        Ok(target) => target.staging().0,
+        Err(_) => std::env::temp_dir(),
+    }
 }
 
 /// The path a chain of symlinks in the last component of `path` ends at (`path` itself

@@ -25,7 +25,6 @@
 //!   the mapping, so the result is wrong numbers (or a panic on an index derived from
 //!   them), never an access outside the mapping.
 
-use std::fs::File;
 use std::path::{Path, PathBuf};
 
 use memmap2::Mmap;
@@ -35,7 +34,7 @@ use rkyv::util::AlignedVec;
 use crate::error::{one_line, FormatError, FormatErrorKind};
 use crate::header::{Header, HEADER_LEN, PAYLOAD_ALIGN};
 use crate::schema::{ArchivedBrickFile, BrickFile};
-use files::input::{read_whole, Limits};
+use files::input::{map_read_only, read_whole, Limits};
 
 /// Options for [`BrickFileView::open_with`].
 #[derive(Debug, Clone)]
@@ -92,21 +91,6 @@ const _: fn() = || {
     fn shared<T: Send + Sync>() {}
     shared::<BrickFileView>();
 };
-
-/// Maps `file` read-only.
-///
-/// This is the only `unsafe` written in the workspace (the `self_cell` macro that
-/// keeps the validated reference next to its bytes carries its own, audited `unsafe`).
-#[allow(unsafe_code)]
-fn map_read_only(file: &File) -> std::io::Result<Mmap> {
-    // SAFETY: `Mmap::map` is unsafe because the mapped bytes may change under us if the
-    // file is modified or truncated by another process, which breaks the immutability a
-    // `&[u8]` promises. We accept that documented risk (see the module docs: our writer
-    // never modifies a file in place; truncation gives SIGBUS, not a bad read). The bytes
-    // are never trusted: every read of them goes through the header checks and rkyv's
-    // validation first.
-    unsafe { Mmap::map(file) }
-}
 
 impl BrickFileView {
     /// Opens `path` with the default options (checksum verified).

@@ -179,6 +179,11 @@ pub enum BakeError {
     /// The bake's memory estimate (or an allocation) is over the shared limit.
     #[error(transparent)]
     Memory(#[from] LimitError),
+    #[error("cannot keep the baked field values in a scratch file in {}: {source}", dir.display())]
+    Scratch {
+        dir: std::path::PathBuf,
+        source: std::io::Error,
+    },
     #[error("grid \"{grid}\" (voxel size {voxel_size}): voxels reach {reach:e} from the origin, {} voxels of the finest size {finest} out: too far for double precision to place cells exactly (the bake takes 2^{MAX_BAKE_REACH_LOG2}, about {:.1e}, finest voxels); translate the grid towards the origin", fmt_cells(*reach / *finest), MAX_REACH)]
     FarFromOrigin {
         grid: String,

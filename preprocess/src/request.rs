@@ -162,6 +162,8 @@ pub fn bake_file(
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
+    // Field values kept on disk during the bake go where the output will need the room.
+    opts.spill.dir = Some(files::output::staging_dir(output));
     // Read only the grids that will be baked.
     stage("reading VDB");
     let file = VdbFile::open(input)?;

@@ -170,7 +170,7 @@ pub fn memory_needed(scene: &str, n0: u32, levels: u32, fields: u64) -> Result<u
             )
         })
         .collect();
-    let bake = bake_bytes(&grids, &[], fields);
+    let bake = bake_bytes(&grids, &[], fields, &preprocess::bake::Spill::default());
     let (decoded, cells) = grids.iter().fold((0u64, 0u64), |(d, c), (f, _)| {
         (d.saturating_add(f.decoded), c.saturating_add(f.cells))
     });

@@ -3,27 +3,110 @@
 //! Bricks are computed in parallel, each writing straight into its own slice of every
 //! field array (bricks lie one after the other, x fastest), so there are no per-brick
 //! buffers to interleave afterwards; the values do not depend on the thread count.
+//!
+//! The fields are derived while the input's values are held (12 or 24 bytes a cell), and
+//! take 4 bytes a cell each: held beside them, they made the bake's peak. So fields larger
+//! than [`Spill::above`] are derived a chunk of bricks at a time, each chunk written to a
+//! scratch file (one per field, unnamed, gone when closed), and read back once the input's
+//! values are dropped ([`DerivedFields::load`]): the peak is then the larger of the input
+//! and the fields, not their sum. The bytes are the same either way.
 
+use std::fs::File;
+use std::io::{Read, Seek, SeekFrom, Write};
+use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use files::limits::{self, LimitError};
+use files::limits;
 use rayon::prelude::*;
 
 use crate::bricks::BrickBox;
 use crate::derive::{gradient, speed, VelocityField};
+use crate::error::BakeError;
 use crate::fields::FieldKind;
 use crate::measures;
 
 use super::extra::ExtraGrid;
 use super::{BakeOptions, Bricks, Cells, Input};
 
+/// Field values larger than this (all fields together) are kept in scratch files while
+/// the input's values are held (see the module docs): 256 MiB, two fields of 32 M cells.
+pub const SPILL_BYTES: u64 = 256 << 20;
+/// Cells of the bricks derived at once when the fields go to scratch files: every field's
+/// values of this many cells are held (16 MiB a field).
+pub const CHUNK_CELLS: u64 = 1 << 22;
+
+/// Where a bake keeps field values too large to hold beside the input's values.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Spill {
+    /// The scratch files' directory (`None`: the system's temporary directory). A bake to
+    /// a file keeps them beside it, where the file itself will need the room.
+    pub dir: Option<PathBuf>,
+    /// Field values up to this many bytes stay in memory.
+    pub above: u64,
+    /// Cells derived at once otherwise (at least one brick).
+    pub chunk: u64,
+}
+
+impl Default for Spill {
+    fn default() -> Self {
+        Spill {
+            dir: None,
+            above: SPILL_BYTES,
+            chunk: CHUNK_CELLS,
+        }
+    }
+}
+
 /// Baked fields: names, and the values of each (brick after brick, x fastest).
 pub(super) struct FieldValues {
     pub(super) names: Vec<String>,
     pub(super) values: Vec<Vec<f32>>,
+}
+
+/// Baked fields as derived: their values in memory or in scratch files.
+pub(super) struct DerivedFields {
+    pub(super) names: Vec<String>,
+    store: Store,
     /// Per field, for one resampled from an extra scalar grid: how many leaf cells have an
     /// active voxel of that grid around their centre (see [`super::extra_coverage`]).
     pub(super) covered: Vec<Option<u64>>,
+}
+
+enum Store {
+    Memory(Vec<Vec<f32>>),
+    /// One scratch file per field, `total` values each, brick after brick.
+    Spilled {
+        files: Vec<File>,
+        total: usize,
+        dir: PathBuf,
+    },
+}
+
+impl DerivedFields {
+    /// The fields with their values in memory: read back from the scratch files (which
+    /// are then closed, and so gone) when they were kept there.
+    pub(super) fn load(self) -> Result<FieldValues, BakeError> {
+        let values = match self.store {
+            Store::Memory(values) => values,
+            Store::Spilled { files, total, dir } => files
+                .into_iter()
+                .map(|mut f| {
+                    let mut v: Vec<f32> = limits::vec_of("the baked field values", total)?;
+                    f.seek(SeekFrom::Start(0))
+                        .and_then(|_| f.read_exact(bytemuck::cast_slice_mut(&mut v)))
+                        .map_err(|source| BakeError::Scratch {
+                            dir: dir.clone(),
+                            source,
+                        })?;
+                    Ok(v)
+                })
+                .collect::<Result<_, BakeError>>()?,
+        };
+        Ok(FieldValues {
+            names: self.names,
+            values,
+        })
+    }
 }
 
 /// The value of every field at every cell of every brick, derived from the velocity (Q,
@@ -34,7 +117,7 @@ pub(super) fn derive_fields(
     cells: &Cells,
     bricks: &Bricks,
     opts: &BakeOptions,
-) -> Result<FieldValues, LimitError> {
+) -> Result<DerivedFields, BakeError> {
     match &cells.input {
         Input::Vector(sets, vals, faces) => {
             let kinds = opts
@@ -59,7 +142,7 @@ pub(super) fn derive_fields(
             // Covered cells per extra field, summed brick by brick (the sum does not
             // depend on the order).
             let covered: Vec<AtomicU64> = kinds.iter().map(|_| AtomicU64::new(0)).collect();
-            let values = per_brick(&bricks.boxes, names.len(), |b, out| {
+            let store = per_brick(&bricks.boxes, names.len(), &opts.spill, |b, out| {
                 let set = &sets[b.set];
                 let v = &vals[b.set];
                 let mut hits = vec![0u64; kinds.len()];
@@ -128,23 +211,23 @@ pub(super) fn derive_fields(
                     vec![c; k.names().len()]
                 })
                 .collect();
-            Ok(FieldValues {
+            Ok(DerivedFields {
                 names,
-                values,
+                store,
                 covered,
             })
         }
         Input::Scalar(sets, vals, name) => {
-            let values = per_brick(&bricks.boxes, 1, |b, out| {
+            let store = per_brick(&bricks.boxes, 1, &opts.spill, |b, out| {
                 let set = &sets[b.set];
                 let v = &vals[b.set];
                 b.for_each_cell(set, |i, _, slot| {
                     out[0][i] = slot.map(|s| v.get(s)).unwrap_or_default() as f32;
                 });
             })?;
-            Ok(FieldValues {
+            Ok(DerivedFields {
                 names: vec![name.clone()],
-                values,
+                store,
                 covered: vec![None],
             })
         }
@@ -153,16 +236,66 @@ pub(super) fn derive_fields(
 
 /// Runs `cell_values` on every brick in parallel with the brick's slice of each of the `nf`
 /// field arrays (which it must fill), and returns the arrays: brick after brick, x fastest.
-/// The arrays are allocated fallibly (they are the largest allocations after the cells).
+/// The arrays are allocated fallibly (they are the largest allocations after the cells);
+/// past `spill.above` bytes they are made a chunk of bricks at a time and written to
+/// scratch files (see the module docs).
 fn per_brick(
     bricks: &[BrickBox],
     nf: usize,
+    spill: &Spill,
     cell_values: impl Fn(&BrickBox, &mut [&mut [f32]]) + Sync,
-) -> Result<Vec<Vec<f32>>, LimitError> {
+) -> Result<Store, BakeError> {
     let total: usize = bricks.iter().map(|b| b.cells() as usize).sum();
-    let mut fields: Vec<Vec<f32>> = (0..nf)
-        .map(|_| limits::vec_of("the baked field values", total))
-        .collect::<Result<_, _>>()?;
+    let arrays = |n: usize| -> Result<Vec<Vec<f32>>, BakeError> {
+        Ok((0..nf)
+            .map(|_| limits::vec_of("the baked field values", n))
+            .collect::<Result<_, _>>()?)
+    };
+    let bytes = (total as u64).saturating_mul(4 * nf as u64);
+    if bytes <= spill.above {
+        let mut fields = arrays(total)?;
+        fill(bricks, &mut fields, &cell_values);
+        return Ok(Store::Memory(fields));
+    }
+    let dir = spill.dir.clone().unwrap_or_else(std::env::temp_dir);
+    files::output::check_space_in(
+        "the field values kept on disk while the input's values are held",
+        &dir,
+        bytes,
+    )?;
+    let scratch = |source| BakeError::Scratch {
+        dir: dir.clone(),
+        source,
+    };
+    let mut files: Vec<File> = (0..nf)
+        .map(|_| tempfile::tempfile_in(&dir))
+        .collect::<Result<_, _>>()
+        .map_err(scratch)?;
+    let mut start = 0;
+    while start < bricks.len() {
+        // At least one brick, then as many as fit in a chunk.
+        let (mut end, mut cells) = (start, 0u64);
+        while end < bricks.len() && (end == start || cells + bricks[end].cells() <= spill.chunk) {
+            cells += bricks[end].cells();
+            end += 1;
+        }
+        let mut chunk = arrays(cells as usize)?;
+        fill(&bricks[start..end], &mut chunk, &cell_values);
+        for (f, values) in files.iter_mut().zip(&chunk) {
+            f.write_all(bytemuck::cast_slice(values)).map_err(scratch)?;
+        }
+        start = end;
+    }
+    Ok(Store::Spilled { files, total, dir })
+}
+
+/// Fills `fields` (every field's values of `bricks`, brick after brick) with `cell_values`
+/// on every brick in parallel.
+fn fill(
+    bricks: &[BrickBox],
+    fields: &mut [Vec<f32>],
+    cell_values: &(impl Fn(&BrickBox, &mut [&mut [f32]]) + Sync),
+) {
     // Cut every field into the bricks' slices, then regroup them per brick.
     let mut rest: Vec<&mut [f32]> = fields.iter_mut().map(Vec::as_mut_slice).collect();
     let mut slices: Vec<Vec<&mut [f32]>> = Vec::with_capacity(bricks.len());
@@ -182,5 +315,4 @@ fn per_brick(
         .into_par_iter()
         .zip(bricks)
         .for_each(|(mut out, b)| cell_values(b, &mut out));
-    Ok(fields)
 }

@@ -25,12 +25,15 @@ use crate::cells::BLOCK_CELLS;
 use crate::error::BakeError;
 use crate::grid::{AnyGrid, Grid, Leaf, LEAF_DIM, LEAF_VOXELS};
 
-use super::BakeOptions;
+use super::{BakeOptions, Spill};
 
 /// Bytes per active cell besides the values and fields (bricks, supports, regions and
 /// their value ranges, the KD-tree, allocator rounding): the measured residual (about 7
 /// bytes on a 384³ tile) with some headroom.
 pub const CELL_BYTES: u64 = 8;
+/// Bytes per active cell of the bricks while the fields are derived: about 80 bytes a
+/// brick of up to 512 cells, with headroom for small bricks.
+const BRICK_BYTES_PER_CELL: u64 = 1;
 /// Bytes of one baked field per cell (an `f32`).
 pub const FIELD_BYTES: u64 = 4;
 /// Bytes per block besides its values: active and leaf masks, origin, index entry.
@@ -131,12 +134,14 @@ pub fn leaf_bytes<V>() -> u64 {
 
 /// The estimated peak of a bake: `grids` with their bytes per slot of their cell sets (see
 /// the module docs), baked into `fields` fields, with the scalar grids `extras` (and their
-/// bytes per slot) resampled as extra fields: the largest of what the three stages that
-/// allocate most hold.
+/// bytes per slot) resampled as extra fields, field values past `spill_above` bytes kept on
+/// disk while the cells' values are held as `spill` says: the largest of what the stages
+/// that allocate most hold.
 pub fn bake_bytes(
     grids: &[(GridFootprint, u64)],
     extras: &[(GridFootprint, u64)],
     fields: u64,
+    spill: &Spill,
 ) -> u64 {
     let values = |(f, slot_bytes): &(GridFootprint, u64)| {
         f.blocks
@@ -157,16 +162,25 @@ pub fn bake_bytes(
         .saturating_add(sum(extras, &|e| {
             values(e).max(e.0.decoded).saturating_add(masks(e))
         }));
-    // The fields, bricks and regions beside all the cells.
-    let per_cell = fields
-        .saturating_mul(FIELD_BYTES)
-        .saturating_add(CELL_BYTES);
-    let derived = sum(grids, &|g| {
-        values(g)
-            .saturating_add(masks(g))
-            .saturating_add(g.0.cells.saturating_mul(per_cell))
-    })
-    .saturating_add(sum(extras, &|e| values(e).saturating_add(masks(e))));
+    // The fields, bricks and regions beside all the cells; or, with the fields on disk,
+    // a chunk of them beside the cells, then the fields without the cells' values.
+    let field_bytes = fields.saturating_mul(FIELD_BYTES);
+    let per_cell = field_bytes.saturating_add(CELL_BYTES);
+    let cells = sum(grids, &|g| g.0.cells);
+    let held = sum(grids, &|g| values(g).saturating_add(masks(g)))
+        .saturating_add(sum(extras, &|e| values(e).saturating_add(masks(e))));
+    let derived = if cells.saturating_mul(field_bytes) > spill.above {
+        // The bricks are all that exists of the structure yet (about 80 bytes a brick).
+        let deriving = held
+            .saturating_add(cells.saturating_mul(BRICK_BYTES_PER_CELL))
+            .saturating_add(spill.chunk.saturating_mul(field_bytes));
+        let after = sum(grids, &|g| {
+            masks(g).saturating_add(g.0.cells.saturating_mul(per_cell))
+        });
+        deriving.max(after)
+    } else {
+        held.saturating_add(cells.saturating_mul(per_cell))
+    };
     converting.max(extra).max(derived)
 }
 
@@ -189,7 +203,7 @@ pub(super) fn check_bake_memory(
     let footprint = |g: &AnyGrid| (GridFootprint::of(g), slot_bytes(g, &opts.staggered));
     let per_grid: Vec<(GridFootprint, u64)> = grids.iter().map(footprint).collect();
     let extras: Vec<(GridFootprint, u64)> = extras.iter().map(footprint).collect();
-    let need = bake_bytes(&per_grid, &extras, fields);
+    let need = bake_bytes(&per_grid, &extras, fields, &opts.spill);
     let mut names: Vec<&str> = grids.iter().map(AnyGrid::name).collect();
     names.dedup();
     let names = names
@@ -241,8 +255,12 @@ mod tests {
         assert_eq!(f.cells, 640 * 640 * 640);
         assert_eq!(f.blocks, 80 * 80 * 80);
         assert_eq!(f.decoded, 0);
+        let no_spill = Spill {
+            above: u64::MAX,
+            ..Spill::default()
+        };
         // 640³ cells, two fields: about 40 bytes per cell, 10 GB.
-        let need = bake_bytes(&[(f, VELOCITY_SLOT_BYTES)], &[], 2);
+        let need = bake_bytes(&[(f, VELOCITY_SLOT_BYTES)], &[], 2, &no_spill);
         assert!(need > 40 * f.cells && need < 41 * f.cells, "{need}");
 
         let leaf = Leaf {
@@ -253,6 +271,6 @@ mod tests {
         let f = GridFootprint::of_grid(&grid(vec![], vec![leaf]));
         // One active voxel still takes a whole block of slots.
         assert_eq!((f.blocks, f.cells), (1, 1));
-        assert!(bake_bytes(&[(f, VELOCITY_SLOT_BYTES)], &[], 2) > 512 * 24);
+        assert!(bake_bytes(&[(f, VELOCITY_SLOT_BYTES)], &[], 2, &no_spill) > 512 * 24);
     }
 }

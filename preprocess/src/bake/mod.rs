@@ -41,6 +41,7 @@ mod supports;
 use supports::snapped_supports;
 
 use derived::{derive_fields, FieldValues};
+pub use derived::{Spill, CHUNK_CELLS, SPILL_BYTES};
 use extra::{extra_coverage, extra_fields, ExtraGrid};
 use memory::check_bake_memory;
 use overlap::same_level_overlaps;
@@ -76,6 +77,10 @@ pub struct BakeOptions {
     /// output does not depend on it.
     #[serde(skip)]
     pub threads: Option<usize>,
+    /// Where field values too large to hold beside the input's go while it is held (see
+    /// [`Spill`]). Not recorded: the output does not depend on it.
+    #[serde(skip)]
+    pub spill: Spill,
 }
 
 impl Default for BakeOptions {
@@ -89,6 +94,7 @@ impl Default for BakeOptions {
             staggered: Vec::new(),
             source: String::new(),
             threads: None,
+            spill: Spill::default(),
         }
     }
 }
@@ -286,20 +292,28 @@ fn run(
     let bricks = brick(sets, opts.max_brick);
 
     stage("deriving fields");
-    let mut fields = derive_fields(&cells, &bricks, opts)?;
+    let derived = derive_fields(&cells, &bricks, opts)?;
     extra_coverage(
         &cells,
-        (&fields.names, &fields.covered),
+        (&derived.names, &derived.covered),
         sets,
         leaf_cells,
         &mut warnings,
     )?;
-    let nonfinite_derived = clamp_fields(&mut fields, &bricks, sets, opts.strict, &mut warnings)?;
     // The cells' values are in the fields now: from here on only the sets' cells are read,
-    // so the input values (24 bytes a cell for a velocity) are dropped before the regions.
-    let nonfinite = cells.nonfinite;
-    let sets = cells.input.into_sets();
+    // so the input values (12 or 24 bytes a cell for a velocity) and the extra fields'
+    // grids are dropped before the fields are read back (when they were kept on disk) and
+    // the regions made.
+    let Cells {
+        input,
+        extras,
+        nonfinite,
+    } = cells;
+    drop(extras);
+    let sets = input.into_sets();
     memory::return_freed();
+    let mut fields = derived.load()?;
+    let nonfinite_derived = clamp_fields(&mut fields, &bricks, &sets, opts.strict, &mut warnings)?;
 
     stage("building regions");
     let (bounds, tree) = build_regions(&sets, &bricks, selection.widths[0]);

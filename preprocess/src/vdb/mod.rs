@@ -4,9 +4,9 @@
 //! `Tree_{float,double,vec3s,vec3d}_5_4_3` grids, with zip, blosc (LZ4) or no compression,
 //! active-mask compression, half-float storage, active tiles at every level, instanced grids
 //! and duplicate names, in files with grid offsets or written to a stream (without them).
-//! It works on the whole file in memory through a bounds-checked cursor:
-//! every count or size read from the file is checked against the bytes left before anything
-//! is allocated from it.
+//! It works on the whole file, mapped (or read, for a pipe), through a bounds-checked
+//! cursor: every count or size read from the file is checked against the bytes left before
+//! anything is allocated from it.
 //!
 //! ```no_run
 //! # fn main() -> Result<(), qbricks_preprocess::vdb::VdbError> {
@@ -32,7 +32,7 @@ pub mod write;
 
 use std::path::Path;
 
-use files::input::{read_whole, Limits};
+use files::input::{map_whole, Limits, Whole};
 
 pub use codec::MAGIC;
 pub use error::{DecompressError, ErrorKind, Invalid, VdbError};
@@ -141,10 +141,10 @@ impl GridDescriptor {
 
 /// An opened VDB file: header, file metadata and grid descriptors. Grids are decoded on
 /// demand with [`VdbFile::read_grid`].
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub struct VdbFile {
     name: String,
-    data: Vec<u8>,
+    data: Whole,
     pub file_version: u32,
     pub library_version: (u32, u32),
     pub(crate) uuid: String,
@@ -153,27 +153,33 @@ pub struct VdbFile {
 }
 
 impl VdbFile {
-    /// Reads the whole file and parses its header and grid descriptors.
+    /// Maps the file (or reads it, when it is no regular file) and parses its header and
+    /// grid descriptors.
     ///
-    /// The file is read with [`Limits::memory`]: a regular file larger than the machine's
-    /// memory is refused by its size before reading, and a device or pipe is read only up
-    /// to a cap (`/dev/zero` would otherwise be read until memory runs out).
+    /// A regular file is mapped read-only ([`files::input::map_whole`]): its pages are read
+    /// as the grids are decoded and let go once decoded, so a large file is never held
+    /// whole beside its decoded leaves. One larger than the machine's memory is refused by
+    /// its size ([`Limits::memory`]: its leaves could not be decoded). A device or pipe is
+    /// read only up to a cap (`/dev/zero` would otherwise be read until memory runs out).
     pub fn open(path: impl AsRef<Path>) -> Result<VdbFile, VdbError> {
         let path = path.as_ref();
         let name = path.display().to_string();
-        let data = read_whole(path, Limits::memory()).map_err(|e| VdbError {
+        let data = map_whole(path, Limits::memory()).map_err(|e| VdbError {
             file: name.clone(),
             grid: None,
             offset: 0,
             what: "file",
             kind: ErrorKind::Io(e.kind.to_string()),
         })?;
-        Self::from_bytes(name, data)
+        Self::parse(name, data)
     }
 
     /// Parses a file held in memory; `name` is used in error messages.
     pub fn from_bytes(name: impl Into<String>, data: Vec<u8>) -> Result<VdbFile, VdbError> {
-        let name = name.into();
+        Self::parse(name.into(), Whole::Read(data))
+    }
+
+    fn parse(name: String, data: Whole) -> Result<VdbFile, VdbError> {
         let mut file = VdbFile {
             name,
             data,
@@ -485,11 +491,17 @@ impl VdbFile {
             tree_owner.tree_pos,
         );
         let name = g.name.clone();
+        let release = |range| self.data.release(range);
+        let r = &release;
         Ok(match &g.value_type {
-            ValueType::Float => AnyGrid::Float(read::<f32>(&mut cur, codec, name, transform)?),
-            ValueType::Double => AnyGrid::Double(read::<f64>(&mut cur, codec, name, transform)?),
-            ValueType::Vec3s => AnyGrid::Vec3s(read::<[f32; 3]>(&mut cur, codec, name, transform)?),
-            ValueType::Vec3d => AnyGrid::Vec3d(read::<[f64; 3]>(&mut cur, codec, name, transform)?),
+            ValueType::Float => AnyGrid::Float(read::<f32>(&mut cur, codec, name, transform, r)?),
+            ValueType::Double => AnyGrid::Double(read::<f64>(&mut cur, codec, name, transform, r)?),
+            ValueType::Vec3s => {
+                AnyGrid::Vec3s(read::<[f32; 3]>(&mut cur, codec, name, transform, r)?)
+            }
+            ValueType::Vec3d => {
+                AnyGrid::Vec3d(read::<[f64; 3]>(&mut cur, codec, name, transform, r)?)
+            }
             ValueType::Unsupported(t) => {
                 return Err(RawError::new(
                     g.grid_pos as usize,
@@ -522,10 +534,20 @@ fn scan_grid(
         half,
     };
     match ty {
-        ValueType::Float => drop(tree::read_tree::<f32>(&mut cur, codec, false)?),
-        ValueType::Double => drop(tree::read_tree::<f64>(&mut cur, codec, false)?),
-        ValueType::Vec3s => drop(tree::read_tree::<[f32; 3]>(&mut cur, codec, false)?),
-        ValueType::Vec3d => drop(tree::read_tree::<[f64; 3]>(&mut cur, codec, false)?),
+        ValueType::Float => drop(tree::read_tree::<f32>(&mut cur, codec, false, &|_| ())?),
+        ValueType::Double => drop(tree::read_tree::<f64>(&mut cur, codec, false, &|_| ())?),
+        ValueType::Vec3s => drop(tree::read_tree::<[f32; 3]>(
+            &mut cur,
+            codec,
+            false,
+            &|_| (),
+        )?),
+        ValueType::Vec3d => drop(tree::read_tree::<[f64; 3]>(
+            &mut cur,
+            codec,
+            false,
+            &|_| (),
+        )?),
         ValueType::Unsupported(t) => {
             return Err(RawError::new(
                 start,
@@ -544,8 +566,9 @@ fn read<V: VdbValue>(
     codec: Codec,
     name: String,
     transform: Transform,
+    release: &dyn Fn(std::ops::Range<usize>),
 ) -> RawResult<Grid<V>> {
-    let t = tree::read_tree::<V>(cur, codec, true)?;
+    let t = tree::read_tree::<V>(cur, codec, true, release)?;
     Ok(Grid {
         name,
         transform,

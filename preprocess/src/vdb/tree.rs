@@ -121,13 +121,23 @@ fn aligned(c: [i32; 3], log2: u32) -> bool {
     c.iter().all(|v| v & ((1 << log2) - 1) == 0)
 }
 
+/// Leaves decoded at once before the file bytes they came from are released: 24 MiB of
+/// vec3s leaves.
+const DECODE_BATCH: usize = 4096;
+
 /// Reads a whole tree (topology then buffers) starting at the buffer count.
 /// With `decode_leaves` false the leaf buffers are only located (the cursor still ends
 /// after the tree) and no leaves are returned: how a stream-written file is walked.
+///
+/// The leaves are decoded a batch at a time, in file order, and `release` hears the range
+/// of the file each batch was read from once it is decoded: a reader of a mapped file
+/// lets those pages go ([`files::input::Whole::release`]), so a large file is never held
+/// whole beside the leaves decoded from it.
 pub(crate) fn read_tree<V: VdbValue>(
     cur: &mut Cursor<'_>,
     codec: Codec,
     decode_leaves: bool,
+    release: &dyn Fn(std::ops::Range<usize>),
 ) -> RawResult<TreeData<V>> {
     // Topology: buffer count, root background, root tiles and children.
     let start = cur.pos();
@@ -222,12 +232,16 @@ pub(crate) fn read_tree<V: VdbValue>(
         ..
     } = reader;
     let mut frames = Vec::with_capacity(topo.len());
+    // Where each leaf's bytes end in the file (they follow one another).
+    let mut ends = Vec::with_capacity(topo.len());
+    let first = cur.pos();
     for (_, range) in children {
         for t in &topo[range] {
             // The value mask is stored again; OpenVDB ignores the copy when seeking.
             cur.skip(64, "leaf buffer")?;
             let frame = locate_values(cur, codec, background, &t.mask, LEAF_VOXELS, "leaf buffer")?;
             frames.push((t, frame));
+            ends.push(cur.pos());
         }
     }
     if !decode_leaves {
@@ -242,18 +256,26 @@ pub(crate) fn read_tree<V: VdbValue>(
         )?;
     }
     // Decoding (decompression, half floats, inactive values) is independent per leaf.
-    let leaves = frames
-        .par_iter()
-        .map_init(Inflater::default, |inflater, (t, frame)| {
-            let mut values = Box::new([V::default(); LEAF_VOXELS]);
-            decode_values(frame, codec, &t.mask, &mut values[..], inflater)?;
-            Ok(Leaf {
-                origin: t.origin,
-                active: t.mask,
-                values,
+    let mut leaves = Vec::with_capacity(frames.len());
+    let mut start = first;
+    for (batch, ends) in frames.chunks(DECODE_BATCH).zip(ends.chunks(DECODE_BATCH)) {
+        let decoded = batch
+            .par_iter()
+            .map_init(Inflater::default, |inflater, (t, frame)| {
+                let mut values = Box::new([V::default(); LEAF_VOXELS]);
+                decode_values(frame, codec, &t.mask, &mut values[..], inflater)?;
+                Ok(Leaf {
+                    origin: t.origin,
+                    active: t.mask,
+                    values,
+                })
             })
-        })
-        .collect::<RawResult<Vec<_>>>()?;
+            .collect::<RawResult<Vec<_>>>()?;
+        leaves.extend(decoded);
+        let end = ends.last().copied().unwrap_or(start);
+        release(start..end);
+        start = end;
+    }
     Ok(TreeData {
         background,
         tiles,

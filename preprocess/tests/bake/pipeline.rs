@@ -506,6 +506,61 @@ fn single_precision_grids_bake_as_their_exact_double_copies() {
     }
 }
 
+/// Fields kept on disk while the input's values are held (`Spill`), chunk after chunk of
+/// bricks, read back as they were written: the same file as a bake that holds them, on two
+/// levels with five fields, chunks of one brick or a few; no scratch file is left behind;
+/// a directory that cannot hold them is named in the error.
+#[test]
+fn fields_kept_on_disk_give_the_same_file() {
+    use qbricks_preprocess::bake::Spill;
+    let grids = two_level(8, &abc);
+    let o = BakeOptions {
+        fields: Some(vec![
+            FieldKind::Q,
+            FieldKind::Speed,
+            FieldKind::Lambda2,
+            FieldKind::Velocity,
+        ]),
+        ..opts(Stencil::CrossLevel)
+    };
+    let held = bake(grids.clone(), &o).expect("bake");
+    let dir = tempfile::tempdir().expect("tempdir");
+    for chunk in [1, 700, 1 << 22] {
+        let spilled = BakeOptions {
+            spill: Spill {
+                dir: Some(dir.path().to_path_buf()),
+                above: 0,
+                chunk,
+            },
+            ..o.clone()
+        };
+        let (file, summary) = bake(grids.clone(), &spilled).expect("bake");
+        assert_eq!(summary, held.1, "chunk {chunk}");
+        assert!(
+            format::writer::to_bytes(&file).expect("serialise")
+                == format::writer::to_bytes(&held.0).expect("serialise"),
+            "chunk {chunk}"
+        );
+        let left: Vec<_> = std::fs::read_dir(dir.path()).expect("dir").collect();
+        assert!(left.is_empty(), "{left:?}");
+    }
+    let gone = dir.path().join("gone");
+    let e = bake(
+        grids,
+        &BakeOptions {
+            spill: Spill {
+                dir: Some(gone.clone()),
+                above: 0,
+                chunk: 1,
+            },
+            ..o
+        },
+    )
+    .expect_err("no such directory");
+    assert!(matches!(e, BakeError::Scratch { .. }), "{e:?}");
+    assert!(e.to_string().contains(&gone.display().to_string()), "{e}");
+}
+
 #[test]
 fn scalar_grid_is_its_own_field_and_bad_inputs_are_refused() {
     let g = sample("density", 1.0, 0.0, [0; 3], [5, 4, 3], &|p| {

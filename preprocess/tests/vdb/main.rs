@@ -15,3 +15,4 @@ mod common;
 mod bad_input;
 mod differential;
 mod fixtures;
+mod mapped;
