@@ -256,7 +256,10 @@ pub fn frame_surfaces(
     let options = format::OpenOptions {
         verify_checksum: false,
     };
-    let mut per_frame: Vec<Vec<([f64; 3], [f64; 3])>> = Vec::new();
+    // Per frame with a surface: its boxes (world frame) when there are at most
+    // `MAX_BOXES` (more make the total pass it anyway), their count and their union.
+    type FrameBoxes = (Vec<([f64; 3], [f64; 3])>, usize, ([f64; 3], [f64; 3]));
+    let mut per_frame: Vec<FrameBoxes> = Vec::new();
     for (frame, path) in frames {
         let Ok(view) = format::BrickFileView::open_with(path, &options) else {
             continue;
@@ -273,9 +276,22 @@ pub fn frame_surfaces(
         if let Some(o) = frame_iso(rule, state, &summary) {
             o.apply(&mut s, false);
         }
-        let boxes = s.surface_bounds(&vol);
-        if !boxes.is_empty() {
-            per_frame.push(boxes);
+        let boxes = s.surface_boxes(&vol);
+        let (mut list, mut count) = (Vec::new(), 0usize);
+        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        boxes.for_each(&vol, |a, b| {
+            let (a, b) = (vol.to_world(a), vol.to_world(b));
+            count += 1;
+            for k in 0..3 {
+                lo[k] = lo[k].min(a[k]);
+                hi[k] = hi[k].max(b[k]);
+            }
+            if count <= MAX_BOXES {
+                list.push((a, b));
+            }
+        });
+        if count > 0 {
+            per_frame.push((list, count, (lo, hi)));
         }
     }
     if per_frame.is_empty() {
@@ -283,17 +299,15 @@ pub fn frame_surfaces(
         state.frame_boxes(&[(lo, hi)]);
         return Framed::Data;
     }
-    let total: usize = per_frame.iter().map(Vec::len).sum();
+    let total: usize = per_frame.iter().map(|f| f.1).sum();
+    let framed = per_frame.len();
     let boxes: Vec<([f64; 3], [f64; 3])> = if total > MAX_BOXES {
-        per_frame
-            .iter()
-            .filter_map(|b| crate::framing::union(b))
-            .collect()
+        per_frame.iter().map(|f| f.2).collect()
     } else {
-        per_frame.concat()
+        per_frame.into_iter().flat_map(|f| f.0).collect()
     };
     state.frame_boxes(&boxes);
-    Framed::Surfaces(per_frame.len())
+    Framed::Surfaces(framed)
 }
 
 /// `x` with four significant digits and no trailing zeros (`0.0123`, `3.4e-7`), for

@@ -214,13 +214,17 @@ impl ViewState {
     /// ([`crate::framing::surface_boxes`]); empty when the field is missing or no cell
     /// lies on both sides of the iso value (an empty picture).
     pub fn surface_bounds(&self, vol: &crate::volume::Volume) -> Vec<([f64; 3], [f64; 3])> {
-        let Ok(f) = vol.field_index(&self.iso_field) else {
-            return Vec::new();
-        };
-        crate::framing::surface_boxes(vol, f, self.iso)
-            .into_iter()
-            .map(|(lo, hi)| (vol.to_world(lo), vol.to_world(hi)))
-            .collect()
+        let mut out = Vec::new();
+        self.surface_boxes(vol)
+            .for_each(vol, |lo, hi| out.push((vol.to_world(lo), vol.to_world(hi))));
+        out
+    }
+
+    /// [`ViewState::surface_bounds`] without listing them (local frame of `vol`): a
+    /// billion-cell file has tens of millions.
+    pub fn surface_boxes(&self, vol: &crate::volume::Volume) -> crate::framing::SurfaceBoxes {
+        let f = vol.field_index(&self.iso_field).unwrap_or(usize::MAX);
+        crate::framing::SurfaceBoxes::of(vol, f, self.iso)
     }
 
     /// Points the camera at the visible structure, the iso surface's bounds (not the
@@ -228,11 +232,19 @@ impl ViewState {
     /// [`crate::framing::DEFAULT_FILL`] of the image; at the whole data when there is no
     /// surface. Keeps the projection kind; the default lights follow.
     pub fn frame_surface(&mut self, vol: &crate::volume::Volume) {
-        let mut boxes = self.surface_bounds(vol);
-        if boxes.is_empty() {
-            boxes.push((vol.to_world(vol.bounds_min), vol.to_world(vol.bounds_max)));
+        let boxes = self.surface_boxes(vol);
+        if boxes.is_empty(vol) {
+            self.frame_boxes(&[(vol.to_world(vol.bounds_min), vol.to_world(vol.bounds_max))]);
+            return;
         }
-        self.frame_boxes(&boxes);
+        let v = glam::DVec3::from_array;
+        let source = |each: &mut dyn FnMut(glam::DVec3, glam::DVec3)| {
+            boxes.for_each(vol, |lo, hi| each(v(vol.to_world(lo)), v(vol.to_world(hi))));
+        };
+        let aspect = f64::from(self.width.max(1)) / f64::from(self.height.max(1));
+        let fill = crate::framing::DEFAULT_FILL;
+        self.camera = crate::framing::fit_boxes_from(&source, aspect, fill, self.camera.projection);
+        self.lights_follow_camera();
     }
 
     /// Points the camera at the union of the world boxes as
