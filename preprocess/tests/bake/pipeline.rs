@@ -399,38 +399,38 @@ fn nonfinite_values_replaced_or_refused() {
     }
 }
 
-/// `g` rounded to single precision, as a `Vec3s` grid and as its exact `Vec3d` copy.
-fn single_and_double(g: &Grid<[f64; 3]>) -> (AnyGrid, AnyGrid) {
-    let single = Grid {
-        name: g.name.clone(),
+/// `g` with every value converted by `f`, named `name`, with background `background`.
+fn convert<V: Copy, W: Copy>(
+    g: &Grid<V>,
+    name: &str,
+    background: W,
+    f: impl Fn(V) -> W,
+) -> Grid<W> {
+    Grid {
+        name: name.to_string(),
         transform: g.transform,
-        background: g.background.map(|c| c as f32),
+        background,
         leaves: g
             .leaves
             .iter()
             .map(|l| Leaf {
                 origin: l.origin,
                 active: l.active,
-                values: Box::new(l.values.map(|v| v.map(|c| c as f32))),
+                values: Box::new(l.values.map(&f)),
             })
             .collect(),
         tiles: vec![],
-    };
-    let double = Grid {
-        name: g.name.clone(),
-        transform: g.transform,
-        background: single.background.map(f64::from),
-        leaves: single
-            .leaves
-            .iter()
-            .map(|l| Leaf {
-                origin: l.origin,
-                active: l.active,
-                values: Box::new(l.values.map(|v| v.map(f64::from))),
-            })
-            .collect(),
-        tiles: vec![],
-    };
+    }
+}
+
+/// `g` rounded to single precision, as a `Vec3s` grid and as its exact `Vec3d` copy.
+fn single_and_double(g: &Grid<[f64; 3]>) -> (AnyGrid, AnyGrid) {
+    let single = convert(g, &g.name, g.background.map(|c| c as f32), |v| {
+        v.map(|c| c as f32)
+    });
+    let double = convert(&single, &g.name, single.background.map(f64::from), |v| {
+        v.map(f64::from)
+    });
     (AnyGrid::Vec3s(single), AnyGrid::Vec3d(double))
 }
 
@@ -461,21 +461,7 @@ fn single_precision_grids_bake_as_their_exact_double_copies() {
     let AnyGrid::Vec3s(coarse) = &singles[0] else {
         unreachable!()
     };
-    let density = Grid {
-        name: "density".to_string(),
-        transform: coarse.transform,
-        background: 0.0f32,
-        leaves: coarse
-            .leaves
-            .iter()
-            .map(|l| Leaf {
-                origin: l.origin,
-                active: l.active,
-                values: Box::new(l.values.map(|v| v[0])),
-            })
-            .collect(),
-        tiles: vec![],
-    };
+    let density = convert(coarse, "density", 0.0f32, |v| v[0]);
     singles.push(AnyGrid::Float(density.clone()));
     doubles.push(AnyGrid::Float(density));
     let cases = [
@@ -566,21 +552,7 @@ fn scalar_grid_is_its_own_field_and_bad_inputs_are_refused() {
     let g = sample("density", 1.0, 0.0, [0; 3], [5, 4, 3], &|p| {
         [p[0] + 2.0 * p[1], 0.0, 0.0]
     });
-    let scalar = Grid {
-        name: g.name.clone(),
-        transform: g.transform,
-        background: 0.0f32,
-        leaves: g
-            .leaves
-            .iter()
-            .map(|l| Leaf {
-                origin: l.origin,
-                active: l.active,
-                values: Box::new(l.values.map(|v| v[0] as f32)),
-            })
-            .collect(),
-        tiles: vec![],
-    };
+    let scalar = convert(&g, &g.name, 0.0f32, |v| v[0] as f32);
     let (file, s) = bake(
         vec![AnyGrid::Float(scalar.clone())],
         &BakeOptions::default(),
