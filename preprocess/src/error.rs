@@ -215,6 +215,9 @@ pub enum BakeError {
     /// A leaf of the file's KD-tree names its region in 31 bits.
     #[error("{regions} regions exceed the file format's limit of {limit}")]
     TooManyRegions { regions: u64, limit: u64 },
+    /// A region names its bricks by a 32-bit run into one list.
+    #[error("{refs} brick references of the regions exceed the file format's limit of {limit}")]
+    TooManyBrickRefs { refs: u64, limit: u64 },
     #[error("thread pool: {0}")]
     ThreadPool(String),
 }

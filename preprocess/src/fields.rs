@@ -5,7 +5,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::bricks::BrickBox;
-use format::Aabb;
+use crate::kdtree::Regions;
 
 /// Bins of every field's histogram.
 pub(crate) const HISTOGRAM_BINS: usize = 64;
@@ -117,12 +117,19 @@ pub(crate) struct RangeInput<'a> {
     pub values: &'a [Vec<f32>],
 }
 
-pub(crate) fn region_ranges(input: &RangeInput, regions: &[(Aabb, Vec<u32>)]) -> Vec<[f32; 2]> {
+pub(crate) fn region_ranges(input: &RangeInput, regions: &Regions) -> Vec<[f32; 2]> {
     let nf = input.values.len();
-    let per_region: Vec<Vec<[f32; 2]>> = regions
-        .par_iter()
-        .map(|(rb, bricks)| {
-            let mut out = vec![[f32::INFINITY, f32::NEG_INFINITY]; nf];
+    // Region-major, as the file stores them; written in place (no list per region).
+    let mut ranges = vec![[f32::INFINITY, f32::NEG_INFINITY]; regions.len() * nf];
+    if nf == 0 {
+        return ranges;
+    }
+    ranges
+        .par_chunks_mut(nf)
+        .enumerate()
+        .for_each(|(r, out)| {
+            let rb = &regions.bounds[r];
+            let bricks = regions.bricks_of(r);
             for &b in bricks {
                 let b = b as usize;
                 let bx = &input.bricks[b];
@@ -159,13 +166,11 @@ pub(crate) fn region_ranges(input: &RangeInput, regions: &[(Aabb, Vec<u32>)]) ->
                 }
             }
             // A region whose cells are all non-finite gets an empty-but-valid range.
-            for r in &mut out {
+            for r in out.iter_mut() {
                 if r[0] > r[1] {
                     *r = [0.0, 0.0];
                 }
             }
-            out
-        })
-        .collect();
-    per_region.into_iter().flatten().collect()
+        });
+    ranges
 }

@@ -406,12 +406,12 @@ mod tests {
                 // above), so the union of regions is exactly the union of supports.
             }
             // The serialised KD-tree finds the same region as brute force.
-            let (packed, flat) = crate::kdtree::flatten(&tree).expect("few regions");
+            let (packed, flat) = crate::kdtree::flatten(tree.clone()).expect("few regions");
             prop_assert_eq!(flat.len(), regs.len());
             for (x, y, z) in pts {
                 let f = [x, y, z];
                 let p = [0, 1, 2].map(|a| bounds.min[a] + f[a] * (bounds.max[a] - bounds.min[a]));
-                let brute = flat.iter().position(|(b, _)| {
+                let brute = flat.bounds.iter().position(|b| {
                     (0..3).all(|a| p[a] >= b.min[a] && p[a] < b.max[a])
                 });
                 prop_assert_eq!(crate::kdtree::locate(&packed, p), brute.map(|r| r as u32));

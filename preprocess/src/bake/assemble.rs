@@ -2,7 +2,7 @@
 //! histograms, levels, bricks with snapped supports, regions, KD-tree, provenance), and
 //! the bound on its size ([`format::MAX_ARCHIVE_BYTES`]), checked before it is built.
 
-use format::{Aabb, Brick, BrickFile, Field, Level, Provenance, Region, SourceGrid, ValueRange};
+use format::{Aabb, Brick, BrickFile, Field, Level, Provenance, SourceGrid, ValueRange};
 
 use crate::fields::{range_and_histogram, HISTOGRAM_BINS};
 
@@ -15,7 +15,7 @@ pub(super) fn archive_bytes(bricks: &Bricks, fields: &FieldValues, kd: &Kd) -> u
     let n = |len: usize, bytes: u64| (len as u64).saturating_mul(bytes);
     let values: u64 = fields.values.iter().map(|v| n(v.len(), 4)).sum();
     let histograms = n(fields.values.len(), 8 * HISTOGRAM_BINS as u64);
-    let region_bricks: u64 = kd.regions.iter().map(|(_, ids)| n(ids.len(), 4)).sum();
+    let region_bricks = n(kd.regions.bricks.len(), 4);
     values
         .saturating_add(histograms)
         .saturating_add(n(bricks.boxes.len(), 64))
@@ -95,15 +95,6 @@ pub(super) fn assemble(
             first_value: *f,
         })
         .collect();
-    let mut region_bricks = Vec::new();
-    let mut file_regions = Vec::with_capacity(kd.regions.len());
-    for (_, ids) in &kd.regions {
-        file_regions.push(Region {
-            bricks_start: region_bricks.len() as u32,
-            bricks_len: ids.len() as u32,
-        });
-        region_bricks.extend_from_slice(ids);
-    }
     let bounds = bounds.unwrap_or(Aabb {
         min: [0.0; 3],
         max: [0.0; 3],
@@ -120,8 +111,8 @@ pub(super) fn assemble(
         levels: file_levels,
         fields: file_fields,
         bricks: file_bricks,
-        regions: file_regions,
-        region_bricks,
+        regions: kd.regions.runs,
+        region_bricks: kd.regions.bricks,
         region_ranges: kd
             .ranges
             .into_iter()

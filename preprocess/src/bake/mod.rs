@@ -22,6 +22,7 @@ use crate::fields::{region_ranges, FieldKind, RangeInput};
 use crate::grid::{AnyGrid, Transform};
 use crate::levels::assign_levels;
 use crate::nonfinite::{self, CellValue};
+use crate::kdtree::{Regions, TooLarge};
 use crate::regions;
 
 /// Re-exported from [`crate::error`], where it lives since [`crate::levels`] returns it too.
@@ -317,7 +318,7 @@ fn run(
 
     stage("building regions");
     let (bounds, tree) = build_regions(&sets, &bricks, selection.widths[0]);
-    let kd = kd_tree(&tree, &bricks, &fields.values)?;
+    let kd = kd_tree(tree, &bricks, &fields.values)?;
 
     stage("assembling");
     check_archive(leaf_cells, nfields, archive_bytes(&bricks, &fields, &kd))?;
@@ -623,25 +624,25 @@ struct Kd {
     /// Root reference, inner nodes, their axes.
     tree: format::kd::Packed,
     /// Bounds and brick ids of each region, in the order the nodes number them.
-    regions: Vec<(Aabb, Vec<u32>)>,
+    regions: Regions,
     /// `(min, max)` of each field over each region (see [`region_ranges`]).
     ranges: Vec<[f32; 2]>,
 }
 
-/// KD-tree stage: flattens the region tree (see [`crate::kdtree::flatten`]) and computes
-/// each region's value range per field, which lets the viewer skip regions an iso-value
-/// cannot cross.
-fn kd_tree(
-    tree: &regions::RegionTree,
-    bricks: &Bricks,
-    values: &[Vec<f32>],
-) -> Result<Kd, BakeError> {
-    let Some((packed, regions)) = crate::kdtree::flatten(tree) else {
-        return Err(BakeError::TooManyRegions {
-            regions: count_regions(tree),
+/// KD-tree stage: flattens the region tree (consumed, see [`crate::kdtree::flatten`]) and
+/// computes each region's value range per field, which lets the viewer skip regions an
+/// iso-value cannot cross.
+fn kd_tree(tree: regions::RegionTree, bricks: &Bricks, values: &[Vec<f32>]) -> Result<Kd, BakeError> {
+    let (packed, regions) = crate::kdtree::flatten(tree).map_err(|e| match e {
+        TooLarge::Regions(regions) => BakeError::TooManyRegions {
+            regions,
             limit: u64::from(format::kd::MAX_REGION) + 1,
-        });
-    };
+        },
+        TooLarge::BrickRefs(refs) => BakeError::TooManyBrickRefs {
+            refs,
+            limit: u64::from(u32::MAX),
+        },
+    })?;
     let ranges = region_ranges(
         &RangeInput {
             bricks: &bricks.boxes,
@@ -657,23 +658,6 @@ fn kd_tree(
         regions,
         ranges,
     })
-}
-
-/// Regions of a region tree (for the error when there are too many).
-fn count_regions(tree: &regions::RegionTree) -> u64 {
-    let mut n = 0u64;
-    let mut todo = vec![tree];
-    while let Some(t) = todo.pop() {
-        match t {
-            regions::RegionTree::Empty => {}
-            regions::RegionTree::Region { .. } => n += 1,
-            regions::RegionTree::Split { left, right, .. } => {
-                todo.push(left);
-                todo.push(right);
-            }
-        }
-    }
-    n
 }
 
 /// Names of the fields a bake of `input` makes.
