@@ -12,10 +12,13 @@
 //!   through), so no run overwrites what it reads.
 //! - [`limits`]: the bounds of every count (threads, repeats, frames) and the one memory
 //!   estimate every large allocation is checked against.
+//! - [`scratch`]: values kept in a scratch file and read through a mapping whose pages a
+//!   pass lets go behind itself.
 //! - [`signals`]: temporary files are removed when the process is interrupted.
 
 pub mod guard;
 pub mod input;
 pub mod limits;
 pub mod output;
+pub mod scratch;
 pub mod signals;

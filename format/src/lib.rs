@@ -15,6 +15,7 @@ pub mod query;
 pub mod reader;
 pub mod schema;
 pub mod sequence;
+pub mod streamed;
 pub mod validate;
 pub mod writer;
 

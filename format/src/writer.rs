@@ -15,6 +15,7 @@ use rkyv::rancor;
 use crate::error::{one_line, FormatError, FormatErrorKind};
 use crate::header::{Header, FLAGS, FORMAT_VERSION, HEADER_LEN};
 use crate::schema::BrickFile;
+use crate::streamed::{FieldValues, Streamed};
 
 /// Bytes of a complete `.qbk` file (header + archive) for `file`.
 pub fn to_bytes(file: &BrickFile) -> Result<Vec<u8>, FormatErrorKind> {
@@ -30,11 +31,54 @@ pub fn to_bytes(file: &BrickFile) -> Result<Vec<u8>, FormatErrorKind> {
 /// `path` may be written at all (not over an input of the run) is the caller's check,
 /// `files::guard`, done before the work that produced `file`.
 pub fn write(path: &Path, file: &BrickFile) -> Result<u64, FormatError> {
-    write_atomically(path, |out| stream_archive(out, file))
+    write_atomically(path, |out| stream_archive(out, |w| archive_into(w, file)))
 }
 
-/// Serialises `file` after a placeholder header, then fills the header in.
-fn stream_archive(out: &mut File, file: &BrickFile) -> Result<u64, FormatErrorKind> {
+/// As [`write`], with the values of field `f` taken from `values[f]` instead of from
+/// `file` (whose fields' own values are ignored): the same bytes as [`write`] of the file
+/// holding those values, without ever holding them in one `Vec` (see [`crate::streamed`]).
+pub fn write_streamed(
+    path: &Path,
+    file: &BrickFile,
+    values: &[FieldValues<'_>],
+) -> Result<u64, FormatError> {
+    let streamed = Streamed::new(file, values).ok_or_else(|| {
+        FormatError::new(
+            path,
+            FormatErrorKind::Serialize(format!(
+                "{} value arrays for {} fields",
+                values.len(),
+                file.fields.len()
+            )),
+        )
+    })?;
+    write_atomically(path, |out| {
+        stream_archive(out, |w| archive_into(w, &streamed))
+    })
+}
+
+/// The archive of `file` written through `w`.
+fn archive_into<W, T>(w: W, file: &T) -> Result<(), rancor::Error>
+where
+    W: Write,
+    T: for<'a> rkyv::Serialize<
+        rkyv::api::high::HighSerializer<
+            rkyv::ser::writer::IoWriter<W>,
+            rkyv::ser::allocator::ArenaHandle<'a>,
+            rancor::Error,
+        >,
+    >,
+{
+    rkyv::api::high::to_bytes_in::<_, rancor::Error>(file, rkyv::ser::writer::IoWriter::new(w))
+        .map(drop)
+}
+
+/// Serialises an archive (`serialize` writes it through the writer it is given) after a
+/// placeholder header, then fills the header in.
+fn stream_archive(
+    out: &mut File,
+    serialize: impl FnOnce(&mut dyn Write) -> Result<(), rancor::Error>,
+) -> Result<u64, FormatErrorKind> {
     out.write_all(&[0u8; HEADER_LEN])?;
     let mut sink = HashingWriter {
         inner: BufWriter::with_capacity(1 << 20, &mut *out),
@@ -42,11 +86,7 @@ fn stream_archive(out: &mut File, file: &BrickFile) -> Result<u64, FormatErrorKi
         len: 0,
         error: None,
     };
-    let result = rkyv::api::high::to_bytes_in::<_, rancor::Error>(
-        file,
-        rkyv::ser::writer::IoWriter::new(&mut sink),
-    )
-    .map(drop);
+    let result = serialize(&mut sink);
     if let Some(e) = sink.error.take() {
         return Err(e.into());
     }

@@ -10,6 +10,68 @@ use qbricks_format::header::{Header, HEADER_LEN};
 use qbricks_format::writer;
 use qbricks_format::{BrickFileView, FormatErrorKind, OpenOptions, FORMAT_VERSION};
 
+/// The file `writer::write_streamed` writes for `file` with its fields' values taken out of
+/// it and handed over as slices; checks that every value was released exactly once, in
+/// order.
+fn streamed_bytes(file: &qbricks_format::BrickFile, dir: &Path) -> Vec<u8> {
+    use std::sync::Mutex;
+    let mut hollow = file.clone();
+    for f in &mut hollow.fields {
+        f.values.clear();
+    }
+    let released: Vec<Mutex<Vec<std::ops::Range<usize>>>> =
+        file.fields.iter().map(|_| Mutex::new(Vec::new())).collect();
+    let releases: Vec<Box<dyn Fn(std::ops::Range<usize>) + Sync + '_>> = released
+        .iter()
+        .map(|r| {
+            Box::new(move |range: std::ops::Range<usize>| r.lock().expect("lock").push(range))
+                as Box<dyn Fn(std::ops::Range<usize>) + Sync>
+        })
+        .collect();
+    let values: Vec<qbricks_format::streamed::FieldValues> = file
+        .fields
+        .iter()
+        .zip(&releases)
+        .map(|(f, r)| qbricks_format::streamed::FieldValues {
+            values: &f.values,
+            release: r.as_ref(),
+        })
+        .collect();
+    let path = dir.join("streamed.qbk");
+    let n = writer::write_streamed(&path, &hollow, &values).expect("write streamed");
+    for (f, r) in file.fields.iter().zip(&released) {
+        let r = r.lock().expect("lock");
+        let mut at = 0;
+        for range in r.iter() {
+            assert_eq!(range.start, at);
+            at = range.end;
+        }
+        assert_eq!(at, f.values.len());
+    }
+    let bytes = std::fs::read(&path).expect("read");
+    assert_eq!(n, bytes.len() as u64);
+    bytes
+}
+
+/// Values of more than one chunk are streamed whole, in order; a count of value arrays
+/// that is not the fields' is refused and writes nothing.
+#[test]
+fn streamed_values_of_several_chunks_and_a_wrong_count() {
+    let mut file = common::random_file(7);
+    for (k, f) in file.fields.iter_mut().enumerate() {
+        f.values = (0..(9 << 20) + 3)
+            .map(|i| (i * (k + 1)) as f32 * 0.5)
+            .collect();
+    }
+    let dir = tempfile::tempdir().expect("tempdir");
+    let expected = writer::to_bytes(&file).expect("to_bytes");
+    assert!(streamed_bytes(&file, dir.path()) == expected);
+    let path = dir.path().join("wrong.qbk");
+    let e = writer::write_streamed(&path, &file, &[]).expect_err("no values");
+    assert!(e.to_string().contains("wrong.qbk"), "{e}");
+    assert!(!path.exists());
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(48))]
 
@@ -23,6 +85,8 @@ proptest! {
         prop_assert_eq!(n, on_disk.len() as u64);
         // The streaming writer and the in-memory serialiser agree byte for byte.
         prop_assert!(on_disk == writer::to_bytes(&original).expect("to_bytes"));
+        // So does the writer taking the values from elsewhere.
+        prop_assert!(on_disk == streamed_bytes(&original, dir.path()));
 
         let view = BrickFileView::open(&path).expect("open");
         prop_assert!(view.is_mapped());

@@ -83,94 +83,210 @@ impl FieldKind {
 }
 
 /// Range over finite values (`(0, 0)` when there is none) and histogram over that range.
-pub(crate) fn range_and_histogram(values: &[f32]) -> (f32, f32, Vec<u64>) {
+/// Two passes front to back, `chunk` values at a time, each chunk's range handed to
+/// `release` once read (a reader of mapped values lets those pages go).
+pub(crate) fn range_and_histogram(
+    values: &[f32],
+    chunk: usize,
+    release: &dyn Fn(std::ops::Range<usize>),
+) -> (f32, f32, Vec<u64>) {
+    let chunk = chunk.max(1);
+    let chunks = || {
+        values
+            .chunks(chunk)
+            .enumerate()
+            .map(move |(k, c)| (k * chunk..k * chunk + c.len(), c))
+    };
     let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-    for &v in values.iter().filter(|v| v.is_finite()) {
-        lo = lo.min(v);
-        hi = hi.max(v);
+    for (range, c) in chunks() {
+        for &v in c.iter().filter(|v| v.is_finite()) {
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+        release(range);
     }
     if lo > hi {
         return (0.0, 0.0, vec![0; HISTOGRAM_BINS]);
     }
     let mut hist = vec![0u64; HISTOGRAM_BINS];
     let span = hi as f64 - lo as f64;
-    for &v in values.iter().filter(|v| v.is_finite()) {
-        let b = if span > 0.0 {
-            (((v as f64 - lo as f64) / span) * HISTOGRAM_BINS as f64) as usize
-        } else {
-            0
-        };
-        hist[b.min(HISTOGRAM_BINS - 1)] += 1;
+    for (range, c) in chunks() {
+        for &v in c.iter().filter(|v| v.is_finite()) {
+            let b = if span > 0.0 {
+                (((v as f64 - lo as f64) / span) * HISTOGRAM_BINS as f64) as usize
+            } else {
+                0
+            };
+            hist[b.min(HISTOGRAM_BINS - 1)] += 1;
+        }
+        release(range);
     }
     (lo, hi, hist)
 }
 
-/// Per-region, per-field `(min, max)` over every cell of the region's bricks whose tent
-/// `(c − w, c + w)` reaches into the region box; conservative by a hair at the edges.
-/// `values[f]` is field `f` brick after brick; `first[b]` is brick `b`'s first value;
-/// `origins[b]`, `widths[b]` its first cell centre and cell width.
+/// The bricks' layout in the field arrays [`region_ranges`] reads: `first[b]` is brick
+/// `b`'s first value; `origins[b]`, `widths[b]` its first cell centre and cell width.
 pub(crate) struct RangeInput<'a> {
     pub bricks: &'a [BrickBox],
     pub origins: &'a [[f64; 3]],
     pub widths: &'a [f64],
     pub first: &'a [u64],
-    pub values: &'a [Vec<f32>],
 }
 
-pub(crate) fn region_ranges(input: &RangeInput, regions: &Regions) -> Vec<[f32; 2]> {
-    let nf = input.values.len();
+/// Where [`region_ranges`] reads the values (field `f` brick after brick in `values[f]`).
+pub(crate) enum BrickValues<'a> {
+    /// Resident (in memory): read in place.
+    Resident(&'a [&'a [f32]]),
+    /// Mapped from scratch files: each batch's bricks are copied out first, and
+    /// `release(f, range)` lets the pages of what was copied go.
+    Mapped {
+        values: &'a [&'a [f32]],
+        release: &'a (dyn Fn(usize, std::ops::Range<usize>) + Sync),
+    },
+}
+
+/// Per-region, per-field `(min, max)` over every cell of the region's bricks whose tent
+/// `(c − w, c + w)` reaches into the region box; conservative by a hair at the edges.
+///
+/// Regions are taken [`REGION_BATCH`] at a time, in parallel within a batch. Mapped values
+/// are read a batch at a time: a batch's regions lie together, but their bricks' values
+/// are spread over the arrays (a slab of space crosses every row of bricks), and every
+/// page fault maps the pages around it too, so reading them in place would make most of
+/// the arrays resident for every batch. Copied out, only the batch's bricks are held.
+pub(crate) fn region_ranges(
+    input: &RangeInput,
+    regions: &Regions,
+    values: &BrickValues,
+) -> Vec<[f32; 2]> {
+    let nf = match values {
+        BrickValues::Resident(v) | BrickValues::Mapped { values: v, .. } => v.len(),
+    };
     // Region-major, as the file stores them; written in place (no list per region).
     let mut ranges = vec![[f32::INFINITY, f32::NEG_INFINITY]; regions.len() * nf];
     if nf == 0 {
         return ranges;
     }
-    ranges
-        .par_chunks_mut(nf)
-        .enumerate()
-        .for_each(|(r, out)| {
-            let rb = &regions.bounds[r];
-            let bricks = regions.bricks_of(r);
-            for &b in bricks {
-                let b = b as usize;
-                let bx = &input.bricks[b];
-                let o = input.origins[b];
-                let w = input.widths[b];
-                let mut lo = [0usize; 3];
-                let mut hi = [0usize; 3];
-                for a in 0..3 {
-                    let d = bx.dims[a] as f64;
-                    let l = ((rb.min[a] - o[a]) / w - 1.0 - 1e-6)
-                        .ceil()
-                        .clamp(0.0, d - 1.0);
-                    let h = ((rb.max[a] - o[a]) / w + 1.0 + 1e-6)
-                        .floor()
-                        .clamp(0.0, d - 1.0);
-                    lo[a] = l as usize;
-                    hi[a] = h as usize;
+    let cells = |b: usize| input.bricks[b].cells() as usize;
+    // Mapped values: where each brick of the batch is in the copies (`NONE`: not copied).
+    const NONE: u32 = u32::MAX;
+    let mut slot = match values {
+        BrickValues::Resident(_) => Vec::new(),
+        BrickValues::Mapped { .. } => vec![NONE; input.bricks.len()],
+    };
+    for (k, batch) in ranges.chunks_mut(nf * REGION_BATCH).enumerate() {
+        let first = k * REGION_BATCH;
+        match values {
+            BrickValues::Resident(v) => {
+                let get = |f: usize, b: usize| {
+                    let at = input.first[b] as usize;
+                    &v[f][at..at + cells(b)]
+                };
+                ranges_of_batch(input, regions, first, nf, batch, &get);
+            }
+            BrickValues::Mapped { values, release } => {
+                let regs = first..first + batch.len() / nf;
+                let mut ids: Vec<u32> = regs.flat_map(|r| regions.bricks_of(r)).copied().collect();
+                ids.sort_unstable();
+                ids.dedup();
+                let mut at = Vec::with_capacity(ids.len() + 1);
+                at.push(0usize);
+                for (i, &b) in ids.iter().enumerate() {
+                    at.push(at[i] + cells(b as usize));
+                    slot[b as usize] = i as u32;
                 }
-                let (nx, ny) = (bx.dims[0] as usize, bx.dims[1] as usize);
-                let base = input.first[b] as usize;
-                for (f, r) in out.iter_mut().enumerate() {
-                    let vals = &input.values[f];
-                    for z in lo[2]..=hi[2] {
-                        for y in lo[1]..=hi[1] {
-                            let row = base + nx * (y + ny * z);
-                            for &v in &vals[row + lo[0]..=row + hi[0]] {
-                                if v.is_finite() {
-                                    r[0] = r[0].min(v);
-                                    r[1] = r[1].max(v);
-                                }
+                // Front to back (the ids are sorted, and bricks lie in id order), letting
+                // go of what lies behind every `RELEASE_SPAN` values, and of the rest
+                // (with the pages mapped around the last reads) at the end.
+                let copied: Vec<Vec<f32>> = (0..nf)
+                    .map(|f| {
+                        let mut out = Vec::with_capacity(at[ids.len()]);
+                        let mut behind = 0;
+                        for &b in &ids {
+                            let start = input.first[b as usize] as usize;
+                            out.extend_from_slice(&values[f][start..start + cells(b as usize)]);
+                            if start - behind >= RELEASE_SPAN {
+                                release(f, behind..start);
+                                behind = start;
+                            }
+                        }
+                        release(f, 0..values[f].len());
+                        out
+                    })
+                    .collect();
+                let get = |f: usize, b: usize| {
+                    let i = slot[b] as usize;
+                    &copied[f][at[i]..at[i + 1]]
+                };
+                ranges_of_batch(input, regions, first, nf, batch, &get);
+                for &b in &ids {
+                    slot[b as usize] = NONE;
+                }
+            }
+        }
+    }
+    ranges
+}
+
+/// Regions whose ranges [`region_ranges`] finds at once: their bricks' values are a few
+/// tens of megabytes.
+pub(crate) const REGION_BATCH: usize = 1 << 16;
+
+/// Mapped values [`region_ranges`] copies before it lets the pages behind go (16 MiB).
+const RELEASE_SPAN: usize = 4 << 20;
+
+/// The ranges of the regions from `first` on, into `out` (`nf` entries a region);
+/// `get(f, b)` is brick `b`'s values of field `f`.
+fn ranges_of_batch<'v>(
+    input: &RangeInput,
+    regions: &Regions,
+    first: usize,
+    nf: usize,
+    out: &mut [[f32; 2]],
+    get: &(dyn Fn(usize, usize) -> &'v [f32] + Sync),
+) {
+    out.par_chunks_mut(nf).enumerate().for_each(|(k, out)| {
+        let r = first + k;
+        let rb = &regions.bounds[r];
+        let bricks = regions.bricks_of(r);
+        for &b in bricks {
+            let b = b as usize;
+            let bx = &input.bricks[b];
+            let o = input.origins[b];
+            let w = input.widths[b];
+            let mut lo = [0usize; 3];
+            let mut hi = [0usize; 3];
+            for a in 0..3 {
+                let d = bx.dims[a] as f64;
+                let l = ((rb.min[a] - o[a]) / w - 1.0 - 1e-6)
+                    .ceil()
+                    .clamp(0.0, d - 1.0);
+                let h = ((rb.max[a] - o[a]) / w + 1.0 + 1e-6)
+                    .floor()
+                    .clamp(0.0, d - 1.0);
+                lo[a] = l as usize;
+                hi[a] = h as usize;
+            }
+            let (nx, ny) = (bx.dims[0] as usize, bx.dims[1] as usize);
+            for (f, r) in out.iter_mut().enumerate() {
+                let vals = get(f, b);
+                for z in lo[2]..=hi[2] {
+                    for y in lo[1]..=hi[1] {
+                        let row = nx * (y + ny * z);
+                        for &v in &vals[row + lo[0]..=row + hi[0]] {
+                            if v.is_finite() {
+                                r[0] = r[0].min(v);
+                                r[1] = r[1].max(v);
                             }
                         }
                     }
                 }
             }
-            // A region whose cells are all non-finite gets an empty-but-valid range.
-            for r in out.iter_mut() {
-                if r[0] > r[1] {
-                    *r = [0.0, 0.0];
-                }
+        }
+        // A region whose cells are all non-finite gets an empty-but-valid range.
+        for r in out.iter_mut() {
+            if r[0] > r[1] {
+                *r = [0.0, 0.0];
             }
-        });
-    ranges
+        }
+    });
 }

@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::Context;
 
-use crate::bake::{bake_with_progress, BakeOptions, BakeSummary, DEFAULT_MAX_BRICK};
+use crate::bake::{bake_kept, BakeOptions, BakeSummary, DEFAULT_MAX_BRICK};
 use crate::derive::Stencil;
 use crate::fields::FieldKind;
 use crate::inputs::{read_inputs, Layout, ReadError, ReadOptions};
@@ -177,12 +177,11 @@ pub fn bake_file(
     drop(file);
     stopped()?;
 
-    let (brick_file, summary) =
-        bake_with_progress(grids, &opts, stage).with_context(|| input_name.clone())?;
+    let (baked, summary) = bake_kept(grids, &opts, stage).with_context(|| input_name.clone())?;
     stopped()?;
     crate::bake::memory::return_freed();
     stage("writing");
-    format::writer::write(output, &brick_file)?;
+    baked.write(output)?;
     Ok(summary)
 }
 

@@ -6,15 +6,16 @@ use format::{Aabb, Brick, BrickFile, Field, Level, Provenance, SourceGrid, Value
 
 use crate::fields::{range_and_histogram, HISTOGRAM_BINS};
 
-use super::derived::FieldValues;
+use super::derived::{FieldValues, RELEASE_VALUES};
 use super::{BakeError, BakeOptions, Bricks, FieldSummary, Kd};
 
 /// Bytes of the archive of a bake, from the sizes of its arrays (each element as the
 /// schema archives it) and 1 MiB for the rest (names, provenance, alignment).
 pub(super) fn archive_bytes(bricks: &Bricks, fields: &FieldValues, kd: &Kd) -> u64 {
     let n = |len: usize, bytes: u64| (len as u64).saturating_mul(bytes);
-    let values: u64 = fields.values.iter().map(|v| n(v.len(), 4)).sum();
-    let histograms = n(fields.values.len(), 8 * HISTOGRAM_BINS as u64);
+    let nf = fields.names.len();
+    let values = n(fields.cells(), 4).saturating_mul(nf as u64);
+    let histograms = n(nf, 8 * HISTOGRAM_BINS as u64);
     let region_bricks = n(kd.regions.bricks.len(), 4);
     values
         .saturating_add(histograms)
@@ -39,21 +40,23 @@ pub(super) fn check_archive(leaf_cells: u64, fields: u64, bytes: u64) -> Result<
 }
 
 /// Assembly stage: the [`BrickFile`] (fields with their ranges and histograms, levels,
-/// bricks, regions, KD-tree, provenance) ready to be written, and
-/// the field ranges for the summary.
+/// bricks, regions, KD-tree, provenance) ready to be written, its fields' values left
+/// where `fields` keeps them, and the field ranges for the summary.
 pub(super) fn assemble(
     opts: &BakeOptions,
     source_grids: Vec<SourceGrid>,
     level_widths: &[f64],
     bricks: &Bricks,
-    fields: FieldValues,
+    fields: &FieldValues,
     kd: Kd,
     bounds: Option<Aabb>,
 ) -> (BrickFile, Vec<FieldSummary>) {
     let mut file_fields = Vec::with_capacity(fields.names.len());
     let mut field_summaries = Vec::with_capacity(fields.names.len());
-    for (name, vals) in fields.names.into_iter().zip(fields.values) {
-        let (min, max, histogram) = range_and_histogram(&vals);
+    for (f, (name, vals)) in fields.names.iter().zip(fields.slices()).enumerate() {
+        let release = |r: std::ops::Range<usize>| fields.release(f, r);
+        let (min, max, histogram) = range_and_histogram(vals, RELEASE_VALUES, &release);
+        let name = name.clone();
         field_summaries.push(FieldSummary {
             name: name.clone(),
             min,
@@ -64,7 +67,8 @@ pub(super) fn assemble(
             min,
             max,
             histogram,
-            values: vals,
+            // The values stay where the bake keeps them (see `Baked`).
+            values: Vec::new(),
         });
     }
     let mut file_levels: Vec<Level> = level_widths

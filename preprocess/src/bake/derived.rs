@@ -7,22 +7,24 @@
 //! The fields are derived while the input's values are held (12 or 24 bytes a cell), and
 //! take 4 bytes a cell each: held beside them, they made the bake's peak. So fields larger
 //! than [`Spill::above`] are derived a chunk of bricks at a time, each chunk written to a
-//! scratch file (one per field, unnamed, gone when closed), and read back once the input's
-//! values are dropped ([`DerivedFields::load`]): the peak is then the larger of the input
-//! and the fields, not their sum. The bytes are the same either way.
+//! scratch file (one per field, unnamed, gone when closed). They stay there: the later
+//! stages read them through a mapping, a part at a time, and the writer streams them into
+//! the archive ([`FieldValues`]), so they are never all resident, beside the input's values
+//! or after them. The bytes are the same either way.
 
 use std::fs::File;
-use std::io::{Read, Seek, SeekFrom, Write};
+use std::io::Write;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use files::limits;
+use files::scratch::ScratchValues;
 use rayon::prelude::*;
 
 use crate::bricks::BrickBox;
 use crate::derive::{gradient, speed, VelocityField};
 use crate::error::BakeError;
-use crate::fields::FieldKind;
+use crate::fields::{BrickValues, FieldKind};
 use crate::measures;
 
 use super::extra::ExtraGrid;
@@ -57,10 +59,88 @@ impl Default for Spill {
     }
 }
 
-/// Baked fields: names, and the values of each (brick after brick, x fastest).
+/// Values a pass over mapped field values reads before it lets their pages go (64 MiB).
+pub(super) const RELEASE_VALUES: usize = 16 << 20;
+
+/// Baked fields: names, and the values of each (brick after brick, x fastest), in memory
+/// or, when they were derived into scratch files, read through a mapping of those files
+/// whose pages every pass lets go behind itself ([`FieldValues::release`]): the stages
+/// after the derivation and the writer then hold only the part of the values they are
+/// working on, not all of them.
 pub(super) struct FieldValues {
     pub(super) names: Vec<String>,
-    pub(super) values: Vec<Vec<f32>>,
+    values: Values,
+}
+
+enum Values {
+    Memory(Vec<Vec<f32>>),
+    Mapped(Vec<ScratchValues>),
+}
+
+impl FieldValues {
+    /// Values per field.
+    pub(super) fn cells(&self) -> usize {
+        match &self.values {
+            Values::Memory(v) => v.first().map_or(0, Vec::len),
+            Values::Mapped(m) => m.first().map_or(0, ScratchValues::len),
+        }
+    }
+
+    /// Every field's values.
+    pub(super) fn slices(&self) -> Vec<&[f32]> {
+        match &self.values {
+            Values::Memory(v) => v.iter().map(Vec::as_slice).collect(),
+            Values::Mapped(m) => m.iter().map(ScratchValues::as_slice).collect(),
+        }
+    }
+
+    /// Field `f`'s values, to change.
+    pub(super) fn field_mut(&mut self, f: usize) -> &mut [f32] {
+        match &mut self.values {
+            Values::Memory(v) => &mut v[f],
+            Values::Mapped(m) => m[f].as_mut_slice(),
+        }
+    }
+
+    /// Says that field `f`'s values in `range` are not needed for a while (see
+    /// [`ScratchValues::release`]; nothing for values in memory).
+    pub(super) fn release(&self, f: usize, range: std::ops::Range<usize>) {
+        if let Values::Mapped(m) = &self.values {
+            m[f].release(range);
+        }
+    }
+
+    /// The values as [`region_ranges`](crate::fields::region_ranges) reads them (`slices`
+    /// are [`FieldValues::slices`], `release` lets mapped ones go).
+    pub(super) fn brick_values<'a>(
+        &self,
+        slices: &'a [&'a [f32]],
+        release: &'a (dyn Fn(usize, std::ops::Range<usize>) + Sync),
+    ) -> BrickValues<'a> {
+        match self.values {
+            Values::Memory(_) => BrickValues::Resident(slices),
+            Values::Mapped(_) => BrickValues::Mapped {
+                values: slices,
+                release,
+            },
+        }
+    }
+
+    /// Every field's values in memory (read from their scratch files when kept there).
+    pub(super) fn into_vecs(self) -> Result<Vec<Vec<f32>>, BakeError> {
+        match self.values {
+            Values::Memory(v) => Ok(v),
+            Values::Mapped(m) => m
+                .iter()
+                .map(|m| {
+                    let mut v: Vec<f32> = limits::vec_of("the baked field values", m.len())?;
+                    v.copy_from_slice(m.as_slice());
+                    m.release(0..m.len());
+                    Ok(v)
+                })
+                .collect(),
+        }
+    }
 }
 
 /// Baked fields as derived: their values in memory or in scratch files.
@@ -83,24 +163,19 @@ enum Store {
 }
 
 impl DerivedFields {
-    /// The fields with their values in memory: read back from the scratch files (which
-    /// are then closed, and so gone) when they were kept there.
-    pub(super) fn load(self) -> Result<FieldValues, BakeError> {
+    /// The fields' values for the stages after the derivation: in memory, or their
+    /// scratch files mapped (the files stay open while mapped; unnamed, they are gone once
+    /// the mappings and files are).
+    pub(super) fn open(self) -> Result<FieldValues, BakeError> {
         let values = match self.store {
-            Store::Memory(values) => values,
-            Store::Spilled { files, total, dir } => files
-                .into_iter()
-                .map(|mut f| {
-                    let mut v: Vec<f32> = limits::vec_of("the baked field values", total)?;
-                    f.seek(SeekFrom::Start(0))
-                        .and_then(|_| f.read_exact(bytemuck::cast_slice_mut(&mut v)))
-                        .map_err(|source| BakeError::Scratch {
-                            dir: dir.clone(),
-                            source,
-                        })?;
-                    Ok(v)
-                })
-                .collect::<Result<_, BakeError>>()?,
+            Store::Memory(values) => Values::Memory(values),
+            Store::Spilled { files, total, dir } => Values::Mapped(
+                files
+                    .iter()
+                    .map(|f| ScratchValues::map(f, total))
+                    .collect::<Result<_, _>>()
+                    .map_err(|source| BakeError::Scratch { dir, source })?,
+            ),
         };
         Ok(FieldValues {
             names: self.names,

@@ -14,7 +14,8 @@
 //!   centred values beside the faces of a staggered one); plus the masks;
 //! - per active cell, once the fields are derived: 4 bytes for every baked field and
 //!   [`CELL_BYTES`] for bricks, supports, regions, their ranges and what the allocator
-//!   rounds up.
+//!   rounds up. Field values past [`Spill::above`] stay in scratch files and are read a
+//!   part at a time: then a chunk of them is held, not all.
 //!
 //! Measured peaks (`/usr/bin/time -v`, maximum resident set, 2 threads) against it are in
 //! docs/baking.md.
@@ -163,7 +164,8 @@ pub fn bake_bytes(
             values(e).max(e.0.decoded).saturating_add(masks(e))
         }));
     // The fields, bricks and regions beside all the cells; or, with the fields on disk,
-    // a chunk of them beside the cells, then the fields without the cells' values.
+    // a chunk of them beside the cells, then the bricks and regions with a chunk of the
+    // fields (they stay on disk, read a part at a time, see `derived::FieldValues`).
     let field_bytes = fields.saturating_mul(FIELD_BYTES);
     let per_cell = field_bytes.saturating_add(CELL_BYTES);
     let cells = sum(grids, &|g| g.0.cells);
@@ -175,8 +177,9 @@ pub fn bake_bytes(
             .saturating_add(cells.saturating_mul(BRICK_BYTES_PER_CELL))
             .saturating_add(spill.chunk.saturating_mul(field_bytes));
         let after = sum(grids, &|g| {
-            masks(g).saturating_add(g.0.cells.saturating_mul(per_cell))
-        });
+            masks(g).saturating_add(g.0.cells.saturating_mul(CELL_BYTES))
+        })
+        .saturating_add(spill.chunk.saturating_mul(field_bytes));
         deriving.max(after)
     } else {
         held.saturating_add(cells.saturating_mul(per_cell))

@@ -20,9 +20,9 @@ use crate::derive::{centre_from_faces, Stencil};
 use crate::error::{field_grid_not_found, grid_labels, GridCount, GridCounts};
 use crate::fields::{region_ranges, FieldKind, RangeInput};
 use crate::grid::{AnyGrid, Transform};
+use crate::kdtree::{Regions, TooLarge};
 use crate::levels::assign_levels;
 use crate::nonfinite::{self, CellValue};
-use crate::kdtree::{Regions, TooLarge};
 use crate::regions;
 
 /// Re-exported from [`crate::error`], where it lives since [`crate::levels`] returns it too.
@@ -141,6 +141,19 @@ pub fn bake_with_progress(
     opts: &BakeOptions,
     stage: &(dyn Fn(&str) + Sync),
 ) -> Result<(BrickFile, BakeSummary), BakeError> {
+    let (baked, summary) = bake_kept(grids, opts, stage)?;
+    Ok((baked.into_file()?, summary))
+}
+
+/// As [`bake_with_progress`], with the field values left where the bake keeps them (in
+/// memory, or in scratch files when they are large, see [`Spill`]): what a bake that
+/// writes a file runs, so that the values are streamed from there into it
+/// ([`Baked::write`]) instead of being gathered in memory first.
+pub fn bake_kept(
+    grids: Vec<AnyGrid>,
+    opts: &BakeOptions,
+    stage: &(dyn Fn(&str) + Sync),
+) -> Result<(Baked, BakeSummary), BakeError> {
     match opts.threads {
         Some(n) => {
             let pool = rayon::ThreadPoolBuilder::new()
@@ -150,6 +163,47 @@ pub fn bake_with_progress(
             pool.install(|| run(grids, opts, stage))
         }
         None => run(grids, opts, stage),
+    }
+}
+
+/// A baked file whose fields' values are kept apart from it (see [`bake_kept`]).
+pub struct Baked {
+    /// Everything but the fields' values (their `values` are empty).
+    file: BrickFile,
+    values: FieldValues,
+}
+
+impl Baked {
+    /// The file with its values in it.
+    pub fn into_file(self) -> Result<BrickFile, BakeError> {
+        let Baked { mut file, values } = self;
+        for (f, v) in file.fields.iter_mut().zip(values.into_vecs()?) {
+            f.values = v;
+        }
+        Ok(file)
+    }
+
+    /// Writes the file to `path` atomically ([`format::writer::write_streamed`]): the
+    /// values are read where they are kept, a chunk at a time, and let go once written.
+    pub fn write(&self, path: &std::path::Path) -> Result<u64, format::FormatError> {
+        let releases: Vec<Box<dyn Fn(std::ops::Range<usize>) + Sync + '_>> =
+            (0..self.values.names.len())
+                .map(|f| {
+                    Box::new(move |r: std::ops::Range<usize>| self.values.release(f, r))
+                        as Box<dyn Fn(std::ops::Range<usize>) + Sync>
+                })
+                .collect();
+        let values: Vec<format::streamed::FieldValues> = self
+            .values
+            .slices()
+            .into_iter()
+            .zip(&releases)
+            .map(|(values, release)| format::streamed::FieldValues {
+                values,
+                release: release.as_ref(),
+            })
+            .collect();
+        format::writer::write_streamed(path, &self.file, &values)
     }
 }
 
@@ -256,7 +310,7 @@ fn run(
     grids: Vec<AnyGrid>,
     opts: &BakeOptions,
     stage: &(dyn Fn(&str) + Sync),
-) -> Result<(BrickFile, BakeSummary), BakeError> {
+) -> Result<(Baked, BakeSummary), BakeError> {
     if opts.max_brick == 0 {
         return Err(BakeError::BadMaxBrick(opts.max_brick));
     }
@@ -313,12 +367,12 @@ fn run(
     drop(extras);
     let sets = input.into_sets();
     memory::return_freed();
-    let mut fields = derived.load()?;
+    let mut fields = derived.open()?;
     let nonfinite_derived = clamp_fields(&mut fields, &bricks, &sets, opts.strict, &mut warnings)?;
 
     stage("building regions");
     let (bounds, tree) = build_regions(&sets, &bricks, selection.widths[0]);
-    let kd = kd_tree(tree, &bricks, &fields.values)?;
+    let kd = kd_tree(tree, &bricks, &fields)?;
 
     stage("assembling");
     check_archive(leaf_cells, nfields, archive_bytes(&bricks, &fields, &kd))?;
@@ -327,7 +381,7 @@ fn run(
         selection.source_grids,
         &selection.widths,
         &bricks,
-        fields,
+        &fields,
         kd,
         bounds,
     );
@@ -343,7 +397,13 @@ fn run(
         fields: field_summaries,
         warnings,
     };
-    Ok((file, summary))
+    Ok((
+        Baked {
+            file,
+            values: fields,
+        },
+        summary,
+    ))
 }
 
 /// What [`select_input`] keeps for the later stages.
@@ -564,13 +624,19 @@ fn clamp_fields(
 ) -> Result<u64, BakeError> {
     let labels = grid_labels(sets.iter().map(|s| s.name.as_str()));
     let mut nonfinite_derived = 0;
-    for (name, vals) in fields.names.iter().zip(fields.values.iter_mut()) {
-        // Counted brick by brick, so each value's grid (and its first cell) is known.
+    for (f, name) in fields.names.clone().iter().enumerate() {
+        // Counted brick by brick, so each value's grid (and its first cell) is known; the
+        // values already read are let go every `RELEASE_VALUES`.
         let mut per_set: Vec<Option<GridCount>> = vec![None; sets.len()];
         let mut count = 0u64;
+        let mut kept_from = 0;
         for (b, bx) in bricks.boxes.iter().enumerate() {
             let first = bricks.first[b] as usize;
-            let part = &mut vals[first..first + bx.cells() as usize];
+            if first - kept_from >= derived::RELEASE_VALUES {
+                fields.release(f, kept_from..first);
+                kept_from = first;
+            }
+            let part = &mut fields.field_mut(f)[first..first + bx.cells() as usize];
             let Some((n, at)) = clamp_nonfinite(part) else {
                 continue;
             };
@@ -586,6 +652,7 @@ fn clamp_fields(
             });
             entry.count += n;
         }
+        fields.release(f, kept_from..fields.cells());
         if count == 0 {
             continue;
         }
@@ -632,7 +699,11 @@ struct Kd {
 /// KD-tree stage: flattens the region tree (consumed, see [`crate::kdtree::flatten`]) and
 /// computes each region's value range per field, which lets the viewer skip regions an
 /// iso-value cannot cross.
-fn kd_tree(tree: regions::RegionTree, bricks: &Bricks, values: &[Vec<f32>]) -> Result<Kd, BakeError> {
+fn kd_tree(
+    tree: regions::RegionTree,
+    bricks: &Bricks,
+    fields: &FieldValues,
+) -> Result<Kd, BakeError> {
     let (packed, regions) = crate::kdtree::flatten(tree).map_err(|e| match e {
         TooLarge::Regions(regions) => BakeError::TooManyRegions {
             regions,
@@ -643,15 +714,17 @@ fn kd_tree(tree: regions::RegionTree, bricks: &Bricks, values: &[Vec<f32>]) -> R
             limit: u64::from(u32::MAX),
         },
     })?;
+    let slices = fields.slices();
+    let release = |f: usize, r: std::ops::Range<usize>| fields.release(f, r);
     let ranges = region_ranges(
         &RangeInput {
             bricks: &bricks.boxes,
             origins: &bricks.origins,
             widths: &bricks.widths,
             first: &bricks.first,
-            values,
         },
         &regions,
+        &fields.brick_values(&slices, &release),
     );
     Ok(Kd {
         tree: packed,

@@ -492,10 +492,11 @@ fn single_precision_grids_bake_as_their_exact_double_copies() {
     }
 }
 
-/// Fields kept on disk while the input's values are held (`Spill`), chunk after chunk of
-/// bricks, read back as they were written: the same file as a bake that holds them, on two
-/// levels with five fields, chunks of one brick or a few; no scratch file is left behind;
-/// a directory that cannot hold them is named in the error.
+/// Fields kept on disk (`Spill`), chunk after chunk of bricks, read back as they were
+/// written, in memory or streamed from their scratch files into the written file: the
+/// same file as a bake that holds them, on two levels with five fields, chunks of one
+/// brick or a few; no scratch file is left behind; a directory that cannot hold them is
+/// named in the error.
 #[test]
 fn fields_kept_on_disk_give_the_same_file() {
     use qbricks_preprocess::bake::Spill;
@@ -520,11 +521,24 @@ fn fields_kept_on_disk_give_the_same_file() {
             },
             ..o.clone()
         };
+        let held_bytes = format::writer::to_bytes(&held.0).expect("serialise");
         let (file, summary) = bake(grids.clone(), &spilled).expect("bake");
         assert_eq!(summary, held.1, "chunk {chunk}");
         assert!(
-            format::writer::to_bytes(&file).expect("serialise")
-                == format::writer::to_bytes(&held.0).expect("serialise"),
+            format::writer::to_bytes(&file).expect("serialise") == held_bytes,
+            "chunk {chunk}"
+        );
+        // Written as `qbricks-bake` writes it: the values streamed from their scratch
+        // files into the archive.
+        let (baked, summary) =
+            qbricks_preprocess::bake::bake_kept(grids.clone(), &spilled, &|_| {}).expect("kept");
+        assert_eq!(summary, held.1, "chunk {chunk}");
+        let out = tempfile::tempdir().expect("tempdir");
+        let path = out.path().join("kept.qbk");
+        baked.write(&path).expect("write");
+        drop(baked);
+        assert!(
+            std::fs::read(&path).expect("read") == held_bytes,
             "chunk {chunk}"
         );
         let left: Vec<_> = std::fs::read_dir(dir.path()).expect("dir").collect();

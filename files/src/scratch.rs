@@ -1,0 +1,125 @@
+//! Values kept in a scratch file and read through a shared mapping: how a bake holds field
+//! values larger than it wants resident. The kernel pages them in as they are read and
+//! writes back what is changed; [`ScratchValues::release`] lets a pass over them drop the
+//! pages behind itself, so that a front-to-back pass over gigabytes keeps only what it is
+//! working on resident. The file is the caller's (normally unnamed, from
+//! `tempfile::tempfile_in`, so it is gone once closed, also after a crash).
+
+use std::fs::File;
+use std::ops::Range;
+
+/// `len` values of `f32` in a scratch file, mapped shared and writable.
+pub struct ScratchValues {
+    map: memmap2::MmapMut,
+    len: usize,
+}
+
+impl std::fmt::Debug for ScratchValues {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ScratchValues")
+            .field("len", &self.len)
+            .finish()
+    }
+}
+
+impl ScratchValues {
+    /// Maps the first `len` values of `file`, which must hold at least that many bytes.
+    #[allow(unsafe_code)]
+    pub fn map(file: &File, len: usize) -> std::io::Result<ScratchValues> {
+        let bytes = len
+            .checked_mul(4)
+            .ok_or_else(|| std::io::Error::other("scratch values past the address space"))?;
+        let have = file.metadata()?.len();
+        if have < bytes as u64 {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::UnexpectedEof,
+                format!("scratch file holds {have} bytes, {bytes} expected"),
+            ));
+        }
+        if bytes == 0 {
+            // A zero-length mapping is refused by the kernel: an anonymous empty one.
+            return Ok(ScratchValues {
+                map: memmap2::MmapMut::map_anon(1)?,
+                len: 0,
+            });
+        }
+        // SAFETY: `MmapMut::map_mut` is unsafe because another mapping or process may change
+        // or truncate the file under us. The file is this process's own unnamed scratch
+        // file, which nothing else can open, and it is not resized while mapped.
+        let map = unsafe { memmap2::MmapOptions::new().len(bytes).map_mut(file)? };
+        Ok(ScratchValues { map, len })
+    }
+
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    pub fn as_slice(&self) -> &[f32] {
+        // A mapping is page-aligned, so aligned for `f32`.
+        bytemuck::cast_slice(&self.map[..self.len * 4])
+    }
+
+    pub fn as_mut_slice(&mut self) -> &mut [f32] {
+        let bytes = self.len * 4;
+        bytemuck::cast_slice_mut(&mut self.map[..bytes])
+    }
+
+    /// Says that the values in `range` will not be used for a while: the pages wholly
+    /// inside it leave this process's resident memory. What was written to them is kept
+    /// (the mapping is shared: it is the file's, in the page cache until written back), and
+    /// a later read of them faults them in again with the same values.
+    #[allow(unsafe_code)]
+    pub fn release(&self, range: Range<usize>) {
+        let page = rustix::param::page_size();
+        let start = (range.start.saturating_mul(4)).div_ceil(page) * page;
+        let end = (range.end.min(self.len).saturating_mul(4) / page) * page;
+        if start < end {
+            // SAFETY: `MADV_DONTNEED` discards private and anonymous pages' contents; this
+            // mapping is shared and backed by its file, so the pages are only unmapped and
+            // their contents (with every write made through the mapping) stay the file's.
+            // Advice the kernel refuses changes nothing, so its error is ignored.
+            let _ = unsafe {
+                self.map.unchecked_advise_range(
+                    memmap2::UncheckedAdvice::DontNeed,
+                    start,
+                    end - start,
+                )
+            };
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::Write;
+
+    /// Values written through the mapping and released are read back unchanged, from the
+    /// mapping and from the file; a file shorter than asked is refused.
+    #[test]
+    fn released_values_keep_what_was_written() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let mut file = tempfile::tempfile_in(dir.path()).expect("scratch");
+        let n = 300_000;
+        let values: Vec<f32> = (0..n).map(|i| i as f32 * 0.25).collect();
+        file.write_all(bytemuck::cast_slice(&values))
+            .expect("write");
+        let mut mapped = ScratchValues::map(&file, n).expect("map");
+        assert_eq!(mapped.as_slice(), &values[..]);
+        mapped.as_mut_slice()[123_456] = -1.0;
+        mapped.release(0..n);
+        let mut expected = values.clone();
+        expected[123_456] = -1.0;
+        assert_eq!(mapped.as_slice(), &expected[..]);
+        drop(mapped);
+        let again = ScratchValues::map(&file, n).expect("map again");
+        assert_eq!(again.as_slice(), &expected[..]);
+        assert!(ScratchValues::map(&file, n + 1).is_err());
+        let empty = ScratchValues::map(&file, 0).expect("empty");
+        assert!(empty.is_empty() && empty.as_slice().is_empty());
+    }
+}
