@@ -19,13 +19,9 @@ use crate::schema::{Aabb, ArchivedBrickFile, ArchivedField, BrickFile, Provenanc
 /// Values written per chunk (16 MiB); `release` hears each chunk's range once written.
 const CHUNK_VALUES: usize = 4 << 20;
 
-/// One field's values as the archive takes them: the slice, and what to call with each
-/// range of it once written (a mapped slice lets those pages go).
-#[derive(Clone, Copy)]
-pub struct FieldValues<'a> {
-    pub values: &'a [f32],
-    pub release: &'a (dyn Fn(std::ops::Range<usize>) + Sync),
-}
+/// What the writer calls with each field's index and range of values once they are
+/// written (a caller holding them mapped lets those pages go).
+pub type Release<'a> = &'a (dyn Fn(usize, std::ops::Range<usize>) + Sync);
 
 /// A [`BrickFile`] with the values of field `f` in `values[f]` (its own `values` are not
 /// read, and are empty in practice). Archived by hand as `ArchivedBrickFile`: each part is
@@ -138,15 +134,19 @@ where
     }
 }
 
-/// Field values archived as the `Vec<f32>` they stand for.
-struct Values<'a>(FieldValues<'a>);
+/// Field `field`'s values archived as the `Vec<f32>` they stand for.
+struct Values<'a> {
+    values: &'a [f32],
+    field: usize,
+    release: Release<'a>,
+}
 
 impl Archive for Values<'_> {
     type Archived = ArchivedVec<rkyv::Archived<f32>>;
     type Resolver = VecResolver;
 
     fn resolve(&self, resolver: Self::Resolver, out: Place<Self::Archived>) {
-        ArchivedVec::resolve_from_len(self.0.values.len(), resolver, out);
+        ArchivedVec::resolve_from_len(self.values.len(), resolver, out);
     }
 }
 
@@ -160,14 +160,14 @@ where
         // little-endian, one after the other.
         let pos = serializer.align_for::<rkyv::Archived<f32>>()?;
         let mut start = 0;
-        for chunk in self.0.values.chunks(CHUNK_VALUES) {
+        for chunk in self.values.chunks(CHUNK_VALUES) {
             if cfg!(target_endian = "little") {
                 serializer.write(bytemuck::cast_slice(chunk))?;
             } else {
                 let bytes: Vec<u8> = chunk.iter().flat_map(|v| v.to_le_bytes()).collect();
                 serializer.write(&bytes)?;
             }
-            (self.0.release)(start..start + chunk.len());
+            (self.release)(self.field, start..start + chunk.len());
             start += chunk.len();
         }
         Ok(VecResolver::from_pos(pos))
@@ -175,9 +175,13 @@ where
 }
 
 impl<'a> Streamed<'a> {
-    /// `file` with the values of field `f` taken from `values[f]`; `None` when the counts
-    /// differ.
-    pub(crate) fn new(file: &'a BrickFile, values: &[FieldValues<'a>]) -> Option<Streamed<'a>> {
+    /// `file` with the values of field `f` taken from `values[f]`, `release` called on
+    /// them as they are written; `None` when the counts differ.
+    pub(crate) fn new(
+        file: &'a BrickFile,
+        values: &[&'a [f32]],
+        release: Release<'a>,
+    ) -> Option<Streamed<'a>> {
         if values.len() != file.fields.len() {
             return None;
         }
@@ -187,9 +191,14 @@ impl<'a> Streamed<'a> {
                 .fields
                 .iter()
                 .zip(values)
-                .map(|(field, v)| StreamedField {
+                .enumerate()
+                .map(|(f, (field, v))| StreamedField {
                     field,
-                    values: Values(*v),
+                    values: Values {
+                        values: v,
+                        field: f,
+                        release,
+                    },
                 })
                 .collect(),
         })

@@ -15,7 +15,7 @@ use rkyv::rancor;
 use crate::error::{one_line, FormatError, FormatErrorKind};
 use crate::header::{Header, FLAGS, FORMAT_VERSION, HEADER_LEN};
 use crate::schema::BrickFile;
-use crate::streamed::{FieldValues, Streamed};
+use crate::streamed::{Release, Streamed};
 
 /// Bytes of a complete `.qbk` file (header + archive) for `file`.
 pub fn to_bytes(file: &BrickFile) -> Result<Vec<u8>, FormatErrorKind> {
@@ -35,14 +35,16 @@ pub fn write(path: &Path, file: &BrickFile) -> Result<u64, FormatError> {
 }
 
 /// As [`write`], with the values of field `f` taken from `values[f]` instead of from
-/// `file` (whose fields' own values are ignored): the same bytes as [`write`] of the file
-/// holding those values, without ever holding them in one `Vec` (see [`crate::streamed`]).
+/// `file` (whose fields' own values are ignored), and `release(f, range)` called on each
+/// range of them once written: the same bytes as [`write`] of the file holding those
+/// values, without ever holding them in one `Vec` (see [`crate::streamed`]).
 pub fn write_streamed(
     path: &Path,
     file: &BrickFile,
-    values: &[FieldValues<'_>],
+    values: &[&[f32]],
+    release: Release<'_>,
 ) -> Result<u64, FormatError> {
-    let streamed = Streamed::new(file, values).ok_or_else(|| {
+    let streamed = Streamed::new(file, values, release).ok_or_else(|| {
         FormatError::new(
             path,
             FormatErrorKind::Serialize(format!(

@@ -21,24 +21,11 @@ fn streamed_bytes(file: &qbricks_format::BrickFile, dir: &Path) -> Vec<u8> {
     }
     let released: Vec<Mutex<Vec<std::ops::Range<usize>>>> =
         file.fields.iter().map(|_| Mutex::new(Vec::new())).collect();
-    let releases: Vec<Box<dyn Fn(std::ops::Range<usize>) + Sync + '_>> = released
-        .iter()
-        .map(|r| {
-            Box::new(move |range: std::ops::Range<usize>| r.lock().expect("lock").push(range))
-                as Box<dyn Fn(std::ops::Range<usize>) + Sync>
-        })
-        .collect();
-    let values: Vec<qbricks_format::streamed::FieldValues> = file
-        .fields
-        .iter()
-        .zip(&releases)
-        .map(|(f, r)| qbricks_format::streamed::FieldValues {
-            values: &f.values,
-            release: r.as_ref(),
-        })
-        .collect();
+    let release =
+        |f: usize, range: std::ops::Range<usize>| released[f].lock().expect("lock").push(range);
+    let values: Vec<&[f32]> = file.fields.iter().map(|f| f.values.as_slice()).collect();
     let path = dir.join("streamed.qbk");
-    let n = writer::write_streamed(&path, &hollow, &values).expect("write streamed");
+    let n = writer::write_streamed(&path, &hollow, &values, &release).expect("write streamed");
     for (f, r) in file.fields.iter().zip(&released) {
         let r = r.lock().expect("lock");
         let mut at = 0;
@@ -67,7 +54,7 @@ fn streamed_values_of_several_chunks_and_a_wrong_count() {
     let expected = writer::to_bytes(&file).expect("to_bytes");
     assert!(streamed_bytes(&file, dir.path()) == expected);
     let path = dir.path().join("wrong.qbk");
-    let e = writer::write_streamed(&path, &file, &[]).expect_err("no values");
+    let e = writer::write_streamed(&path, &file, &[], &|_, _| {}).expect_err("no values");
     assert!(e.to_string().contains("wrong.qbk"), "{e}");
     assert!(!path.exists());
 }

@@ -12,7 +12,8 @@ use crate::regions::RegionTree;
 /// Regions as the tree numbers them, laid out as the file stores them: region `r`'s box
 /// is `bounds[r]` (its leaf's cell) and its sorted brick ids are the run `runs[r]` of
 /// `bricks`. Flat, so that a bake's millions of regions cost their ids and a few bytes
-/// each, not a heap allocation each (16.6 M regions of a billion cells held 7 GB so).
+/// each, not a heap allocation each (a copy of each list beside the tree's own made the
+/// regions stage of a billion cells, 16.6 M regions, 1.5 GB larger).
 #[derive(Debug, Default)]
 pub(crate) struct Regions {
     pub bounds: Vec<Aabb>,

@@ -333,10 +333,11 @@ fn per_brick(
         return Ok(Store::Memory(fields));
     }
     let dir = spill.dir.clone().unwrap_or_else(std::env::temp_dir);
+    // They stay until the file is written, beside it (the archive holds them again).
     files::output::check_space_in(
-        "the field values kept on disk while the input's values are held",
+        "the field values kept on disk until they are written, and the file holding them",
         &dir,
-        bytes,
+        bytes.saturating_mul(2),
     )?;
     let scratch = |source| BakeError::Scratch {
         dir: dir.clone(),

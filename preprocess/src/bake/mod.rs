@@ -186,24 +186,8 @@ impl Baked {
     /// Writes the file to `path` atomically ([`format::writer::write_streamed`]): the
     /// values are read where they are kept, a chunk at a time, and let go once written.
     pub fn write(&self, path: &std::path::Path) -> Result<u64, format::FormatError> {
-        let releases: Vec<Box<dyn Fn(std::ops::Range<usize>) + Sync + '_>> =
-            (0..self.values.names.len())
-                .map(|f| {
-                    Box::new(move |r: std::ops::Range<usize>| self.values.release(f, r))
-                        as Box<dyn Fn(std::ops::Range<usize>) + Sync>
-                })
-                .collect();
-        let values: Vec<format::streamed::FieldValues> = self
-            .values
-            .slices()
-            .into_iter()
-            .zip(&releases)
-            .map(|(values, release)| format::streamed::FieldValues {
-                values,
-                release: release.as_ref(),
-            })
-            .collect();
-        format::writer::write_streamed(path, &self.file, &values)
+        let release = |f: usize, r: std::ops::Range<usize>| self.values.release(f, r);
+        format::writer::write_streamed(path, &self.file, &self.values.slices(), &release)
     }
 }
 
