@@ -158,6 +158,17 @@ pub(crate) fn region_ranges(
     regions: &Regions,
     values: &BrickValues,
 ) -> Vec<[f32; 2]> {
+    ranges_in_batches(input, regions, values, REGION_BATCH)
+}
+
+/// [`region_ranges`], `batch` regions at a time.
+fn ranges_in_batches(
+    input: &RangeInput,
+    regions: &Regions,
+    values: &BrickValues,
+    batch_regions: usize,
+) -> Vec<[f32; 2]> {
+    let batch_regions = batch_regions.max(1);
     let nf = match values {
         BrickValues::Resident(v) | BrickValues::Mapped { values: v, .. } => v.len(),
     };
@@ -173,8 +184,8 @@ pub(crate) fn region_ranges(
         BrickValues::Resident(_) => Vec::new(),
         BrickValues::Mapped { .. } => vec![NONE; input.bricks.len()],
     };
-    for (k, batch) in ranges.chunks_mut(nf * REGION_BATCH).enumerate() {
-        let first = k * REGION_BATCH;
+    for (k, batch) in ranges.chunks_mut(nf * batch_regions).enumerate() {
+        let first = k * batch_regions;
         match values {
             BrickValues::Resident(v) => {
                 let get = |f: usize, b: usize| {
@@ -289,4 +300,94 @@ fn ranges_of_batch<'v>(
             }
         }
     });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use format::{Aabb, Region};
+
+    /// Mapped values, copied out a batch at a time, give the ranges read in place, for
+    /// batches of one region to all of them; every value's pages are let go after each
+    /// batch. Bricks of two widths, regions listing up to three bricks (one of them in
+    /// every batch), non-finite values among the cells.
+    #[test]
+    fn ranges_of_mapped_values_in_batches_are_those_read_in_place() {
+        let bricks: Vec<BrickBox> = (0..6)
+            .map(|b| BrickBox {
+                set: b % 2,
+                level: (b % 2) as u32,
+                lo: [0; 3],
+                dims: [2 + (b as u32 % 3), 2, 1 + (b as u32 % 2)],
+            })
+            .collect();
+        let widths: Vec<f64> = (0..6).map(|b| [0.5, 1.0][b % 2]).collect();
+        let origins: Vec<[f64; 3]> = (0..6).map(|b| [b as f64 * 0.7, 0.25, -0.5]).collect();
+        let mut first = Vec::new();
+        let mut total = 0u64;
+        for b in &bricks {
+            first.push(total);
+            total += b.cells();
+        }
+        let field = |k: usize| -> Vec<f32> {
+            (0..total as usize)
+                .map(|i| match (i * 7 + k) % 11 {
+                    3 => f32::NAN,
+                    5 => f32::INFINITY,
+                    r => (r as f32 - 4.5) * (k as f32 + 1.0) + i as f32 * 0.01,
+                })
+                .collect()
+        };
+        let values = [field(0), field(1)];
+        let slices: Vec<&[f32]> = values.iter().map(Vec::as_slice).collect();
+        let mut regions = Regions::default();
+        for r in 0..9 {
+            let lo = r as f64 * 0.45 - 0.3;
+            let ids: Vec<u32> = [0, (r % 5 + 1) as u32, ((r * 2) % 6) as u32]
+                .into_iter()
+                .collect::<std::collections::BTreeSet<_>>()
+                .into_iter()
+                .collect();
+            regions.bounds.push(Aabb {
+                min: [lo, 0.0, -0.6],
+                max: [lo + 0.9, 1.4, 0.4],
+            });
+            regions.runs.push(Region {
+                bricks_start: regions.bricks.len() as u32,
+                bricks_len: ids.len() as u32,
+            });
+            regions.bricks.extend(ids);
+        }
+        let input = RangeInput {
+            bricks: &bricks,
+            origins: &origins,
+            widths: &widths,
+            first: &first,
+        };
+        let in_place = region_ranges(&input, &regions, &BrickValues::Resident(&slices));
+        assert_eq!(in_place.len(), 9 * 2);
+        assert!(in_place.iter().all(|r| r[0].is_finite() && r[0] <= r[1]));
+        for batch in [1, 2, 4, 9, 100] {
+            let released = std::sync::Mutex::new(Vec::new());
+            let release = |f: usize, r: std::ops::Range<usize>| {
+                released.lock().expect("lock").push((f, r));
+            };
+            let mapped = BrickValues::Mapped {
+                values: &slices,
+                release: &release,
+            };
+            let ranges = ranges_in_batches(&input, &regions, &mapped, batch);
+            let bits = |v: &[[f32; 2]]| -> Vec<[u32; 2]> {
+                v.iter().map(|r| r.map(f32::to_bits)).collect()
+            };
+            assert_eq!(bits(&ranges), bits(&in_place), "batch {batch}");
+            let whole = released
+                .lock()
+                .expect("lock")
+                .iter()
+                .filter(|(_, r)| *r == (0..total as usize))
+                .count();
+            assert_eq!(whole, 2 * 9usize.div_ceil(batch), "batch {batch}");
+        }
+    }
 }
