@@ -260,17 +260,22 @@ impl Whole {
         let Whole::Mapped(map) = self else {
             return;
         };
-        let page = page_size();
-        let start = range.start.div_ceil(page) * page;
-        let end = (range.end.min(map.len()) / page) * page;
-        if start < end {
-            release_pages(map, start, end - start);
+        if let Some(pages) = whole_pages(range, map.len()) {
+            release_pages(map, pages.start, pages.len());
         }
     }
 }
 
-fn page_size() -> usize {
-    rustix::param::page_size()
+/// The pages lying wholly inside the bytes `range` of a mapping of `len` bytes (`None`
+/// when there is none): what a release may drop without touching bytes outside `range`.
+pub(crate) fn whole_pages(
+    range: std::ops::Range<usize>,
+    len: usize,
+) -> Option<std::ops::Range<usize>> {
+    let page = rustix::param::page_size();
+    let start = range.start.div_ceil(page) * page;
+    let end = (range.end.min(len) / page) * page;
+    (start < end).then_some(start..end)
 }
 
 /// Drops the pages `offset..offset + len` of a read-only map from the resident set.

@@ -74,10 +74,8 @@ impl ScratchValues {
     /// a later read of them faults them in again with the same values.
     #[allow(unsafe_code)]
     pub fn release(&self, range: Range<usize>) {
-        let page = rustix::param::page_size();
-        let start = (range.start.saturating_mul(4)).div_ceil(page) * page;
-        let end = (range.end.min(self.len).saturating_mul(4) / page) * page;
-        if start < end {
+        let bytes = range.start.saturating_mul(4)..range.end.min(self.len).saturating_mul(4);
+        if let Some(pages) = crate::input::whole_pages(bytes, self.len * 4) {
             // SAFETY: `MADV_DONTNEED` discards private and anonymous pages' contents; this
             // mapping is shared and backed by its file, so the pages are only unmapped and
             // their contents (with every write made through the mapping) stay the file's.
@@ -85,8 +83,8 @@ impl ScratchValues {
             let _ = unsafe {
                 self.map.unchecked_advise_range(
                     memmap2::UncheckedAdvice::DontNeed,
-                    start,
-                    end - start,
+                    pages.start,
+                    pages.len(),
                 )
             };
         }
