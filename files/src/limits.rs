@@ -91,6 +91,60 @@ pub fn repeat(value: u32) -> Result<u32, LimitError> {
     count("--repeat", value, 1, MAX_REPEAT)
 }
 
+/// Smallest memory budget (`--memory`): below it nothing bakes, whatever the input.
+pub const MIN_MEMORY_BUDGET: u64 = 16 << 20;
+
+/// A memory size as a user writes it (`--memory 2G`): a number of bytes, or of KiB, MiB,
+/// GiB or TiB with the suffix `K`, `M`, `G`, `T` (binary units, as `ulimit` and container
+/// limits read them; `KiB`, `MB`, `g` … are taken the same way); fractions allowed
+/// (`1.5G`). Refused outside [`MIN_MEMORY_BUDGET`] to 2^50 bytes.
+pub fn memory_size(flag: &str, text: &str) -> Result<u64, LimitError> {
+    let t = text.trim();
+    let split = t
+        .find(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .unwrap_or(t.len());
+    let (number, unit) = t.split_at(split);
+    let shift = match unit.trim().to_ascii_lowercase().as_str() {
+        "" | "b" => Some(0),
+        "k" | "kb" | "kib" => Some(10),
+        "m" | "mb" | "mib" => Some(20),
+        "g" | "gb" | "gib" => Some(30),
+        "t" | "tb" | "tib" => Some(40),
+        _ => None,
+    };
+    let (min, max) = (MIN_MEMORY_BUDGET, 1u64 << 50);
+    let bad = || LimitError::Count {
+        flag: flag.to_string(),
+        min: "16M".to_string(),
+        max: "1024T (a size: bytes, or K, M, G, T)".to_string(),
+        found: text.to_string(),
+    };
+    let (Some(shift), Ok(n)) = (shift, number.parse::<f64>()) else {
+        return Err(bad());
+    };
+    let bytes = n * (1u64 << shift) as f64;
+    if !(bytes >= min as f64 && bytes <= max as f64) {
+        return Err(bad());
+    }
+    Ok(bytes as u64)
+}
+
+/// Refuses `bytes` of address space for `what` when an address-space limit (`ulimit -v`)
+/// leaves less. Memory mapped from files takes address space whether its pages are
+/// resident or not: a run that keeps gigabytes in mapped scratch files checks this beside
+/// [`check_memory`], which looks at what it holds.
+pub fn check_address_space(what: impl Display, bytes: u64) -> Result<(), LimitError> {
+    match address_space_left() {
+        Some(left) if bytes > left => Err(LimitError::Memory {
+            what: what.to_string(),
+            need: bytes,
+            limit: left,
+            why: "what the address-space limit, ulimit -v, leaves".to_string(),
+        }),
+        _ => Ok(()),
+    }
+}
+
 /// `--resolution NU,NV` of a sampled plane: each side 1..=[`MAX_PLANE_SIDE`]. The memory
 /// the samples take is checked by the command, which knows how many fields it keeps.
 pub fn plane_resolution(nu: u64, nv: u64) -> Result<[u32; 2], LimitError> {
@@ -238,23 +292,53 @@ fn address_space_left() -> Option<u64> {
     #[cfg(unix)]
     {
         let limit = rustix::process::getrlimit(rustix::process::Resource::As).current?;
-        let status = std::fs::read_to_string("/proc/self/status").ok()?;
-        let used_kib: u64 = status
-            .lines()
-            .find(|l| l.starts_with("VmSize:"))?
-            .split_whitespace()
-            .nth(1)?
-            .parse()
-            .ok()?;
-        Some(limit.saturating_sub(used_kib.saturating_mul(1024)))
+        Some(limit.saturating_sub(own_status_bytes("VmSize:")?))
     }
     #[cfg(not(unix))]
     None
 }
 
+/// This process's peak resident memory in bytes (`VmHWM`: the most it held at once since
+/// it started, its own program's, unlike `getrusage`, which also counts what the parent
+/// held when it was started), where the system tells.
+pub fn peak_resident() -> Option<u64> {
+    own_status_bytes("VmHWM:")
+}
+
+/// A size line (`key  1234 kB`) of `/proc/self/status`, in bytes.
+fn own_status_bytes(key: &str) -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let kib: u64 = status
+        .lines()
+        .find(|l| l.starts_with(key))?
+        .split_whitespace()
+        .nth(1)?
+        .parse()
+        .ok()?;
+    kib.checked_mul(1024)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn memory_sizes_read_in_binary_units_and_out_of_range_ones_are_refused() {
+        let m = |t: &str| memory_size("--memory", t);
+        assert_eq!(m("64M"), Ok(64 << 20));
+        assert_eq!(m("64MiB"), Ok(64 << 20));
+        assert_eq!(m(" 2g "), Ok(2 << 30));
+        assert_eq!(m("1.5G"), Ok(3 << 29));
+        assert_eq!(m("16777216"), Ok(16 << 20));
+        assert_eq!(m("1T"), Ok(1 << 40));
+        for bad in ["", "M", "15M", "64Q", "-1G", "1e9", "2000T", "nan", "1..5G"] {
+            let e = m(bad).expect_err(bad);
+            assert!(
+                e.to_string().starts_with("--memory: expected 16M..="),
+                "{bad}: {e}"
+            );
+        }
+    }
 
     #[test]
     fn counts_name_the_flag_the_range_and_the_value() {

@@ -6,15 +6,18 @@
 //! `tempfile::tempfile_in`, so it is gone once closed, also after a crash).
 
 use std::fs::File;
+use std::marker::PhantomData;
 use std::ops::Range;
 
-/// `len` values of `f32` in a scratch file, mapped shared and writable.
-pub struct ScratchValues {
+/// `len` values of `T` (plain data: `f32` for fields, a cell's velocity for the cells) in a
+/// scratch file, mapped shared and writable.
+pub struct ScratchValues<T = f32> {
     map: memmap2::MmapMut,
     len: usize,
+    kind: PhantomData<T>,
 }
 
-impl std::fmt::Debug for ScratchValues {
+impl<T> std::fmt::Debug for ScratchValues<T> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("ScratchValues")
             .field("len", &self.len)
@@ -22,12 +25,14 @@ impl std::fmt::Debug for ScratchValues {
     }
 }
 
-impl ScratchValues {
+impl<T: bytemuck::Pod> ScratchValues<T> {
+    const SIZE: usize = std::mem::size_of::<T>();
+
     /// Maps the first `len` values of `file`, which must hold at least that many bytes.
     #[allow(unsafe_code)]
-    pub fn map(file: &File, len: usize) -> std::io::Result<ScratchValues> {
+    pub fn map(file: &File, len: usize) -> std::io::Result<ScratchValues<T>> {
         let bytes = len
-            .checked_mul(4)
+            .checked_mul(Self::SIZE)
             .ok_or_else(|| std::io::Error::other("scratch values past the address space"))?;
         let have = file.metadata()?.len();
         if have < bytes as u64 {
@@ -41,13 +46,18 @@ impl ScratchValues {
             return Ok(ScratchValues {
                 map: memmap2::MmapMut::map_anon(1)?,
                 len: 0,
+                kind: PhantomData,
             });
         }
         // SAFETY: `MmapMut::map_mut` is unsafe because another mapping or process may change
         // or truncate the file under us. The file is this process's own unnamed scratch
         // file, which nothing else can open, and it is not resized while mapped.
         let map = unsafe { memmap2::MmapOptions::new().len(bytes).map_mut(file)? };
-        Ok(ScratchValues { map, len })
+        Ok(ScratchValues {
+            map,
+            len,
+            kind: PhantomData,
+        })
     }
 
     pub fn len(&self) -> usize {
@@ -58,13 +68,13 @@ impl ScratchValues {
         self.len == 0
     }
 
-    pub fn as_slice(&self) -> &[f32] {
-        // A mapping is page-aligned, so aligned for `f32`.
-        bytemuck::cast_slice(&self.map[..self.len * 4])
+    pub fn as_slice(&self) -> &[T] {
+        // A mapping is page-aligned, so aligned for any plain value.
+        bytemuck::cast_slice(&self.map[..self.len * Self::SIZE])
     }
 
-    pub fn as_mut_slice(&mut self) -> &mut [f32] {
-        let bytes = self.len * 4;
+    pub fn as_mut_slice(&mut self) -> &mut [T] {
+        let bytes = self.len * Self::SIZE;
         bytemuck::cast_slice_mut(&mut self.map[..bytes])
     }
 
@@ -74,8 +84,9 @@ impl ScratchValues {
     /// a later read of them faults them in again with the same values.
     #[allow(unsafe_code)]
     pub fn release(&self, range: Range<usize>) {
-        let bytes = range.start.saturating_mul(4)..range.end.min(self.len).saturating_mul(4);
-        if let Some(pages) = crate::input::whole_pages(bytes, self.len * 4) {
+        let size = Self::SIZE;
+        let bytes = range.start.saturating_mul(size)..range.end.min(self.len).saturating_mul(size);
+        if let Some(pages) = crate::input::whole_pages(bytes, self.len * size) {
             // SAFETY: `MADV_DONTNEED` discards private and anonymous pages' contents; this
             // mapping is shared and backed by its file, so the pages are only unmapped and
             // their contents (with every write made through the mapping) stay the file's.
@@ -106,7 +117,7 @@ mod tests {
         let values: Vec<f32> = (0..n).map(|i| i as f32 * 0.25).collect();
         file.write_all(bytemuck::cast_slice(&values))
             .expect("write");
-        let mut mapped = ScratchValues::map(&file, n).expect("map");
+        let mut mapped = ScratchValues::<f32>::map(&file, n).expect("map");
         assert_eq!(mapped.as_slice(), &values[..]);
         mapped.as_mut_slice()[123_456] = -1.0;
         mapped.release(0..n);
@@ -114,10 +125,26 @@ mod tests {
         expected[123_456] = -1.0;
         assert_eq!(mapped.as_slice(), &expected[..]);
         drop(mapped);
-        let again = ScratchValues::map(&file, n).expect("map again");
+        let again = ScratchValues::<f32>::map(&file, n).expect("map again");
         assert_eq!(again.as_slice(), &expected[..]);
-        assert!(ScratchValues::map(&file, n + 1).is_err());
-        let empty = ScratchValues::map(&file, 0).expect("empty");
+        assert!(ScratchValues::<f32>::map(&file, n + 1).is_err());
+        let empty = ScratchValues::<f32>::map(&file, 0).expect("empty");
         assert!(empty.is_empty() && empty.as_slice().is_empty());
+    }
+
+    /// Values wider than a byte count the file in their own size: a velocity per value.
+    #[test]
+    fn vectors_are_mapped_in_their_own_size() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let file = tempfile::tempfile_in(dir.path()).expect("scratch");
+        let n = 5000;
+        file.set_len((n * 12) as u64).expect("size");
+        let mut mapped = ScratchValues::<[f32; 3]>::map(&file, n).expect("map");
+        assert_eq!(mapped.len(), n);
+        assert!(mapped.as_slice().iter().all(|v| *v == [0.0; 3]));
+        mapped.as_mut_slice()[n - 1] = [1.0, -2.0, 3.5];
+        mapped.release(0..n);
+        assert_eq!(mapped.as_slice()[n - 1], [1.0, -2.0, 3.5]);
+        assert!(ScratchValues::<[f32; 3]>::map(&file, n + 1).is_err());
     }
 }

@@ -26,7 +26,8 @@ use serde::Serialize;
 
 use rayon::prelude::*;
 
-use crate::cells::{CellSet, SlotValues, BLOCK_CELLS};
+use crate::cells::{CellSet, Keep, SlotValues, Slots, BLOCK_CELLS};
+use crate::error::BakeError;
 
 /// Gradient stencil at grid edges and next to missing cells (`--stencil`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Default, clap::ValueEnum)]
@@ -60,31 +61,44 @@ pub(crate) struct VelocityField<'a> {
 /// (voxel `i + e_c`). Where the upper face's voxel is not active (grid edge, inactive
 /// neighbour) the value is extrapolated linearly from the two lower faces (second order,
 /// like the one-sided differences), or is the lower face alone when only it exists.
-/// Inactive slots hold zero.
-pub(crate) fn centre_from_faces(set: &CellSet, faces: &SlotValues<[f64; 3]>) -> Vec<[f64; 3]> {
-    let mut out = vec![[0.0; 3]; faces.len()];
-    out.par_chunks_mut(BLOCK_CELLS)
-        .enumerate()
-        .for_each(|(b, block)| {
-            for (n, v) in block.iter_mut().enumerate() {
-                let slot = b * BLOCK_CELLS + n;
-                if !set.is_active(slot) {
-                    continue;
+/// Inactive slots hold zero. They are kept as `keep` says, made a window of blocks at a
+/// time, so that values on disk (these and the faces) let their pages go behind.
+pub(crate) fn centre_from_faces(
+    set: &CellSet,
+    faces: &SlotValues<[f64; 3]>,
+    keep: Keep<'_>,
+) -> Result<Slots<[f64; 3]>, BakeError> {
+    let what = format!("the cell-centred velocities of grid \"{}\"", set.name);
+    let mut out: Slots<[f64; 3]> = Slots::zeroed(&what, faces.len(), keep)?;
+    let span = (keep.window as usize / (BLOCK_CELLS * 24)).max(1) * BLOCK_CELLS;
+    for start in (0..faces.len()).step_by(span) {
+        let end = (start + span).min(faces.len());
+        out.as_mut_slice()[start..end]
+            .par_chunks_mut(BLOCK_CELLS)
+            .enumerate()
+            .for_each(|(k, block)| {
+                for (n, v) in block.iter_mut().enumerate() {
+                    let slot = start + k * BLOCK_CELLS + n;
+                    if !set.is_active(slot) {
+                        continue;
+                    }
+                    let ijk = set.ijk(slot);
+                    let f = faces.get(slot);
+                    for c in 0..3 {
+                        v[c] = match set.active_neighbour(slot, ijk, c, 1) {
+                            Some(up) => 0.5 * (f[c] + faces.get(up)[c]),
+                            None => match set.active_neighbour(slot, ijk, c, -1) {
+                                Some(down) => 1.5 * f[c] - 0.5 * faces.get(down)[c],
+                                None => f[c],
+                            },
+                        };
+                    }
                 }
-                let ijk = set.ijk(slot);
-                let f = faces.get(slot);
-                for c in 0..3 {
-                    v[c] = match set.active_neighbour(slot, ijk, c, 1) {
-                        Some(up) => 0.5 * (f[c] + faces.get(up)[c]),
-                        None => match set.active_neighbour(slot, ijk, c, -1) {
-                            Some(down) => 1.5 * f[c] - 0.5 * faces.get(down)[c],
-                            None => f[c],
-                        },
-                    };
-                }
-            }
-        });
-    out
+            });
+        out.release(0..usize::MAX);
+        faces.release();
+    }
+    Ok(out)
 }
 
 /// `∂u_a/∂x_a` at cell `ijk` (slot `slot`) of a staggered grid from its face values: the

@@ -179,8 +179,26 @@ pub enum BakeError {
     /// The bake's memory estimate (or an allocation) is over the shared limit.
     #[error(transparent)]
     Memory(#[from] LimitError),
-    #[error("cannot keep the baked field values in a scratch file in {}: {source}", dir.display())]
+    /// The bake's estimate is over the `--memory` budget even with every value kept on
+    /// disk; `least` is the least budget it fits in.
+    #[error(
+        "{what} needs about {} MiB even with every value kept on disk (the cells' masks, the bricks and the regions), more than the --memory budget of {} MiB: give --memory {}M or more",
+        least.div_ceil(1 << 20),
+        budget >> 20,
+        least.div_ceil(1 << 20)
+    )]
+    OverBudget {
+        what: String,
+        budget: u64,
+        least: u64,
+    },
+    /// A leaf of a grid located in the file (decoded as it becomes cells) is malformed.
+    #[error(transparent)]
+    Vdb(#[from] Box<crate::vdb::VdbError>),
+    #[error("cannot keep {what} in a scratch file in {}: {source}", dir.display())]
     Scratch {
+        /// What was to be kept there: the baked field values, a grid's cells.
+        what: String,
         dir: std::path::PathBuf,
         source: std::io::Error,
     },

@@ -148,25 +148,29 @@ pub(crate) enum BrickValues<'a> {
 /// Per-region, per-field `(min, max)` over every cell of the region's bricks whose tent
 /// `(c − w, c + w)` reaches into the region box; conservative by a hair at the edges.
 ///
-/// Regions are taken [`REGION_BATCH`] at a time, in parallel within a batch. Mapped values
-/// are read a batch at a time: a batch's regions lie together, but their bricks' values
-/// are spread over the arrays (a slab of space crosses every row of bricks), and every
-/// page fault maps the pages around it too, so reading them in place would make most of
-/// the arrays resident for every batch. Copied out, only the batch's bricks are held.
+/// Regions are taken [`REGION_BATCH`] at a time, in parallel within a batch, and fewer
+/// when their bricks hold more than `window` values (all fields). Mapped values are read a
+/// batch at a time: a batch's regions lie together, but their bricks' values are spread
+/// over the arrays (a slab of space crosses every row of bricks), and every page fault
+/// maps the pages around it too, so reading them in place would make most of the arrays
+/// resident for every batch. Copied out, only the batch's bricks are held, and let go
+/// behind every `window` values.
 pub(crate) fn region_ranges(
     input: &RangeInput,
     regions: &Regions,
     values: &BrickValues,
+    window: usize,
 ) -> Vec<[f32; 2]> {
-    ranges_in_batches(input, regions, values, REGION_BATCH)
+    ranges_in_batches(input, regions, values, REGION_BATCH, window)
 }
 
-/// [`region_ranges`], `batch` regions at a time.
+/// [`region_ranges`], at most `batch` regions at a time.
 fn ranges_in_batches(
     input: &RangeInput,
     regions: &Regions,
     values: &BrickValues,
     batch_regions: usize,
+    window: usize,
 ) -> Vec<[f32; 2]> {
     let batch_regions = batch_regions.max(1);
     let nf = match values {
@@ -184,8 +188,32 @@ fn ranges_in_batches(
         BrickValues::Resident(_) => Vec::new(),
         BrickValues::Mapped { .. } => vec![NONE; input.bricks.len()],
     };
-    for (k, batch) in ranges.chunks_mut(nf * batch_regions).enumerate() {
-        let first = k * batch_regions;
+    // Batches: consecutive regions, as many as `batch_regions` and their bricks' values
+    // (counted once per region that names them: an upper bound) within the window.
+    let mut batches = Vec::new();
+    let mut start = 0;
+    while start < regions.len() {
+        let (mut end, mut held) = (start, 0usize);
+        while end < regions.len() && end - start < batch_regions {
+            let more: usize = regions
+                .bricks_of(end)
+                .iter()
+                .map(|&b| cells(b as usize))
+                .sum();
+            if end > start && held + more * nf > window {
+                break;
+            }
+            held += more * nf;
+            end += 1;
+        }
+        batches.push(start..end);
+        start = end;
+    }
+    let mut rest = ranges.as_mut_slice();
+    for regs in batches {
+        let (batch, tail) = std::mem::take(&mut rest).split_at_mut(regs.len() * nf);
+        rest = tail;
+        let first = regs.start;
         match values {
             BrickValues::Resident(v) => {
                 let get = |f: usize, b: usize| {
@@ -206,7 +234,7 @@ fn ranges_in_batches(
                     slot[b as usize] = i as u32;
                 }
                 // Front to back (the ids are sorted, and bricks lie in id order), letting
-                // go of what lies behind every `RELEASE_SPAN` values, and of the rest
+                // go of what lies behind every window of values, and of the rest
                 // (with the pages mapped around the last reads) at the end.
                 let copied: Vec<Vec<f32>> = (0..nf)
                     .map(|f| {
@@ -215,7 +243,7 @@ fn ranges_in_batches(
                         for &b in &ids {
                             let start = input.first[b as usize] as usize;
                             out.extend_from_slice(&values[f][start..start + cells(b as usize)]);
-                            if start - behind >= RELEASE_SPAN {
+                            if start - behind >= window {
                                 release(f, behind..start);
                                 behind = start;
                             }
@@ -241,9 +269,6 @@ fn ranges_in_batches(
 /// Regions whose ranges [`region_ranges`] finds at once: their bricks' values are a few
 /// tens of megabytes.
 pub(crate) const REGION_BATCH: usize = 1 << 16;
-
-/// Mapped values [`region_ranges`] copies before it lets the pages behind go (16 MiB).
-const RELEASE_SPAN: usize = 4 << 20;
 
 /// The ranges of the regions from `first` on, into `out` (`nf` entries a region);
 /// `get(f, b)` is brick `b`'s values of field `f`.
@@ -364,7 +389,7 @@ mod tests {
             widths: &widths,
             first: &first,
         };
-        let in_place = region_ranges(&input, &regions, &BrickValues::Resident(&slices));
+        let in_place = region_ranges(&input, &regions, &BrickValues::Resident(&slices), 1 << 20);
         assert_eq!(in_place.len(), 9 * 2);
         assert!(in_place.iter().all(|r| r[0].is_finite() && r[0] <= r[1]));
         for batch in [1, 2, 4, 9, 100] {
@@ -376,7 +401,7 @@ mod tests {
                 values: &slices,
                 release: &release,
             };
-            let ranges = ranges_in_batches(&input, &regions, &mapped, batch);
+            let ranges = ranges_in_batches(&input, &regions, &mapped, batch, usize::MAX);
             let bits = |v: &[[f32; 2]]| -> Vec<[u32; 2]> {
                 v.iter().map(|r| r.map(f32::to_bits)).collect()
             };
@@ -388,6 +413,15 @@ mod tests {
                 .filter(|(_, r)| *r == (0..total as usize))
                 .count();
             assert_eq!(whole, 2 * 9usize.div_ceil(batch), "batch {batch}");
+            // Batches cut by the values their bricks hold give the same ranges.
+            for window in [1, 40, 700] {
+                let ranges = ranges_in_batches(&input, &regions, &mapped, batch, window);
+                assert_eq!(
+                    bits(&ranges),
+                    bits(&in_place),
+                    "batch {batch} window {window}"
+                );
+            }
         }
     }
 }

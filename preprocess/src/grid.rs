@@ -43,6 +43,26 @@ pub struct Leaf<V> {
     pub values: Box<[V; LEAF_VOXELS]>,
 }
 
+/// What is known of a leaf before its values are decoded: where it is and which of its
+/// voxels are active. The bake's checks and its cells' layout need no more than this, so
+/// they are made before any value is decoded.
+pub trait LeafTopology {
+    fn origin(&self) -> [i32; 3];
+    fn active(&self) -> &[u64; 8];
+    fn active_count(&self) -> u32 {
+        self.active().iter().map(|w| w.count_ones()).sum()
+    }
+}
+
+impl<V> LeafTopology for Leaf<V> {
+    fn origin(&self) -> [i32; 3] {
+        self.origin
+    }
+    fn active(&self) -> &[u64; 8] {
+        &self.active
+    }
+}
+
 impl<V: Copy> Leaf<V> {
     pub fn is_active(&self, n: usize) -> bool {
         (self.active[n >> 6] >> (n & 63)) & 1 == 1
@@ -61,10 +81,6 @@ impl<V: Copy> Leaf<V> {
                 (ijk, self.values[n])
             })
     }
-
-    pub(crate) fn active_count(&self) -> u32 {
-        self.active.iter().map(|w| w.count_ones()).sum()
-    }
 }
 
 /// An active constant cube of `size³` voxels starting at `origin` (index space).
@@ -76,17 +92,18 @@ pub struct Tile<V> {
     pub value: V,
 }
 
-/// One grid's active values.
+/// One grid's active values: its leaves decoded ([`Leaf`]), or only located in a file
+/// (`crate::vdb::LocatedLeaf`) until the bake decodes them into its cells.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Grid<V> {
+pub struct Grid<V, L = Leaf<V>> {
     pub name: String,
     pub transform: Transform,
     pub background: V,
-    pub leaves: Vec<Leaf<V>>,
+    pub leaves: Vec<L>,
     pub tiles: Vec<Tile<V>>,
 }
 
-impl<V: Copy> Grid<V> {
+impl<V: Copy, L: LeafTopology> Grid<V, L> {
     /// Active voxels, tiles counted as the voxels they cover.
     pub fn active_voxel_count(&self) -> u64 {
         let leaves: u64 = self.leaves.iter().map(|l| l.active_count() as u64).sum();
@@ -121,22 +138,8 @@ macro_rules! with_grid {
 }
 
 impl AnyGrid {
-    pub(crate) fn name(&self) -> &str {
-        with_grid!(self, g => &g.name)
-    }
-
     pub(crate) fn transform(&self) -> Transform {
         with_grid!(self, g => g.transform)
-    }
-
-    /// Active voxels, tiles counted as the voxels they cover.
-    pub(crate) fn active_voxel_count(&self) -> u64 {
-        with_grid!(self, g => g.active_voxel_count())
-    }
-
-    /// A vec3 grid (single or double precision).
-    pub(crate) fn is_vector(&self) -> bool {
-        matches!(self, AnyGrid::Vec3s(_) | AnyGrid::Vec3d(_))
     }
 
     /// Gives the grid another name and transform, keeping its tree: how an instanced grid
@@ -157,15 +160,4 @@ pub enum GridKind {
     Scalar,
     /// A grid type the baker cannot read (listed, never selected by default).
     Other,
-}
-
-impl GridKind {
-    /// The kind of a decoded grid.
-    pub(crate) fn of(grid: &AnyGrid) -> GridKind {
-        if grid.is_vector() {
-            GridKind::Vector
-        } else {
-            GridKind::Scalar
-        }
-    }
 }

@@ -11,7 +11,7 @@ use std::collections::{BTreeMap, HashMap};
 use files::limits::{self, LimitError};
 
 use crate::bake::memory::{leaf_bytes, GridFootprint};
-use crate::bake::{select_grids, BakeError, GridKind};
+use crate::bake::{select_grids, BakeError, BakeGrid, GridKind};
 use crate::error::field_grid_not_found;
 use crate::grid::{AnyGrid, Grid, Leaf, Transform, LEAF_DIM, LEAF_VOXELS};
 use crate::vdb::{GridDescriptor, ValueType, VdbError, VdbFile};
@@ -54,12 +54,14 @@ pub enum ReadError {
     GridAndVelocity,
 }
 
-/// The grids of `file` to bake, decoded (component grids merged), and the names of those
-/// that are MAC grids under `opts.layout`.
+/// The grids of `file` to bake, and the names of those that are MAC grids under
+/// `opts.layout`. They are located, not decoded (see [`crate::vdb::located`]): the bake
+/// decodes them a batch of leaves at a time as they become cells. Component grids are
+/// decoded here, to be checked and merged.
 pub fn read_inputs(
     file: &VdbFile,
     opts: &ReadOptions,
-) -> Result<(Vec<AnyGrid>, Vec<String>), ReadError> {
+) -> Result<(Vec<BakeGrid>, Vec<String>), ReadError> {
     let descs = file.grids();
     let kinds: Vec<(&str, GridKind)> = descs
         .iter()
@@ -95,7 +97,7 @@ pub fn read_inputs(
             .collect();
         let mut grids = chosen
             .iter()
-            .map(|&i| file.read_grid(i))
+            .map(|&i| file.locate_grid(i).map(BakeGrid::Located))
             .collect::<Result<Vec<_>, _>>()?;
         read_extra(file, &kinds, &opts.extra, &chosen, &mut grids)?;
         return Ok((grids, mac));
@@ -110,7 +112,7 @@ pub fn read_inputs(
                     mac.push(name);
                 }
                 for i in ids {
-                    grids.push(file.read_grid(i)?);
+                    grids.push(BakeGrid::Located(file.locate_grid(i)?));
                     read.push(i);
                 }
             }
@@ -128,7 +130,7 @@ pub fn read_inputs(
                         merge_components(&name, [&x, &y, &z])?
                     }
                 };
-                grids.push(AnyGrid::Vec3d(merged));
+                grids.push(BakeGrid::Decoded(AnyGrid::Vec3d(merged)));
             }
         }
     }
@@ -143,7 +145,7 @@ fn read_extra(
     kinds: &[(&str, GridKind)],
     extra: &[String],
     done: &[usize],
-    grids: &mut Vec<AnyGrid>,
+    grids: &mut Vec<BakeGrid>,
 ) -> Result<(), ReadError> {
     let scalar = |n: &str| kinds.iter().any(|(g, k)| *k == GridKind::Scalar && *g == n);
     if let Some(missing) = extra.iter().find(|n| !scalar(n)) {
@@ -151,7 +153,7 @@ fn read_extra(
     }
     for (i, (name, kind)) in kinds.iter().enumerate() {
         if *kind == GridKind::Scalar && !done.contains(&i) && extra.iter().any(|e| e == name) {
-            grids.push(file.read_grid(i)?);
+            grids.push(BakeGrid::Located(file.locate_grid(i)?));
         }
     }
     Ok(())

@@ -45,15 +45,31 @@ pub(crate) struct NonFiniteReport {
 }
 
 /// Counts the non-finite active values of `set` (first one in slot order).
-/// `value` gives the value of a slot.
-pub(crate) fn count<T: CellValue>(set: &CellSet, value: impl Fn(usize) -> T) -> NonFiniteReport {
-    let bad: Vec<usize> = set
-        .active_slots()
-        .filter(|&s| !value(s).is_finite())
-        .collect();
+/// `value` gives the value of a slot; `release` is called every `every` slots and at the
+/// end, so that values kept on disk let their pages go behind the pass.
+pub(crate) fn count<T: CellValue>(
+    set: &CellSet,
+    value: impl Fn(usize) -> T,
+    every: usize,
+    release: impl Fn(),
+) -> NonFiniteReport {
+    let mut count = 0u64;
+    let mut first = None;
+    let mut next_release = every;
+    for s in set.active_slots() {
+        if s >= next_release {
+            release();
+            next_release = s + every;
+        }
+        if !value(s).is_finite() {
+            count += 1;
+            first.get_or_insert(s);
+        }
+    }
+    release();
     NonFiniteReport {
-        count: bad.len() as u64,
-        first: bad.first().map(|&s| set.ijk(s)),
+        count,
+        first: first.map(|s| set.ijk(s)),
     }
 }
 
@@ -133,12 +149,12 @@ mod tests {
             tiles: vec![],
         };
         let (set, mut vals) = CellSet::from_grid(grid, 0, |v| v).expect("small");
-        assert_eq!(count(&set, |s| vals[s]).count, 3);
+        assert_eq!(count(&set, |s| vals[s], 7, || ()).count, 3);
         assert_eq!(replace(&set, &mut vals), 3);
         let at = |c: [i32; 3]| vals[set.active_slot(c).expect("active")];
         assert_eq!(at([1, 0, 0]), 2.0); // mean of 1 and 3
         assert_eq!(at([3, 0, 0]), 3.0); // only finite neighbour: 3
         assert_eq!(at([6, 6, 6]), 0.0); // no neighbour
-        assert_eq!(count(&set, |s| vals[s]).count, 0);
+        assert_eq!(count(&set, |s| vals[s], 7, || ()).count, 0);
     }
 }

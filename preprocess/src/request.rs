@@ -31,6 +31,8 @@ pub struct BakeRequest {
     pub strict: bool,
     /// Worker threads (None: rayon's global pool).
     pub threads: Option<usize>,
+    /// `--memory`: the bake's memory budget in bytes (see [`BakeOptions::memory`]).
+    pub memory: Option<u64>,
 }
 
 impl Default for BakeRequest {
@@ -44,6 +46,7 @@ impl Default for BakeRequest {
             max_brick: DEFAULT_MAX_BRICK,
             strict: false,
             threads: None,
+            memory: None,
         }
     }
 }
@@ -58,6 +61,16 @@ pub struct EmptyFieldName;
 pub struct BakePlan {
     pub read: ReadOptions,
     pub opts: BakeOptions,
+}
+
+impl BakePlan {
+    /// The plan for each of `jobs` bakes run at once: each has its share of the memory
+    /// budget, so that together they keep within it.
+    pub fn per_job(&self, jobs: usize) -> BakePlan {
+        let mut plan = self.clone();
+        plan.opts.memory = self.opts.memory.map(|m| m / jobs.max(1) as u64);
+        plan
+    }
 }
 
 impl BakeRequest {
@@ -96,6 +109,7 @@ impl BakeRequest {
                 max_brick: self.max_brick,
                 strict: self.strict,
                 threads: self.threads,
+                memory: self.memory,
                 ..BakeOptions::default()
             },
         })

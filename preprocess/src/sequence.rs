@@ -184,9 +184,10 @@ impl SequenceBake {
         })
     }
 
-    /// Bakes the frames `which` (indices into [`SequenceBake::frames`]), `jobs` at once; a
-    /// frame that fails is an outcome like the others and the run goes on. `cancel` stops
-    /// the run before the next frame ([`Cancelled`]; frames written stay, whole).
+    /// Bakes the frames `which` (indices into [`SequenceBake::frames`]), `jobs` at once,
+    /// each with its share of the plan's memory budget; a frame that fails is an outcome
+    /// like the others and the run goes on. `cancel` stops the run before the next frame
+    /// ([`Cancelled`]; frames written stay, whole).
     pub fn bake(
         &self,
         plan: &BakePlan,
@@ -197,11 +198,13 @@ impl SequenceBake {
         // Workers take the next frame from a counter; each bake uses the shared rayon
         // pool, so frames overlap their sequential parts (reading, writing) and share the
         // threads.
+        let workers = self.jobs.min(which.len()).max(1);
+        let plan = &plan.per_job(workers);
         let next = AtomicUsize::new(0);
         let results: Mutex<Vec<Option<FrameOutcome>>> = Mutex::new(vec![None; which.len()]);
         let done = AtomicUsize::new(0);
         std::thread::scope(|scope| {
-            for _ in 0..self.jobs.min(which.len()).max(1) {
+            for _ in 0..workers {
                 scope.spawn(|| loop {
                     if cancel.load(Ordering::Relaxed) {
                         break;

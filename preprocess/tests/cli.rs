@@ -7,7 +7,7 @@ mod common;
 
 use std::process::Output;
 
-use common::{peak_memory, qbricks_bake};
+use common::qbricks_bake;
 use format::BrickFileView;
 
 fn run(args: &[&str]) -> Output {
@@ -70,6 +70,7 @@ fn bake_json_summary_matches_the_file() {
             "nonfinite",
             "nonfinite_derived",
             "output",
+            "peak_memory",
             "regions",
             "seconds"
         ]
@@ -152,7 +153,7 @@ fn moved_commands_exit_2_naming_qbricks_lab() {
 /// single-precision velocity single: its peak is the fields' derivation, about 26 bytes a
 /// cell on a dense 160³ velocity grid (4.1 M cells, 106 MB). It held 47 when freed leaves
 /// stayed in the allocator's heaps, and 37 with the velocity widened to f64.
-/// Memory is measured, not time: the child's maximum resident set from `wait4`.
+/// Memory is measured, not time: the bake's own peak resident memory.
 #[test]
 fn bake_peak_memory_stays_near_its_cells() {
     use qbricks_preprocess::grid::{AnyGrid, Grid, Leaf, Transform, LEAF_VOXELS};
@@ -197,17 +198,7 @@ fn bake_peak_memory_stays_near_its_cells() {
         tiles: Vec::new(),
     };
     write_vdb(&vdb, &[AnyGrid::Vec3s(grid)], Compression::Zip).expect("write");
-    let child = qbricks_bake()
-        .arg("bake")
-        .arg(&vdb)
-        .arg("-o")
-        .arg(&qbk)
-        .arg("--quiet")
-        // The allocator keeps an arena per thread: fixed, so the bound holds on any machine.
-        .env("RAYON_NUM_THREADS", "2")
-        .spawn()
-        .expect("run qbricks-bake");
-    let peak = peak_memory(child);
+    let peak = bake_peak(&vdb, &qbk, &[]);
     assert!(qbk.exists());
     let cells = 160.0f64.powi(3);
     let per_cell = peak as f64 / cells;
@@ -217,4 +208,146 @@ fn bake_peak_memory_stays_near_its_cells() {
     // disk past 256 MiB, show only on larger bakes: `vdb::mapped` and
     // `fields_kept_on_disk_give_the_same_file` test those.)
     assert!(per_cell < 30.0, "{per_cell:.1} bytes a cell at the peak");
+}
+
+/// Bakes `vdb` into `qbk` with `args` on two threads (the allocator keeps an arena per
+/// thread: fixed, so a bound holds on any machine) and returns the bake's peak resident
+/// memory as it reports it (`peak_memory` of `--json`: its own `VmHWM`; `wait4` would count
+/// what this test process held when it started the bake, while other tests ran in it).
+fn bake_peak(vdb: &std::path::Path, qbk: &std::path::Path, args: &[&str]) -> u64 {
+    let out = qbricks_bake()
+        .arg("bake")
+        .arg(vdb)
+        .arg("-o")
+        .arg(qbk)
+        .arg("--json")
+        .args(args)
+        .env("RAYON_NUM_THREADS", "2")
+        .output()
+        .expect("run qbricks-bake");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    v["peak_memory"].as_u64().expect("peak_memory")
+}
+
+/// A grid of `n³` cells of width `h` from index `lo` on, sampled from `f` at the cell
+/// centres (`translation` h/2), single precision.
+fn abc_grid(name: &str, h: f64, lo: i32, n: i32) -> qbricks_preprocess::grid::Grid<[f32; 3]> {
+    use qbricks_preprocess::grid::{Grid, Leaf, Transform, LEAF_VOXELS};
+    let mut leaves = Vec::new();
+    for x in (lo..lo + n).step_by(8) {
+        for y in (lo..lo + n).step_by(8) {
+            for z in (lo..lo + n).step_by(8) {
+                let values = Box::new(std::array::from_fn::<_, LEAF_VOXELS, _>(|k| {
+                    let p = [
+                        x + (k >> 6) as i32,
+                        y + ((k >> 3) & 7) as i32,
+                        z + (k & 7) as i32,
+                    ]
+                    .map(|i| (f64::from(i) + 0.5) * h);
+                    [
+                        (p[2].sin() + p[1].cos()) as f32,
+                        (p[0].sin() + p[2].cos()) as f32,
+                        (p[1].sin() + p[0].cos()) as f32,
+                    ]
+                }));
+                leaves.push(Leaf {
+                    origin: [x, y, z],
+                    active: [u64::MAX; 8],
+                    values,
+                });
+            }
+        }
+    }
+    Grid {
+        name: name.into(),
+        transform: Transform {
+            voxel_size: [h; 3],
+            translation: [0.5 * h; 3],
+        },
+        background: [0.0; 3],
+        leaves,
+        tiles: Vec::new(),
+    }
+}
+
+/// `--memory`: a bake kept within a budget a third of what it takes unbudgeted keeps its
+/// values on disk, stays under the budget (its peak resident memory, from `wait4`), and
+/// writes the same file byte for byte; here on two levels whose boundary runs through the
+/// coarse grid's blocks, a staggered velocity and an extra scalar field. A budget below
+/// what the structure alone needs is refused naming the least that would do, and no file
+/// is written.
+#[test]
+fn a_bake_within_a_memory_budget_stays_under_it_and_writes_the_same_file() {
+    use qbricks_preprocess::grid::{AnyGrid, Grid};
+    use qbricks_preprocess::vdb::write::{write_vdb, Compression};
+    let dir = tempfile::tempdir().expect("tempdir");
+    let vdb = dir.path().join("two.vdb");
+    let h = std::f64::consts::TAU / 128.0;
+    let coarse = abc_grid("vel", h, 0, 128);
+    // Fine cells over coarse cells 36..100: the level boundary cuts coarse blocks.
+    let fine = abc_grid("vel", 0.5 * h, 72, 128);
+    let density = Grid {
+        name: "density".to_string(),
+        transform: coarse.transform,
+        background: 0.0f32,
+        leaves: coarse
+            .leaves
+            .iter()
+            .map(|l| qbricks_preprocess::grid::Leaf {
+                origin: l.origin,
+                active: l.active,
+                values: Box::new(l.values.map(|v| v[0] * v[1])),
+            })
+            .collect(),
+        tiles: Vec::new(),
+    };
+    let grids = [
+        AnyGrid::Vec3s(coarse),
+        AnyGrid::Vec3s(fine),
+        AnyGrid::Float(density),
+    ];
+    write_vdb(&vdb, &grids, Compression::Zip).expect("write");
+    drop(grids);
+    let bake = |out: &str, extra: &[&str]| {
+        let qbk = dir.path().join(out);
+        let args = [
+            &["--layout", "staggered", "--fields", "q,speed,density"],
+            extra,
+        ]
+        .concat();
+        let peak = bake_peak(&vdb, &qbk, &args);
+        (peak, std::fs::read(&qbk).expect("written"))
+    };
+    let (free_peak, free) = bake("free.qbk", &[]);
+    let budget = 64u64 << 20;
+    let (peak, within) = bake("within.qbk", &["--memory", "64M"]);
+    eprintln!(
+        "peak {} MiB unbudgeted, {} MiB within --memory 64M",
+        free_peak >> 20,
+        peak >> 20
+    );
+    assert!(free_peak > 3 * budget, "{free_peak}");
+    assert!(within == free, "the budgeted bake wrote another file");
+    assert!(peak <= budget, "{} MiB", peak >> 20);
+
+    let out = run(&[
+        "bake",
+        vdb.to_str().expect("utf-8"),
+        "-o",
+        dir.path().join("small.qbk").to_str().expect("utf-8"),
+        "--memory",
+        "16M",
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("even with every value kept on disk") && err.contains("give --memory "),
+        "{err}"
+    );
+    assert!(!dir.path().join("small.qbk").exists());
 }

@@ -660,6 +660,7 @@ fn bake(
                 max_brick: max_brick.unwrap_or(preprocess::bake::DEFAULT_MAX_BRICK),
                 strict,
                 threads,
+                memory: None,
             };
             let plan = request.plan()?;
             let seconds = || start.elapsed().as_secs_f64();

@@ -6,7 +6,7 @@ use format::{Aabb, Brick, BrickFile, Field, Level, Provenance, SourceGrid, Value
 
 use crate::fields::{range_and_histogram, HISTOGRAM_BINS};
 
-use super::derived::{FieldValues, RELEASE_VALUES};
+use super::derived::FieldValues;
 use super::{BakeError, BakeOptions, Bricks, FieldSummary, Kd};
 
 /// Bytes of the archive of a bake, from the sizes of its arrays (each element as the
@@ -55,7 +55,8 @@ pub(super) fn assemble(
     let mut field_summaries = Vec::with_capacity(fields.names.len());
     for (f, (name, vals)) in fields.names.iter().zip(fields.slices()).enumerate() {
         let release = |r: std::ops::Range<usize>| fields.release(f, r);
-        let (min, max, histogram) = range_and_histogram(vals, RELEASE_VALUES, &release);
+        let window = opts.spill.window_values(4);
+        let (min, max, histogram) = range_and_histogram(vals, window, &release);
         let name = name.clone();
         field_summaries.push(FieldSummary {
             name: name.clone(),

@@ -37,16 +37,20 @@ pub const SPILL_BYTES: u64 = 256 << 20;
 /// values of this many cells are held (16 MiB a field).
 pub const CHUNK_CELLS: u64 = 1 << 22;
 
-/// Where a bake keeps field values too large to hold beside the input's values.
+/// Where a bake keeps values too large to hold: the field values and, past the same size,
+/// each grid's cell values (see [`crate::cells::Keep`]).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Spill {
     /// The scratch files' directory (`None`: the system's temporary directory). A bake to
     /// a file keeps them beside it, where the file itself will need the room.
     pub dir: Option<PathBuf>,
-    /// Field values up to this many bytes stay in memory.
+    /// Field values up to this many bytes (all fields together), and each grid's cell
+    /// values up to this many, stay in memory.
     pub above: u64,
     /// Cells derived at once otherwise (at least one brick).
     pub chunk: u64,
+    /// Bytes of values kept on disk a pass reads before it lets their pages go.
+    pub window: u64,
 }
 
 impl Default for Spill {
@@ -55,12 +59,44 @@ impl Default for Spill {
             dir: None,
             above: SPILL_BYTES,
             chunk: CHUNK_CELLS,
+            window: WINDOW_BYTES,
         }
     }
 }
 
-/// Values a pass over mapped field values reads before it lets their pages go (64 MiB).
-pub(super) const RELEASE_VALUES: usize = 16 << 20;
+impl Spill {
+    /// Settings that keep a bake within `budget` bytes where its input allows (`--memory`):
+    /// values past an eighth of the budget go to disk, passes over them hold an eighth of
+    /// it at most, and a chunk of fields being derived a sixty-fourth; never more than the
+    /// defaults.
+    pub fn within(budget: u64) -> Spill {
+        let d = Spill::default();
+        Spill {
+            dir: None,
+            above: d.above.min(budget / 8),
+            chunk: d.chunk.min(budget / 64 / 4).max(1),
+            window: d.window.min(budget / 8).max(1 << 20),
+        }
+    }
+
+    /// The settings that hold the least: every value on disk, passes of a megabyte.
+    pub fn least() -> Spill {
+        Spill {
+            dir: None,
+            above: 0,
+            chunk: 1,
+            window: 1 << 20,
+        }
+    }
+
+    /// Values of `size` bytes a pass over values on disk reads before it lets them go.
+    pub(crate) fn window_values(&self, size: usize) -> usize {
+        (self.window as usize / size.max(1)).max(1)
+    }
+}
+
+/// Bytes a pass over values on disk reads before it lets their pages go, by default.
+pub const WINDOW_BYTES: u64 = 64 << 20;
 
 /// Baked fields: names, and the values of each (brick after brick, x fastest), in memory
 /// or, when they were derived into scratch files, read through a mapping of those files
@@ -174,7 +210,11 @@ impl DerivedFields {
                     .iter()
                     .map(|f| ScratchValues::map(f, total))
                     .collect::<Result<_, _>>()
-                    .map_err(|source| BakeError::Scratch { dir, source })?,
+                    .map_err(|source| BakeError::Scratch {
+                        what: "the baked field values".to_string(),
+                        dir,
+                        source,
+                    })?,
             ),
         };
         Ok(FieldValues {
@@ -217,67 +257,74 @@ pub(super) fn derive_fields(
             // Covered cells per extra field, summed brick by brick (the sum does not
             // depend on the order).
             let covered: Vec<AtomicU64> = kinds.iter().map(|_| AtomicU64::new(0)).collect();
-            let store = per_brick(&bricks.boxes, names.len(), &opts.spill, |b, out| {
-                let set = &sets[b.set];
-                let v = &vals[b.set];
-                let mut hits = vec![0u64; kinds.len()];
-                b.for_each_cell(set, |i, ijk, slot| {
-                    let u = slot.map(|s| v.get(s)).unwrap_or_default();
-                    // One gradient for every measure made from it.
-                    let g = match slot.filter(|&s| needs_gradient && set.is_active(s)) {
-                        Some(s) => gradient(&field, b.set, ijk, s, opts.stencil),
-                        None => [[0.0; 3]; 3],
-                    };
-                    let mut f = 0;
-                    for (ki, (k, extra)) in kinds.iter().zip(&extras).enumerate() {
-                        match k {
-                            FieldKind::Q => {
-                                out[f][i] = measures::q(&g) as f32;
-                                f += 1;
-                            }
-                            FieldKind::Speed => {
-                                out[f][i] = speed(&u) as f32;
-                                f += 1;
-                            }
-                            FieldKind::Vorticity => {
-                                out[f][i] = measures::vorticity_magnitude(&g) as f32;
-                                f += 1;
-                            }
-                            FieldKind::Lambda2 => {
-                                out[f][i] = measures::lambda2(&g) as f32;
-                                f += 1;
-                            }
-                            FieldKind::Helicity => {
-                                out[f][i] = measures::helicity(&u, &g) as f32;
-                                f += 1;
-                            }
-                            FieldKind::Velocity => {
-                                for c in u {
-                                    out[f][i] = c as f32;
+            let release = || cells.release_values();
+            let store = per_brick(
+                &bricks.boxes,
+                names.len(),
+                &opts.spill,
+                &release,
+                |b, out| {
+                    let set = &sets[b.set];
+                    let v = &vals[b.set];
+                    let mut hits = vec![0u64; kinds.len()];
+                    b.for_each_cell(set, |i, ijk, slot| {
+                        let u = slot.map(|s| v.get(s)).unwrap_or_default();
+                        // One gradient for every measure made from it.
+                        let g = match slot.filter(|&s| needs_gradient && set.is_active(s)) {
+                            Some(s) => gradient(&field, b.set, ijk, s, opts.stencil),
+                            None => [[0.0; 3]; 3],
+                        };
+                        let mut f = 0;
+                        for (ki, (k, extra)) in kinds.iter().zip(&extras).enumerate() {
+                            match k {
+                                FieldKind::Q => {
+                                    out[f][i] = measures::q(&g) as f32;
+                                    f += 1;
+                                }
+                                FieldKind::Speed => {
+                                    out[f][i] = speed(&u) as f32;
+                                    f += 1;
+                                }
+                                FieldKind::Vorticity => {
+                                    out[f][i] = measures::vorticity_magnitude(&g) as f32;
+                                    f += 1;
+                                }
+                                FieldKind::Lambda2 => {
+                                    out[f][i] = measures::lambda2(&g) as f32;
+                                    f += 1;
+                                }
+                                FieldKind::Helicity => {
+                                    out[f][i] = measures::helicity(&u, &g) as f32;
+                                    f += 1;
+                                }
+                                FieldKind::Velocity => {
+                                    for c in u {
+                                        out[f][i] = c as f32;
+                                        f += 1;
+                                    }
+                                }
+                                FieldKind::Scalar(_) => {
+                                    let p = set.centre(ijk);
+                                    let value = extra.map_or(0.0, |e| match e.sample(p) {
+                                        Some(x) => {
+                                            hits[ki] += 1;
+                                            x
+                                        }
+                                        None => e.background(),
+                                    });
+                                    out[f][i] = value as f32;
                                     f += 1;
                                 }
                             }
-                            FieldKind::Scalar(_) => {
-                                let p = set.centre(ijk);
-                                let value = extra.map_or(0.0, |e| match e.sample(p) {
-                                    Some(x) => {
-                                        hits[ki] += 1;
-                                        x
-                                    }
-                                    None => e.background(),
-                                });
-                                out[f][i] = value as f32;
-                                f += 1;
-                            }
+                        }
+                    });
+                    for (c, h) in covered.iter().zip(hits) {
+                        if h > 0 {
+                            c.fetch_add(h, Ordering::Relaxed);
                         }
                     }
-                });
-                for (c, h) in covered.iter().zip(hits) {
-                    if h > 0 {
-                        c.fetch_add(h, Ordering::Relaxed);
-                    }
-                }
-            })?;
+                },
+            )?;
             let covered = kinds
                 .iter()
                 .zip(covered)
@@ -293,7 +340,8 @@ pub(super) fn derive_fields(
             })
         }
         Input::Scalar(sets, vals, name) => {
-            let store = per_brick(&bricks.boxes, 1, &opts.spill, |b, out| {
+            let release = || cells.release_values();
+            let store = per_brick(&bricks.boxes, 1, &opts.spill, &release, |b, out| {
                 let set = &sets[b.set];
                 let v = &vals[b.set];
                 b.for_each_cell(set, |i, _, slot| {
@@ -313,11 +361,13 @@ pub(super) fn derive_fields(
 /// field arrays (which it must fill), and returns the arrays: brick after brick, x fastest.
 /// The arrays are allocated fallibly (they are the largest allocations after the cells);
 /// past `spill.above` bytes they are made a chunk of bricks at a time and written to
-/// scratch files (see the module docs).
+/// scratch files (see the module docs), and `release` is called after every chunk, so that
+/// the input's values kept on disk let go of the pages the chunk read.
 fn per_brick(
     bricks: &[BrickBox],
     nf: usize,
     spill: &Spill,
+    release: &dyn Fn(),
     cell_values: impl Fn(&BrickBox, &mut [&mut [f32]]) + Sync,
 ) -> Result<Store, BakeError> {
     let total: usize = bricks.iter().map(|b| b.cells() as usize).sum();
@@ -340,6 +390,7 @@ fn per_brick(
         bytes.saturating_mul(2),
     )?;
     let scratch = |source| BakeError::Scratch {
+        what: "the baked field values".to_string(),
         dir: dir.clone(),
         source,
     };
@@ -360,6 +411,7 @@ fn per_brick(
         for (f, values) in files.iter_mut().zip(&chunk) {
             f.write_all(bytemuck::cast_slice(values)).map_err(scratch)?;
         }
+        release();
         start = end;
     }
     Ok(Store::Spilled { files, total, dir })

@@ -2,9 +2,11 @@
 //! velocity's leaf-cell centres. Their own grids need not share the velocity's lattice, so
 //! they are sampled, not copied.
 
-use crate::cells::{CellSet, SlotValues};
+use super::grids::{decoded_cells, located_cells, BakeGrid};
+use crate::cells::{CellSet, Keep, SlotValues};
 use crate::error::BakeError;
 use crate::grid::AnyGrid;
+use crate::vdb::AnyLocated;
 
 use super::{fix_nonfinite, Cells};
 
@@ -16,6 +18,13 @@ pub(super) struct ExtraGrid {
 }
 
 impl ExtraGrid {
+    /// Lets the pages of its values kept on disk go.
+    pub(super) fn release_values(&self) {
+        for (_, values, _) in &self.grids {
+            values.release();
+        }
+    }
+
     /// Trilinear sample at world point `p` from the finest grid with an active voxel among
     /// the 8 around `p`; inactive or missing voxels count as the background (OpenVDB's
     /// reading of a sparse grid). `None` where no grid has an active voxel around `p`: the
@@ -84,27 +93,38 @@ impl ExtraGrid {
 /// the velocity), one entry per field name.
 pub(super) fn extra_fields(
     names: &[String],
-    mut grids: Vec<AnyGrid>,
+    mut grids: Vec<BakeGrid>,
+    keep: Keep<'_>,
     strict: bool,
     warnings: &mut Vec<String>,
 ) -> Result<Vec<ExtraGrid>, BakeError> {
     let mut out = Vec::with_capacity(names.len());
     for name in names {
-        let mine: Vec<AnyGrid>;
+        let mine: Vec<BakeGrid>;
         (mine, grids) = grids.into_iter().partition(|g| g.name() == name);
         let mut sets = Vec::with_capacity(mine.len());
         let mut vals = Vec::with_capacity(mine.len());
         let mut bgs = Vec::with_capacity(mine.len());
         for g in mine {
             let (set, v, bg) = match g {
-                AnyGrid::Float(g) => {
+                BakeGrid::Decoded(AnyGrid::Float(g)) => {
                     let bg = f64::from(g.background);
-                    let (s, v) = CellSet::from_grid(g, 0, |v: f32| v)?;
+                    let (s, v) = decoded_cells(g, 0, |v| v, keep)?;
                     (s, SlotValues::Narrow(v), bg)
                 }
-                AnyGrid::Double(g) => {
+                BakeGrid::Decoded(AnyGrid::Double(g)) => {
                     let bg = g.background;
-                    let (s, v) = CellSet::from_grid(g, 0, |v: f64| v)?;
+                    let (s, v) = decoded_cells(g, 0, |v| v, keep)?;
+                    (s, SlotValues::Wide(v), bg)
+                }
+                BakeGrid::Located(AnyLocated::Float(g)) => {
+                    let bg = f64::from(g.grid.background);
+                    let (s, v) = located_cells(g, 0, |v| v, keep)?;
+                    (s, SlotValues::Narrow(v), bg)
+                }
+                BakeGrid::Located(AnyLocated::Double(g)) => {
+                    let bg = g.grid.background;
+                    let (s, v) = located_cells(g, 0, |v| v, keep)?;
                     (s, SlotValues::Wide(v), bg)
                 }
                 _ => continue,
@@ -113,7 +133,7 @@ pub(super) fn extra_fields(
             vals.push(v);
             bgs.push(if bg.is_finite() { bg } else { 0.0 });
         }
-        fix_nonfinite(&sets, &mut vals, strict, warnings)?;
+        fix_nonfinite(&sets, &mut vals, keep, strict, warnings)?;
         let mut sorted: Vec<(CellSet, SlotValues<f64>, f64)> = sets
             .into_iter()
             .zip(vals)

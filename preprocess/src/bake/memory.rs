@@ -1,30 +1,38 @@
-//! How much memory a bake needs, estimated from the decoded grids before any cell is made,
-//! so that a bake the machine cannot hold is refused with its size through the one shared
-//! limit ([`files::limits::check_memory`]) instead of dying in an allocation failure half
-//! way through. A file of a few kilobytes can hold a single active tile of 640³ voxels:
-//! nothing about the file's size says what the bake will take, only its cells do.
+//! How much memory a bake needs, estimated from the grids' topology before any cell is
+//! made, so that a bake the machine cannot hold is refused with its size through the one
+//! shared limit ([`files::limits::check_memory`]) instead of dying in an allocation failure
+//! half way through. A file of a few kilobytes can hold a single active tile of 640³
+//! voxels: nothing about the file's size says what the bake will take, only its cells do.
 //!
 //! The estimate follows what the pipeline holds, stage by stage, and takes the largest:
 //! - while a grid becomes cells, its decoded leaves ([`GridFootprint::decoded`]) are freed
-//!   as its cells' values are written ([`crate::cells::CellSet::from_grid`]), so a grid
-//!   costs the larger of the two, not their sum; the extra fields' grids wait decoded;
+//!   as its cells' values are written ([`crate::cells::CellSet::from_leaves`]): a grid
+//!   read from a file is decoded a batch of leaves at a time, so only a batch is held; a
+//!   decoded grid costs the larger of its leaves and its cells, not their sum;
 //! - per slot of every 8³ block a cell set takes ([`GridFootprint::blocks`], 512 slots
 //!   each, inactive slots included): the cells' values at the precision the file stored
-//!   ([`slot_bytes`]: 12 bytes for a single-precision velocity, 24 for a double one, the
-//!   centred values beside the faces of a staggered one); plus the masks;
+//!   ([`slot_bytes`]: 12 bytes for a single-precision velocity, 24 for a double one), and
+//!   the centred values made beside the faces of a staggered one; plus the masks;
 //! - per active cell, once the fields are derived: 4 bytes for every baked field and
 //!   [`CELL_BYTES`] for bricks, supports, regions, their ranges and what the allocator
-//!   rounds up. Field values past [`Spill::above`] stay in scratch files and are read a
-//!   part at a time: then a chunk of them is held, not all.
+//!   rounds up.
+//!
+//! Values past [`Spill::above`] (the fields together, each grid's cells on its own) stay in
+//! scratch files and are read a part at a time: a chunk of fields, a window or two of
+//! cells is held, not all. They still take address space, which `ulimit -v` bounds, so
+//! that is checked too ([`mapped_bytes`]). With a budget (`--memory`), [`spill_within`]
+//! chooses how much goes to disk, and what is left, the structure, must fit.
 //!
 //! Measured peaks (`/usr/bin/time -v`, maximum resident set, 2 threads) against it are in
 //! docs/baking.md.
 
 pub use crate::heap::return_freed;
 
-use crate::cells::BLOCK_CELLS;
+use super::grids::{with_topology, BakeGrid};
+use crate::cells::{BLOCK_CELLS, LEAF_BATCH};
 use crate::error::BakeError;
-use crate::grid::{AnyGrid, Grid, Leaf, LEAF_DIM, LEAF_VOXELS};
+use crate::grid::{AnyGrid, Grid, Leaf, LeafTopology, LEAF_DIM, LEAF_VOXELS};
+use crate::vdb::{AnyLocated, Located};
 
 use super::{BakeOptions, Spill};
 
@@ -49,19 +57,19 @@ pub const SINGLE_VELOCITY_SLOT_BYTES: u64 = 12;
 pub const SCALAR_SLOT_BYTES: u64 = 8;
 pub const SINGLE_SCALAR_SLOT_BYTES: u64 = 4;
 
-/// Bytes per cell-set slot of `grid`'s values: as stored, and for a staggered grid (one of
-/// `staggered`) the cell-centred values made from its faces beside them.
-pub fn slot_bytes(grid: &AnyGrid, staggered: &[String]) -> u64 {
-    let stored = match grid {
-        AnyGrid::Float(_) => SINGLE_SCALAR_SLOT_BYTES,
-        AnyGrid::Double(_) => SCALAR_SLOT_BYTES,
-        AnyGrid::Vec3s(_) => SINGLE_VELOCITY_SLOT_BYTES,
-        AnyGrid::Vec3d(_) => VELOCITY_SLOT_BYTES,
-    };
+/// Bytes per cell-set slot of `grid`'s values as stored (`SINGLE_SCALAR_SLOT_BYTES` …
+/// `VELOCITY_SLOT_BYTES`).
+pub fn slot_bytes(grid: &BakeGrid) -> u64 {
+    grid.value_bytes()
+}
+
+/// Bytes per slot of values made beside the stored ones: a staggered grid's (one of
+/// `staggered`) cell-centred velocities.
+pub fn made_slot_bytes(grid: &BakeGrid, staggered: &[String]) -> u64 {
     if grid.is_vector() && staggered.iter().any(|s| s == grid.name()) {
-        stored + VELOCITY_SLOT_BYTES
+        VELOCITY_SLOT_BYTES
     } else {
-        stored
+        0
     }
 }
 
@@ -75,19 +83,28 @@ pub struct GridFootprint {
     pub blocks: u64,
     /// Active voxels, tiles counted as the voxels they cover.
     pub cells: u64,
+    /// Whether its leaves are decoded a batch at a time as it becomes cells (a grid read
+    /// from a file): then a batch of them is held, at most a window's worth.
+    pub batched: bool,
+    /// Bytes per slot of values the bake makes beside the stored ones
+    /// ([`made_slot_bytes`]), kept like them.
+    pub made: u64,
 }
 
 impl GridFootprint {
-    pub fn of(grid: &AnyGrid) -> GridFootprint {
-        match grid {
-            AnyGrid::Float(g) => Self::of_grid(g),
-            AnyGrid::Double(g) => Self::of_grid(g),
-            AnyGrid::Vec3s(g) => Self::of_grid(g),
-            AnyGrid::Vec3d(g) => Self::of_grid(g),
+    /// The footprint of `grid`: a located grid's leaves are decoded a batch at a time, so
+    /// only a batch of them is ever held decoded.
+    pub fn of(grid: &BakeGrid) -> GridFootprint {
+        let mut f = with_topology!(grid, g => Self::of_grid(g));
+        if grid.is_located() {
+            let batch = (LEAF_BATCH as u64).saturating_mul(grid.value_bytes() * LEAF_VOXELS as u64);
+            f.decoded = f.decoded.min(batch);
+            f.batched = true;
         }
+        f
     }
 
-    pub fn of_grid<V: Copy>(g: &Grid<V>) -> GridFootprint {
+    pub fn of_grid<V: Copy, L: LeafTopology>(g: &Grid<V, L>) -> GridFootprint {
         let mut blocks = 0u64;
         for t in &g.tiles {
             let per_axis = |a: usize| {
@@ -107,13 +124,15 @@ impl GridFootprint {
         }
         for l in &g.leaves {
             // A leaf off the block lattice straddles up to 8 blocks.
-            let aligned = l.origin.iter().all(|c| c % LEAF_DIM == 0);
+            let aligned = l.origin().iter().all(|c| c % LEAF_DIM == 0);
             blocks = blocks.saturating_add(if aligned { 1 } else { 8 });
         }
         GridFootprint {
             decoded: (g.leaves.len() as u64).saturating_mul(leaf_bytes::<V>()),
             blocks,
             cells: g.active_voxel_count(),
+            batched: false,
+            made: 0,
         }
     }
 
@@ -123,6 +142,8 @@ impl GridFootprint {
             decoded: n.saturating_mul(leaf_bytes::<V>()),
             blocks: n,
             cells,
+            batched: false,
+            made: 0,
         }
     }
 }
@@ -133,36 +154,49 @@ pub fn leaf_bytes<V>() -> u64 {
     (std::mem::size_of::<Leaf<V>>() + std::mem::size_of::<[V; LEAF_VOXELS]>()) as u64
 }
 
-/// The estimated peak of a bake: `grids` with their bytes per slot of their cell sets (see
-/// the module docs), baked into `fields` fields, with the scalar grids `extras` (and their
-/// bytes per slot) resampled as extra fields, field values past `spill_above` bytes kept on
-/// disk while the cells' values are held as `spill` says: the largest of what the stages
-/// that allocate most hold.
+/// The estimated peak of a bake: `grids` with their bytes per slot of their cell sets as
+/// stored (see the module docs), baked into `fields` fields, with the scalar grids `extras`
+/// (and their bytes per slot) resampled as extra fields, values kept as `spill` says:
+/// field values past `spill.above` bytes on disk, a chunk of them held; a grid's cell values
+/// past `spill.above` bytes on disk, of which the passes over them (two at once: the grids
+/// become cells in parallel) hold a window each. The largest of what the stages that
+/// allocate most hold.
 pub fn bake_bytes(
     grids: &[(GridFootprint, u64)],
     extras: &[(GridFootprint, u64)],
     fields: u64,
     spill: &Spill,
 ) -> u64 {
-    let values = |(f, slot_bytes): &(GridFootprint, u64)| {
-        f.blocks
-            .saturating_mul(BLOCK_CELLS as u64)
-            .saturating_mul(*slot_bytes)
+    // Values held in memory: those stored, and those made beside them, each unless kept
+    // on disk.
+    let values = |g: &(GridFootprint, u64)| {
+        value_parts(g)
+            .into_iter()
+            .filter(|&b| b <= spill.above)
+            .fold(0u64, u64::saturating_add)
     };
     let masks = |(f, _): &(GridFootprint, u64)| f.blocks.saturating_mul(BLOCK_BYTES);
     let sum = |list: &[(GridFootprint, u64)], each: &dyn Fn(&(GridFootprint, u64)) -> u64| {
         list.iter().map(each).fold(0u64, u64::saturating_add)
     };
-    // The velocity (or scalar) grids become cells, the extra fields' grids still decoded.
+    let mapped = mapped_values(grids, extras, spill).min(spill.window.saturating_mul(2));
+    // The velocity (or scalar) grids become cells, the extra fields' grids still decoded
+    // (a batch of leaves, for grids decoded as they become cells).
+    let decoded = |(f, _): &(GridFootprint, u64)| match f.batched {
+        true => f.decoded.min(spill.window),
+        false => f.decoded,
+    };
     let converting = sum(grids, &|g| {
-        values(g).max(g.0.decoded).saturating_add(masks(g))
+        values(g).max(decoded(g)).saturating_add(masks(g))
     })
-    .saturating_add(sum(extras, &|e| e.0.decoded));
+    .saturating_add(sum(extras, &decoded))
+    .saturating_add(mapped);
     // The extra fields' grids become cells beside the velocity's.
     let extra = sum(grids, &|g| values(g).saturating_add(masks(g)))
         .saturating_add(sum(extras, &|e| {
-            values(e).max(e.0.decoded).saturating_add(masks(e))
-        }));
+            values(e).max(decoded(e)).saturating_add(masks(e))
+        }))
+        .saturating_add(mapped);
     // The fields, bricks and regions beside all the cells; or, with the fields on disk,
     // a chunk of them beside the cells, then the bricks and regions with a chunk of the
     // fields (they stay on disk, read a part at a time, see `derived::FieldValues`).
@@ -170,16 +204,18 @@ pub fn bake_bytes(
     let per_cell = field_bytes.saturating_add(CELL_BYTES);
     let cells = sum(grids, &|g| g.0.cells);
     let held = sum(grids, &|g| values(g).saturating_add(masks(g)))
-        .saturating_add(sum(extras, &|e| values(e).saturating_add(masks(e))));
+        .saturating_add(sum(extras, &|e| values(e).saturating_add(masks(e))))
+        .saturating_add(mapped);
     let derived = if cells.saturating_mul(field_bytes) > spill.above {
         // The bricks are all that exists of the structure yet (about 80 bytes a brick).
+        let chunk = spill.chunk.saturating_mul(field_bytes);
         let deriving = held
             .saturating_add(cells.saturating_mul(BRICK_BYTES_PER_CELL))
-            .saturating_add(spill.chunk.saturating_mul(field_bytes));
+            .saturating_add(chunk);
         let after = sum(grids, &|g| {
             masks(g).saturating_add(g.0.cells.saturating_mul(CELL_BYTES))
         })
-        .saturating_add(spill.chunk.saturating_mul(field_bytes));
+        .saturating_add(chunk.max(spill.window));
         deriving.max(after)
     } else {
         held.saturating_add(cells.saturating_mul(per_cell))
@@ -187,15 +223,91 @@ pub fn bake_bytes(
     converting.max(extra).max(derived)
 }
 
+/// Bytes of values a bake of `grids` (see [`bake_bytes`]) keeps in scratch files and maps:
+/// the cell values past `spill.above` and the field values past it. They take address space
+/// (`ulimit -v`) whether resident or not.
+pub fn mapped_bytes(
+    grids: &[(GridFootprint, u64)],
+    extras: &[(GridFootprint, u64)],
+    fields: u64,
+    spill: &Spill,
+) -> u64 {
+    let cells: u64 = grids.iter().map(|g| g.0.cells).fold(0, u64::saturating_add);
+    let field_values = cells.saturating_mul(fields.saturating_mul(FIELD_BYTES));
+    mapped_values(grids, extras, spill).saturating_add(if field_values > spill.above {
+        field_values
+    } else {
+        0
+    })
+}
+
+/// A grid's values: those stored and those made beside them (a staggered grid's centred
+/// velocities), each a set of values kept in memory or on disk as its size says.
+fn value_parts((f, slot_bytes): &(GridFootprint, u64)) -> [u64; 2] {
+    let slots = f.blocks.saturating_mul(BLOCK_CELLS as u64);
+    [
+        slots.saturating_mul(*slot_bytes),
+        slots.saturating_mul(f.made),
+    ]
+}
+
+/// Bytes of the grids' values kept on disk, as `spill` says.
+fn mapped_values(
+    grids: &[(GridFootprint, u64)],
+    extras: &[(GridFootprint, u64)],
+    spill: &Spill,
+) -> u64 {
+    grids
+        .iter()
+        .chain(extras)
+        .flat_map(value_parts)
+        .filter(|&b| b > spill.above)
+        .fold(0u64, u64::saturating_add)
+}
+
+/// The spill a bake of `grids` (see [`bake_bytes`]) keeps within `budget` with, and its
+/// estimate: [`Spill::within`] the budget, or, when that is over it, every value on disk;
+/// `Err` with the least budget that would do when neither fits.
+pub fn spill_within(
+    grids: &[(GridFootprint, u64)],
+    extras: &[(GridFootprint, u64)],
+    fields: u64,
+    budget: u64,
+) -> Result<(Spill, u64), u64> {
+    let all_on_disk = |b: u64| Spill {
+        above: 0,
+        ..Spill::within(b)
+    };
+    for spill in [Spill::within(budget), all_on_disk(budget)] {
+        let need = bake_bytes(grids, extras, fields, &spill);
+        if need <= budget {
+            return Ok((spill, need));
+        }
+    }
+    // The windows grow with the budget, slower than it: from what the structure alone
+    // needs, a few steps up reach a budget the estimate fits in.
+    let mut least = bake_bytes(grids, extras, fields, &Spill::least());
+    for _ in 0..64 {
+        let need = bake_bytes(grids, extras, fields, &all_on_disk(least));
+        if need <= least {
+            break;
+        }
+        least = need;
+    }
+    Err(least)
+}
+
 /// Refuses, before any cell is made, a bake of `grids` (and of the scalar grids `extras`
-/// as extra fields) whose estimated peak ([`bake_bytes`]) is over the shared memory limit.
+/// as extra fields) whose estimated peak ([`bake_bytes`]) is over the shared memory limit,
+/// or over the budget `opts.memory` even with its values on disk ([`spill_within`]).
+/// Returns where the bake keeps its values: as `opts.spill` says, or within the budget.
 pub(super) fn check_bake_memory(
-    grids: &[AnyGrid],
-    extras: &[AnyGrid],
+    grids: &[BakeGrid],
+    extras: &[BakeGrid],
     opts: &BakeOptions,
     input_cells: u64,
-) -> Result<(), BakeError> {
-    let vector = grids.first().is_some_and(AnyGrid::is_vector);
+) -> Result<Spill, BakeError> {
+    let vector = grids.first().is_some_and(BakeGrid::is_vector);
     let fields = if vector {
         opts.fields.as_ref().map_or(2, |kinds| {
             kinds.iter().map(|k| k.names().len() as u64).sum::<u64>()
@@ -203,11 +315,16 @@ pub(super) fn check_bake_memory(
     } else {
         1
     };
-    let footprint = |g: &AnyGrid| (GridFootprint::of(g), slot_bytes(g, &opts.staggered));
+    let footprint = |g: &BakeGrid| {
+        let f = GridFootprint {
+            made: made_slot_bytes(g, &opts.staggered),
+            ..GridFootprint::of(g)
+        };
+        (f, slot_bytes(g))
+    };
     let per_grid: Vec<(GridFootprint, u64)> = grids.iter().map(footprint).collect();
     let extras: Vec<(GridFootprint, u64)> = extras.iter().map(footprint).collect();
-    let need = bake_bytes(&per_grid, &extras, fields, &opts.spill);
-    let mut names: Vec<&str> = grids.iter().map(AnyGrid::name).collect();
+    let mut names: Vec<&str> = grids.iter().map(BakeGrid::name).collect();
     names.dedup();
     let names = names
         .iter()
@@ -219,11 +336,33 @@ pub(super) fn check_bake_memory(
     } else {
         "grid"
     };
-    files::limits::check_memory(
-        format!("the bake of {input_cells} input cells ({grid_s} {names})"),
-        need,
-    )?;
-    Ok(())
+    let what = format!("the bake of {input_cells} input cells ({grid_s} {names})");
+    let (spill, need) = match opts.memory {
+        None => {
+            let need = bake_bytes(&per_grid, &extras, fields, &opts.spill);
+            (opts.spill.clone(), need)
+        }
+        Some(budget) => match spill_within(&per_grid, &extras, fields, budget) {
+            Ok((spill, need)) => (
+                Spill {
+                    dir: opts.spill.dir.clone(),
+                    ..spill
+                },
+                need,
+            ),
+            Err(least) => {
+                return Err(BakeError::OverBudget {
+                    what,
+                    budget,
+                    least,
+                })
+            }
+        },
+    };
+    let mapped = mapped_bytes(&per_grid, &extras, fields, &spill);
+    files::limits::check_memory(&what, need)?;
+    files::limits::check_address_space(what, need.saturating_add(mapped))?;
+    Ok(spill)
 }
 
 #[cfg(test)]

@@ -12,10 +12,8 @@ use serde::Serialize;
 
 use format::{Aabb, BrickFile, SourceGrid};
 
-use files::limits::LimitError;
-
 use crate::bricks::{make_bricks, BrickBox};
-use crate::cells::{classify_leaves, CellSet, SlotValues, Widen};
+use crate::cells::{classify_leaves, CellSet, Keep, SlotValues, Widen};
 use crate::derive::{centre_from_faces, Stencil};
 use crate::error::{field_grid_not_found, grid_labels, GridCount, GridCounts};
 use crate::fields::{region_ranges, FieldKind, RangeInput};
@@ -24,6 +22,7 @@ use crate::kdtree::{Regions, TooLarge};
 use crate::levels::assign_levels;
 use crate::nonfinite::{self, CellValue};
 use crate::regions;
+use crate::vdb::AnyLocated;
 
 /// Re-exported from [`crate::error`], where it lives since [`crate::levels`] returns it too.
 pub use crate::error::BakeError;
@@ -33,6 +32,9 @@ mod assemble;
 use assemble::{archive_bytes, assemble, check_archive};
 mod derived;
 mod extra;
+mod grids;
+pub use grids::BakeGrid;
+use grids::{decoded_cells, located_cells};
 /// Memory estimates of a bake (also used by `qbricks-lab`'s `synth` and `accuracy` limits).
 pub mod memory;
 mod overlap;
@@ -42,7 +44,7 @@ mod supports;
 use supports::snapped_supports;
 
 use derived::{derive_fields, FieldValues};
-pub use derived::{Spill, CHUNK_CELLS, SPILL_BYTES};
+pub use derived::{Spill, CHUNK_CELLS, SPILL_BYTES, WINDOW_BYTES};
 use extra::{extra_coverage, extra_fields, ExtraGrid};
 use memory::check_bake_memory;
 use overlap::same_level_overlaps;
@@ -78,10 +80,16 @@ pub struct BakeOptions {
     /// output does not depend on it.
     #[serde(skip)]
     pub threads: Option<usize>,
-    /// Where field values too large to hold beside the input's go while it is held (see
-    /// [`Spill`]). Not recorded: the output does not depend on it.
+    /// Where values too large to hold go (see [`Spill`]). Not recorded: the output does
+    /// not depend on it.
     #[serde(skip)]
     pub spill: Spill,
+    /// The memory budget (`--memory`): the bake keeps values on disk as it needs to stay
+    /// within it (`spill` then gives only their directory, see
+    /// [`memory::spill_within`]), and is refused, naming the least budget that would do,
+    /// when its estimate is over it even so. Not recorded.
+    #[serde(skip)]
+    pub memory: Option<u64>,
 }
 
 impl Default for BakeOptions {
@@ -96,6 +104,7 @@ impl Default for BakeOptions {
             source: String::new(),
             threads: None,
             spill: Spill::default(),
+            memory: None,
         }
     }
 }
@@ -141,6 +150,7 @@ pub fn bake_with_progress(
     opts: &BakeOptions,
     stage: &(dyn Fn(&str) + Sync),
 ) -> Result<(BrickFile, BakeSummary), BakeError> {
+    let grids = grids.into_iter().map(BakeGrid::Decoded).collect();
     let (baked, summary) = bake_kept(grids, opts, stage)?;
     Ok((baked.into_file()?, summary))
 }
@@ -150,7 +160,7 @@ pub fn bake_with_progress(
 /// writes a file runs, so that the values are streamed from there into it
 /// ([`Baked::write`]) instead of being gathered in memory first.
 pub fn bake_kept(
-    grids: Vec<AnyGrid>,
+    grids: Vec<BakeGrid>,
     opts: &BakeOptions,
     stage: &(dyn Fn(&str) + Sync),
 ) -> Result<(Baked, BakeSummary), BakeError> {
@@ -226,9 +236,9 @@ impl Input {
 /// Cell sets of the grids (consumed) that `one` converts, in file order (rayon keeps the
 /// order, so the output does not depend on the thread count).
 fn to_sets<T: Send>(
-    grids: Vec<AnyGrid>,
+    grids: Vec<BakeGrid>,
     levels: &[u32],
-    one: impl Fn(AnyGrid, u32) -> Option<Result<(CellSet, T), LimitError>> + Sync,
+    one: impl Fn(BakeGrid, u32) -> Option<Result<(CellSet, T), BakeError>> + Sync,
 ) -> Result<(Vec<CellSet>, Vec<T>), BakeError> {
     Ok(grids
         .into_par_iter()
@@ -241,18 +251,21 @@ fn to_sets<T: Send>(
 
 /// Replaces the non-finite values of every set by the average of their finite neighbours,
 /// with one warning naming every grid that had some (with its count), or refuses them with
-/// `strict`. Returns how many there were.
+/// `strict`. Returns how many there were. Values kept on disk (as `keep` says, also the
+/// widened copies of repaired grids) are read a window at a time.
 fn fix_nonfinite<T: CellValue + Widen>(
     sets: &[CellSet],
     values: &mut [SlotValues<T>],
+    keep: Keep<'_>,
     strict: bool,
     warnings: &mut Vec<String>,
 ) -> Result<u64, BakeError> {
     let labels = grid_labels(sets.iter().map(|s| s.name.as_str()));
+    let every = (keep.window as usize / std::mem::size_of::<T>()).max(1);
     let mut found = Vec::new();
     let mut any = vec![false; sets.len()];
     for (((set, vals), label), any) in sets.iter().zip(values.iter()).zip(labels).zip(&mut any) {
-        let rep = nonfinite::count(set, |s| vals.get(s));
+        let rep = nonfinite::count(set, |s| vals.get(s), every, || vals.release());
         *any = rep.count > 0;
         if rep.count > 0 {
             found.push(GridCount {
@@ -280,7 +293,8 @@ fn fix_nonfinite<T: CellValue + Widen>(
         .zip(&any)
         .filter(|(_, &a)| a)
     {
-        nonfinite::replace(set, vals.wide_mut());
+        let what = format!("the repaired values of grid \"{}\"", set.name);
+        nonfinite::replace(set, vals.wide_mut(&what, keep)?);
     }
     warnings.push(format!(
         "replaced {total} non-finite values by the average of their finite neighbours: {grids}"
@@ -291,7 +305,7 @@ fn fix_nonfinite<T: CellValue + Widen>(
 /// The bake, stage after stage; `stage` hears each stage's name as it starts. Every stage
 /// is one function below, in pipeline order, taking what the ones before it made.
 fn run(
-    grids: Vec<AnyGrid>,
+    grids: Vec<BakeGrid>,
     opts: &BakeOptions,
     stage: &(dyn Fn(&str) + Sync),
 ) -> Result<(Baked, BakeSummary), BakeError> {
@@ -300,6 +314,10 @@ fn run(
     }
     stage("selecting grids");
     let selection = select_input(grids, opts)?;
+    let opts = &BakeOptions {
+        spill: selection.spill.clone(),
+        ..opts.clone()
+    };
 
     stage("reading cells");
     let mut warnings = Vec::new();
@@ -352,11 +370,18 @@ fn run(
     let sets = input.into_sets();
     memory::return_freed();
     let mut fields = derived.open()?;
-    let nonfinite_derived = clamp_fields(&mut fields, &bricks, &sets, opts.strict, &mut warnings)?;
+    let nonfinite_derived = clamp_fields(
+        &mut fields,
+        &bricks,
+        &sets,
+        &opts.spill,
+        opts.strict,
+        &mut warnings,
+    )?;
 
     stage("building regions");
     let (bounds, tree) = build_regions(&sets, &bricks, selection.widths[0]);
-    let kd = kd_tree(tree, &bricks, &fields)?;
+    let kd = kd_tree(tree, &bricks, &fields, &opts.spill)?;
 
     stage("assembling");
     check_archive(leaf_cells, nfields, archive_bytes(&bricks, &fields, &kd))?;
@@ -393,7 +418,9 @@ fn run(
 /// What [`select_input`] keeps for the later stages.
 struct Selection {
     /// The grids to bake (all vec3 or all scalar).
-    grids: Vec<AnyGrid>,
+    grids: Vec<BakeGrid>,
+    /// Where the bake keeps its values (as asked, or to keep within its memory budget).
+    spill: Spill,
     /// Level of each grid (0 = finest) and cell width of each level.
     levels: Vec<u32>,
     widths: Vec<f64>,
@@ -403,13 +430,13 @@ struct Selection {
     source_grids: Vec<SourceGrid>,
     /// Names of the fields resampled from scalar grids, and those grids.
     extra_names: Vec<String>,
-    extra_grids: Vec<AnyGrid>,
+    extra_grids: Vec<BakeGrid>,
 }
 
 /// Read stage: checks the field list, takes the scalar grids baked as extra fields out of
 /// `grids`, selects the grids to bake and assigns their levels, refusing empty or too large
 /// input before any cell is made from it.
-fn select_input(grids: Vec<AnyGrid>, opts: &BakeOptions) -> Result<Selection, BakeError> {
+fn select_input(grids: Vec<BakeGrid>, opts: &BakeOptions) -> Result<Selection, BakeError> {
     // Fields: no name twice; scalar-grid fields take their grids out of the selection.
     let mut extra_names: Vec<String> = Vec::new();
     if let Some(kinds) = &opts.fields {
@@ -426,7 +453,7 @@ fn select_input(grids: Vec<AnyGrid>, opts: &BakeOptions) -> Result<Selection, Ba
             }
         }
     }
-    let (extra_grids, grids): (Vec<AnyGrid>, Vec<AnyGrid>) = grids
+    let (extra_grids, grids): (Vec<BakeGrid>, Vec<BakeGrid>) = grids
         .into_iter()
         .partition(|g| !g.is_vector() && extra_names.iter().any(|n| n == g.name()));
     if let Some(missing) = extra_names
@@ -436,7 +463,7 @@ fn select_input(grids: Vec<AnyGrid>, opts: &BakeOptions) -> Result<Selection, Ba
         let kinds: Vec<(&str, GridKind)> = grids
             .iter()
             .chain(&extra_grids)
-            .map(|g| (g.name(), GridKind::of(g)))
+            .map(|g| (g.name(), g.kind()))
             .collect();
         return Err(field_grid_not_found(missing, &kinds));
     }
@@ -447,11 +474,11 @@ fn select_input(grids: Vec<AnyGrid>, opts: &BakeOptions) -> Result<Selection, Ba
     let named: Vec<(&str, Transform)> = grids.iter().map(|g| (g.name(), g.transform())).collect();
     let (levels, widths) = assign_levels(&named)?;
     check_reach(&grids, widths[0])?;
-    let input_cells: u64 = grids.iter().map(AnyGrid::active_voxel_count).sum();
+    let input_cells: u64 = grids.iter().map(BakeGrid::active_voxel_count).sum();
     if input_cells == 0 {
         return Err(BakeError::Empty);
     }
-    check_bake_memory(&grids, &extra_grids, opts, input_cells)?;
+    let spill = check_bake_memory(&grids, &extra_grids, opts, input_cells)?;
     let source_grids: Vec<SourceGrid> = grids
         .iter()
         .zip(&levels)
@@ -463,6 +490,7 @@ fn select_input(grids: Vec<AnyGrid>, opts: &BakeOptions) -> Result<Selection, Ba
         .collect();
     Ok(Selection {
         grids,
+        spill,
         levels,
         widths,
         input_cells,
@@ -481,36 +509,56 @@ struct Cells {
     nonfinite: u64,
 }
 
+impl Cells {
+    /// Lets the pages of the values kept on disk go (see [`Slots::release`]): called by
+    /// the passes over them, behind themselves.
+    fn release_values(&self) {
+        match &self.input {
+            Input::Vector(_, vals, faces) => {
+                vals.iter().for_each(SlotValues::release);
+                faces.iter().flatten().for_each(SlotValues::release);
+            }
+            Input::Scalar(_, vals, _) => vals.iter().for_each(SlotValues::release),
+        }
+        self.extras.iter().for_each(ExtraGrid::release_values);
+    }
+}
+
 /// Cells stage: the selected grids as cell sets with f64 values (the grids are dropped as
 /// soon as they are converted, so both are never held at once), non-finite values repaired
 /// (or refused with `strict`), the extra fields' grids likewise, and staggered velocities
 /// moved to cell centres.
 fn read_cells(
-    grids: Vec<AnyGrid>,
+    grids: Vec<BakeGrid>,
     levels: &[u32],
     extra_names: &[String],
-    extra_grids: Vec<AnyGrid>,
+    extra_grids: Vec<BakeGrid>,
     opts: &BakeOptions,
     warnings: &mut Vec<String>,
 ) -> Result<Cells, BakeError> {
     let mut input = cell_sets(grids, levels, opts)?;
     let nonfinite = match &mut input {
-        Input::Vector(sets, vals, _) => fix_nonfinite(sets, vals, opts.strict, warnings)?,
-        Input::Scalar(sets, vals, _) => fix_nonfinite(sets, vals, opts.strict, warnings)?,
+        Input::Vector(sets, vals, _) => {
+            fix_nonfinite(sets, vals, keep(opts), opts.strict, warnings)?
+        }
+        Input::Scalar(sets, vals, _) => {
+            fix_nonfinite(sets, vals, keep(opts), opts.strict, warnings)?
+        }
     };
-    let extras = extra_fields(extra_names, extra_grids, opts.strict, warnings)?;
+    let extras = extra_fields(extra_names, extra_grids, keep(opts), opts.strict, warnings)?;
     // Staggered grids: keep the (repaired) face values, bake from cell-centred ones.
     if let Input::Vector(sets, vals, faces) = &mut input {
         *faces = sets
             .iter()
             .zip(vals.iter_mut())
             .map(|(set, v)| {
-                opts.staggered.contains(&set.name).then(|| {
-                    let centred = SlotValues::Wide(centre_from_faces(set, v));
-                    std::mem::replace(v, centred)
-                })
+                if !opts.staggered.contains(&set.name) {
+                    return Ok(None);
+                }
+                let centred = SlotValues::Wide(centre_from_faces(set, v, keep(opts))?);
+                Ok(Some(std::mem::replace(v, centred)))
             })
-            .collect();
+            .collect::<Result<_, BakeError>>()?;
     }
     Ok(Cells {
         input,
@@ -521,7 +569,8 @@ fn read_cells(
 
 /// Converts the grids (consumed) to cell sets; a field list is refused for scalar grids,
 /// and an empty one for vec3 grids.
-fn cell_sets(grids: Vec<AnyGrid>, levels: &[u32], opts: &BakeOptions) -> Result<Input, BakeError> {
+fn cell_sets(grids: Vec<BakeGrid>, levels: &[u32], opts: &BakeOptions) -> Result<Input, BakeError> {
+    let keep = keep(opts);
     if grids[0].is_vector() {
         if let Some(f) = &opts.fields {
             if f.is_empty() {
@@ -529,13 +578,21 @@ fn cell_sets(grids: Vec<AnyGrid>, levels: &[u32], opts: &BakeOptions) -> Result<
             }
         }
         // Single-precision velocities stay single (see `SlotValues`).
+        let narrow = |(s, v)| (s, SlotValues::Narrow(v));
+        let wide = |(s, v)| (s, SlotValues::Wide(v));
         let (sets, vals) = to_sets(grids, levels, |g, l| match g {
-            AnyGrid::Vec3s(g) => Some(
-                CellSet::from_grid(g, l, |v: [f32; 3]| v).map(|(s, v)| (s, SlotValues::Narrow(v))),
-            ),
-            AnyGrid::Vec3d(g) => Some(
-                CellSet::from_grid(g, l, |v: [f64; 3]| v).map(|(s, v)| (s, SlotValues::Wide(v))),
-            ),
+            BakeGrid::Decoded(AnyGrid::Vec3s(g)) => {
+                Some(decoded_cells(g, l, |v| v, keep).map(narrow))
+            }
+            BakeGrid::Decoded(AnyGrid::Vec3d(g)) => {
+                Some(decoded_cells(g, l, |v| v, keep).map(wide))
+            }
+            BakeGrid::Located(AnyLocated::Vec3s(g)) => {
+                Some(located_cells(g, l, |v| v, keep).map(narrow))
+            }
+            BakeGrid::Located(AnyLocated::Vec3d(g)) => {
+                Some(located_cells(g, l, |v| v, keep).map(wide))
+            }
             _ => None,
         })?;
         Ok(Input::Vector(sets, vals, Vec::new()))
@@ -544,16 +601,34 @@ fn cell_sets(grids: Vec<AnyGrid>, levels: &[u32], opts: &BakeOptions) -> Result<
         if opts.fields.is_some() {
             return Err(BakeError::FieldsForScalar { grid: name });
         }
+        let narrow = |(s, v)| (s, SlotValues::Narrow(v));
+        let wide = |(s, v)| (s, SlotValues::Wide(v));
         let (sets, vals) = to_sets(grids, levels, |g, l| match g {
-            AnyGrid::Float(g) => {
-                Some(CellSet::from_grid(g, l, |v: f32| v).map(|(s, v)| (s, SlotValues::Narrow(v))))
+            BakeGrid::Decoded(AnyGrid::Float(g)) => {
+                Some(decoded_cells(g, l, |v| v, keep).map(narrow))
             }
-            AnyGrid::Double(g) => {
-                Some(CellSet::from_grid(g, l, |v: f64| v).map(|(s, v)| (s, SlotValues::Wide(v))))
+            BakeGrid::Decoded(AnyGrid::Double(g)) => {
+                Some(decoded_cells(g, l, |v| v, keep).map(wide))
+            }
+            BakeGrid::Located(AnyLocated::Float(g)) => {
+                Some(located_cells(g, l, |v| v, keep).map(narrow))
+            }
+            BakeGrid::Located(AnyLocated::Double(g)) => {
+                Some(located_cells(g, l, |v| v, keep).map(wide))
             }
             _ => None,
         })?;
         Ok(Input::Scalar(sets, vals, name))
+    }
+}
+
+/// Where the cells' values are kept: beside the field values past the same size (see
+/// [`Spill`]), so that a bake too large for memory keeps both on disk.
+fn keep(opts: &BakeOptions) -> Keep<'_> {
+    Keep {
+        dir: opts.spill.dir.as_deref(),
+        above: opts.spill.above,
+        window: opts.spill.window,
     }
 }
 
@@ -603,20 +678,22 @@ fn clamp_fields(
     fields: &mut FieldValues,
     bricks: &Bricks,
     sets: &[CellSet],
+    spill: &Spill,
     strict: bool,
     warnings: &mut Vec<String>,
 ) -> Result<u64, BakeError> {
     let labels = grid_labels(sets.iter().map(|s| s.name.as_str()));
+    let window = spill.window_values(4);
     let mut nonfinite_derived = 0;
     for (f, name) in fields.names.clone().iter().enumerate() {
         // Counted brick by brick, so each value's grid (and its first cell) is known; the
-        // values already read are let go every `RELEASE_VALUES`.
+        // values already read are let go every window.
         let mut per_set: Vec<Option<GridCount>> = vec![None; sets.len()];
         let mut count = 0u64;
         let mut kept_from = 0;
         for (b, bx) in bricks.boxes.iter().enumerate() {
             let first = bricks.first[b] as usize;
-            if first - kept_from >= derived::RELEASE_VALUES {
+            if first - kept_from >= window {
                 fields.release(f, kept_from..first);
                 kept_from = first;
             }
@@ -687,6 +764,7 @@ fn kd_tree(
     tree: regions::RegionTree,
     bricks: &Bricks,
     fields: &FieldValues,
+    spill: &Spill,
 ) -> Result<Kd, BakeError> {
     let (packed, regions) = crate::kdtree::flatten(tree).map_err(|e| match e {
         TooLarge::Regions(regions) => BakeError::TooManyRegions {
@@ -709,6 +787,7 @@ fn kd_tree(
         },
         &regions,
         &fields.brick_values(&slices, &release),
+        spill.window_values(4),
     );
     Ok(Kd {
         tree: packed,

@@ -6,19 +6,16 @@
 //! refused before anything is made of it, naming the grid, its reach and voxel size. The
 //! same bound keeps every stored coordinate finite, which the file format requires.
 
+use super::grids::{with_topology, BakeGrid};
 use crate::error::{BakeError, MAX_REACH};
-use crate::grid::{AnyGrid, Grid};
+use crate::grid::{AnyGrid, Grid, LeafTopology};
+use crate::vdb::{AnyLocated, Located};
 
 /// Refuses the first grid one of whose voxels (as a box, half a voxel around its centre)
 /// lies more than [`MAX_REACH`] finest voxels (`finest` wide) from the origin.
-pub(super) fn check_reach(grids: &[AnyGrid], finest: f64) -> Result<(), BakeError> {
+pub(super) fn check_reach(grids: &[BakeGrid], finest: f64) -> Result<(), BakeError> {
     for g in grids {
-        let reach = match g {
-            AnyGrid::Float(g) => reach_of(g),
-            AnyGrid::Double(g) => reach_of(g),
-            AnyGrid::Vec3s(g) => reach_of(g),
-            AnyGrid::Vec3d(g) => reach_of(g),
-        };
+        let reach = with_topology!(g, g => reach_of(g));
         let Some(reach) = reach else {
             continue;
         };
@@ -40,11 +37,11 @@ pub(super) fn check_reach(grids: &[AnyGrid], finest: f64) -> Result<(), BakeErro
 
 /// Largest |world coordinate| of the boxes of `g`'s leaves and tiles (whole leaves: an
 /// upper bound by at most 8 voxels, without visiting voxels), or `None` for an empty grid.
-fn reach_of<V: Copy>(g: &Grid<V>) -> Option<f64> {
+fn reach_of<V: Copy, L: LeafTopology>(g: &Grid<V, L>) -> Option<f64> {
     let boxes = g
         .leaves
         .iter()
-        .map(|l| (l.origin, 8i64))
+        .map(|l| (l.origin(), 8i64))
         .chain(g.tiles.iter().map(|t| (t.origin, i64::from(t.size))));
     let mut lo = [i64::MAX; 3];
     let mut hi = [i64::MIN; 3];
@@ -73,8 +70,8 @@ mod tests {
     use super::*;
     use crate::grid::{Leaf, Transform, LEAF_VOXELS};
 
-    fn grid(w: f64, t: f64, origin: [i32; 3]) -> AnyGrid {
-        AnyGrid::Vec3s(Grid {
+    fn grid(w: f64, t: f64, origin: [i32; 3]) -> BakeGrid {
+        BakeGrid::Decoded(AnyGrid::Vec3s(Grid {
             name: "vel".into(),
             transform: Transform {
                 voxel_size: [w; 3],
@@ -87,7 +84,7 @@ mod tests {
                 values: Box::new([[0.0; 3]; LEAF_VOXELS]),
             }],
             tiles: vec![],
-        })
+        }))
     }
 
     #[test]

@@ -2,8 +2,8 @@
 //! grid, or the grids of the one scalar name when the file has no vec3 grid. Kept apart from
 //! the pipeline because it decides on names and kinds only, before any voxel is read.
 
+use super::grids::BakeGrid;
 use crate::error::BakeError;
-use crate::grid::AnyGrid;
 pub use crate::grid::GridKind;
 
 /// Indices (file order) of the grids to bake among `grids` (name, kind): every grid named
@@ -77,8 +77,8 @@ pub fn select_grids(grids: &[(&str, GridKind)], names: &[String]) -> Result<Vec<
     }
 }
 
-pub(super) fn select(grids: Vec<AnyGrid>, names: &[String]) -> Result<Vec<AnyGrid>, BakeError> {
-    let kinds: Vec<(&str, GridKind)> = grids.iter().map(|g| (g.name(), GridKind::of(g))).collect();
+pub(super) fn select(grids: Vec<BakeGrid>, names: &[String]) -> Result<Vec<BakeGrid>, BakeError> {
+    let kinds: Vec<(&str, GridKind)> = grids.iter().map(|g| (g.name(), g.kind())).collect();
     let keep = select_grids(&kinds, names)?;
     Ok(grids
         .into_iter()

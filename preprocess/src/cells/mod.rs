@@ -8,9 +8,11 @@
 //! A cell is a *leaf cell* when its box is not fully covered by active cells of finer grids
 //! (smaller voxel size); [`classify_leaves`] finds them.
 
-use files::limits::{self, LimitError};
+use bytemuck::Pod;
+use files::limits;
 
-use crate::grid::{leaf_offset, Grid, Transform, LEAF_VOXELS};
+use crate::error::BakeError;
+use crate::grid::{leaf_offset, Grid, Leaf, LeafTopology, Transform, LEAF_VOXELS};
 
 mod classify;
 mod index;
@@ -18,7 +20,7 @@ mod values;
 
 pub(crate) use classify::classify_leaves;
 use index::BlockIndex;
-pub(crate) use values::{SlotValues, Widen};
+pub(crate) use values::{Keep, SlotValues, Slots, Widen};
 
 /// Cells per block (one VDB leaf).
 pub(crate) const BLOCK_CELLS: usize = LEAF_VOXELS;
@@ -48,9 +50,26 @@ fn bit(mask: &[u64; 8], n: usize) -> bool {
     (mask[n >> 6] >> (n & 63)) & 1 == 1
 }
 
-/// Decoded leaf values [`CellSet::from_grid`] frees before it hands them back to the system
-/// (a few hundred `malloc_trim` calls for a billion cells).
+/// Decoded leaf values [`CellSet::from_leaves`] frees before it hands them back to the
+/// system (a few hundred `malloc_trim` calls for a billion cells), and lets the pages of
+/// values kept on disk go.
 const RELEASE_BYTES: usize = 256 << 20;
+
+/// Leaves decoded at once: 24 MiB of single-precision velocity.
+pub(crate) const LEAF_BATCH: usize = 4096;
+
+/// Index coordinates of the active voxels of a leaf at `origin` with mask `active`.
+fn active_cells(origin: [i32; 3], active: &[u64; 8]) -> impl Iterator<Item = [i32; 3]> + '_ {
+    (0..LEAF_VOXELS)
+        .filter(move |&n| bit(active, n))
+        .map(move |n| {
+            [
+                origin[0] + (n >> 6) as i32,
+                origin[1] + ((n >> 3) & 7) as i32,
+                origin[2] + (n & 7) as i32,
+            ]
+        })
+}
 
 /// One input grid's cells on its lattice.
 #[derive(Debug, Clone)]
@@ -73,22 +92,27 @@ pub(crate) struct CellSet {
 }
 
 impl CellSet {
-    /// Builds the cell set of `grid` and its values converted by `conv`, one per slot.
-    /// Tiles are expanded to cells; the caller bounds the total beforehand (see
-    /// [`crate::bake::memory`]), and the two allocations that grow with it (the blocks'
-    /// values and masks) are fallible, so an estimate that falls short is an error, not an
-    /// abort.
+    /// Builds the cell set of `grid` and its values converted by `conv`, one per slot,
+    /// kept as `keep` says (in memory, or in a scratch file when large). The leaves'
+    /// values come from `decode`, a batch of leaves at a time (at most [`LEAF_BATCH`], and
+    /// no more than `keep.window` bytes of them decoded): decoded
+    /// grids hand theirs over as they are, grids located in a file decode them then. Tiles
+    /// are expanded to cells; the caller bounds the total beforehand (see
+    /// [`crate::bake::memory`]), and the allocations that grow with it (the blocks' values
+    /// and masks) are fallible, so an estimate that falls short is an error, not an abort.
     ///
-    /// The grid is consumed leaf by leaf: each leaf's values are freed once copied, and
-    /// handed back to the system every [`RELEASE_BYTES`], while the values' pages become
-    /// resident only as they are written ([`limits::zeroed_vec_of`]). So the grid and its
-    /// cells are never both held whole: the conversion's peak is the larger of the two,
-    /// not their sum.
-    pub(crate) fn from_grid<V: Copy, T: Copy + Default + bytemuck::Zeroable>(
-        grid: Grid<V>,
+    /// The decoded leaves are freed batch by batch once copied (and handed back to the
+    /// system every [`RELEASE_BYTES`]), while the values' pages become resident only as they
+    /// are written; values kept on disk let their pages go every `keep.window` bytes. So
+    /// the grid and its cells are never both held whole: the conversion's peak is the
+    /// larger of the two, not their sum, and with a located grid on disk, a batch of each.
+    pub(crate) fn from_leaves<V: Copy, L: LeafTopology, T: Pod>(
+        grid: Grid<V, L>,
         level: u32,
         conv: impl Fn(V) -> T,
-    ) -> Result<(CellSet, Vec<T>), LimitError> {
+        keep: Keep<'_>,
+        mut decode: impl FnMut(Vec<L>) -> Result<Vec<Leaf<V>>, BakeError>,
+    ) -> Result<(CellSet, Slots<T>), BakeError> {
         let tile_ranges: Vec<([i64; 3], [i64; 3])> = grid
             .tiles
             .iter()
@@ -116,20 +140,21 @@ impl CellSet {
             }
         }
         for leaf in &grid.leaves {
-            if is_block_origin(leaf.origin) {
-                if leaf.active != [0; 8] {
-                    blocks.push(leaf.origin);
+            let origin = leaf.origin();
+            if is_block_origin(origin) {
+                if *leaf.active() != [0; 8] {
+                    blocks.push(origin);
                 }
             } else {
-                blocks.extend(leaf.active_voxels().map(|(ijk, _)| block_origin(ijk)));
+                blocks.extend(active_cells(origin, leaf.active()).map(block_origin));
             }
         }
         blocks.sort_unstable_by_key(|o| (o[2], o[1], o[0]));
         blocks.dedup();
         let index = BlockIndex::new(&blocks);
-        let what = || format!("the cells of grid \"{}\"", grid.name);
-        let mut active: Vec<[u64; 8]> = limits::vec_of(what(), blocks.len())?;
-        let mut values: Vec<T> = limits::zeroed_vec_of(what(), blocks.len() * BLOCK_CELLS)?;
+        let what = format!("the cells of grid \"{}\"", grid.name);
+        let mut active: Vec<[u64; 8]> = limits::vec_of(&what, blocks.len())?;
+        let mut slots: Slots<T> = Slots::zeroed(&what, blocks.len() * BLOCK_CELLS, keep)?;
         let put = |active: &mut [[u64; 8]], values: &mut [T], ijk: [i32; 3], v: T| {
             if let Some(b) = index.get(block_origin(ijk)) {
                 let n = offset_in_block(ijk);
@@ -137,45 +162,70 @@ impl CellSet {
                 values[b as usize * BLOCK_CELLS + n] = v;
             }
         };
-        // Tiles first, so that leaf voxels win where a (malformed) file has both.
+        // Tiles first, so that leaf voxels win where a (malformed) file has both. A tile can
+        // be gigabytes of values: those kept on disk let their pages go as they go.
+        let window = (keep.window / std::mem::size_of::<T>().max(1) as u64).max(1);
+        let mut written = 0u64;
         for (t, (lo, hi)) in grid.tiles.iter().zip(&tile_ranges) {
             let v = conv(t.value);
             for z in lo[2]..hi[2] {
+                let values = slots.as_mut_slice();
                 for y in lo[1]..hi[1] {
                     for x in lo[0]..hi[0] {
-                        put(&mut active, &mut values, [x as i32, y as i32, z as i32], v);
+                        put(&mut active, values, [x as i32, y as i32, z as i32], v);
                     }
+                }
+                written += ((hi[1] - lo[1]) * (hi[0] - lo[0])) as u64;
+                if written >= window {
+                    slots.release(0..usize::MAX);
+                    written = 0;
                 }
             }
         }
         let leaf_bytes = std::mem::size_of::<[V; LEAF_VOXELS]>();
+        // A batch of decoded leaves is held beside the values: within the window too.
+        let batch_leaves = (keep.window as usize / leaf_bytes).clamp(1, LEAF_BATCH);
         let mut freed = 0usize;
-        for leaf in grid.leaves {
-            freed += leaf_bytes;
+        let mut leaves = grid.leaves.into_iter();
+        loop {
+            let batch: Vec<L> = leaves.by_ref().take(batch_leaves).collect();
+            if batch.is_empty() {
+                break;
+            }
+            let decoded = decode(batch)?;
+            freed += decoded.len() * leaf_bytes;
+            written += (decoded.len() * LEAF_VOXELS) as u64;
+            let values = slots.as_mut_slice();
+            for leaf in decoded {
+                if !is_block_origin(leaf.origin) {
+                    for (ijk, v) in leaf.active_voxels() {
+                        put(&mut active, values, ijk, conv(v));
+                    }
+                    continue;
+                }
+                // A leaf on the block lattice is one block with the same voxel layout.
+                let Some(b) = index.get(leaf.origin) else {
+                    continue;
+                };
+                let b = b as usize;
+                let out = &mut values[b * BLOCK_CELLS..(b + 1) * BLOCK_CELLS];
+                for (w, &word) in leaf.active.iter().enumerate() {
+                    let mut bits = word;
+                    while bits != 0 {
+                        let n = w * 64 + bits.trailing_zeros() as usize;
+                        bits &= bits - 1;
+                        out[n] = conv(leaf.values[n]);
+                    }
+                    active[b][w] |= word;
+                }
+            }
             if freed >= RELEASE_BYTES {
                 crate::heap::return_freed();
                 freed = 0;
             }
-            if !is_block_origin(leaf.origin) {
-                for (ijk, v) in leaf.active_voxels() {
-                    put(&mut active, &mut values, ijk, conv(v));
-                }
-                continue;
-            }
-            // A leaf on the block lattice is one block with the same voxel layout.
-            let Some(b) = index.get(leaf.origin) else {
-                continue;
-            };
-            let b = b as usize;
-            let out = &mut values[b * BLOCK_CELLS..(b + 1) * BLOCK_CELLS];
-            for (w, &word) in leaf.active.iter().enumerate() {
-                let mut bits = word;
-                while bits != 0 {
-                    let n = w * 64 + bits.trailing_zeros() as usize;
-                    bits &= bits - 1;
-                    out[n] = conv(leaf.values[n]);
-                }
-                active[b][w] |= word;
+            if written >= window {
+                slots.release(0..usize::MAX);
+                written = 0;
             }
         }
         let set = CellSet {
@@ -188,7 +238,21 @@ impl CellSet {
             leaf: active.clone(),
             active,
         };
-        Ok((set, values))
+        slots.release(0..usize::MAX);
+        Ok((set, slots))
+    }
+
+    /// As [`CellSet::from_leaves`] for a decoded grid, its values in memory.
+    #[cfg(test)]
+    pub(crate) fn from_grid<V: Copy, T: Pod>(
+        grid: Grid<V>,
+        level: u32,
+        conv: impl Fn(V) -> T,
+    ) -> Result<(CellSet, Vec<T>), BakeError> {
+        match Self::from_leaves(grid, level, conv, Keep::MEMORY, Ok)? {
+            (set, Slots::Memory(values)) => Ok((set, values)),
+            (_, Slots::Mapped(_)) => unreachable!("kept in memory"),
+        }
     }
 
     /// Slot of `ijk` when its block exists (the cell may be inactive).

@@ -24,6 +24,7 @@ pub mod compress;
 mod cursor;
 pub mod error;
 pub mod inspect;
+pub mod located;
 pub mod metadata;
 mod transform;
 pub mod tree;
@@ -31,12 +32,15 @@ mod values;
 pub mod write;
 
 use std::path::Path;
+use std::sync::Arc;
 
 use files::input::{map_whole, Limits, Whole};
 
 pub use codec::MAGIC;
 pub use error::{DecompressError, ErrorKind, Invalid, VdbError};
+pub use located::{AnyLocated, LeafSource, Located};
 pub use metadata::{MetaValue, Metadata};
+pub use tree::LocatedLeaf;
 
 use crate::grid::{AnyGrid, Grid, Transform};
 use codec::{CompressionFlags, VdbValue};
@@ -144,7 +148,8 @@ impl GridDescriptor {
 #[derive(Debug)]
 pub struct VdbFile {
     name: String,
-    data: Whole,
+    /// Shared with the grids located in it ([`LeafSource`]), which decode from it later.
+    data: Arc<Whole>,
     pub file_version: u32,
     pub library_version: (u32, u32),
     pub(crate) uuid: String,
@@ -182,7 +187,7 @@ impl VdbFile {
     fn parse(name: String, data: Whole) -> Result<VdbFile, VdbError> {
         let mut file = VdbFile {
             name,
-            data,
+            data: Arc::new(data),
             file_version: 0,
             library_version: (0, 0),
             uuid: String::new(),
@@ -205,10 +210,8 @@ impl VdbFile {
     }
 
     fn parse_header(&mut self) -> RawResult<()> {
-        let data = std::mem::take(&mut self.data);
-        let result = self.parse_header_in(&data);
-        self.data = data;
-        result
+        let data = Arc::clone(&self.data);
+        self.parse_header_in(&data)
     }
 
     fn parse_header_in(&mut self, data: &[u8]) -> RawResult<()> {
@@ -411,6 +414,12 @@ impl VdbFile {
 
     /// Decodes grid `index` (voxels and tiles).
     pub fn read_grid(&self, index: usize) -> Result<AnyGrid, VdbError> {
+        self.locate_grid(index)?.decode()
+    }
+
+    /// Reads grid `index`'s tiles and topology and finds its leaf buffers, without decoding
+    /// them: see [`located`].
+    pub fn locate_grid(&self, index: usize) -> Result<AnyLocated, VdbError> {
         let g = self.grids.get(index).ok_or_else(|| VdbError {
             file: self.name.clone(),
             grid: None,
@@ -421,7 +430,7 @@ impl VdbFile {
                 count: self.grids.len(),
             },
         })?;
-        self.read_grid_raw(g)
+        self.locate_grid_raw(g)
             .map_err(|e| e.locate(&self.name, Some(&g.name)))
     }
 
@@ -443,7 +452,7 @@ impl VdbFile {
         Ok(out)
     }
 
-    fn read_grid_raw(&self, g: &GridDescriptor) -> RawResult<AnyGrid> {
+    fn locate_grid_raw(&self, g: &GridDescriptor) -> RawResult<AnyLocated> {
         if let ValueType::Unsupported(t) = &g.value_type {
             return Err(RawError::new(
                 g.grid_pos as usize,
@@ -486,22 +495,17 @@ impl VdbFile {
             flags: tree_owner.compression_flags(),
             half: tree_owner.half_float,
         };
-        let mut cur = Cursor::new(
-            &self.data[..tree_owner.end_pos as usize],
-            tree_owner.tree_pos,
-        );
+        let end = tree_owner.end_pos as usize;
+        let mut cur = Cursor::new(&self.data[..end], tree_owner.tree_pos);
+        let source = located::source(&self.data, end, codec, &self.name, &g.name);
         let name = g.name.clone();
-        let release = |range| self.data.release(range);
-        let r = &release;
+        let c = &mut cur;
+        let r = &|range| self.data.release(range);
         Ok(match &g.value_type {
-            ValueType::Float => AnyGrid::Float(read::<f32>(&mut cur, codec, name, transform, r)?),
-            ValueType::Double => AnyGrid::Double(read::<f64>(&mut cur, codec, name, transform, r)?),
-            ValueType::Vec3s => {
-                AnyGrid::Vec3s(read::<[f32; 3]>(&mut cur, codec, name, transform, r)?)
-            }
-            ValueType::Vec3d => {
-                AnyGrid::Vec3d(read::<[f64; 3]>(&mut cur, codec, name, transform, r)?)
-            }
+            ValueType::Float => AnyLocated::Float(locate(c, codec, name, transform, source, r)?),
+            ValueType::Double => AnyLocated::Double(locate(c, codec, name, transform, source, r)?),
+            ValueType::Vec3s => AnyLocated::Vec3s(locate(c, codec, name, transform, source, r)?),
+            ValueType::Vec3d => AnyLocated::Vec3d(locate(c, codec, name, transform, source, r)?),
             ValueType::Unsupported(t) => {
                 return Err(RawError::new(
                     g.grid_pos as usize,
@@ -534,20 +538,10 @@ fn scan_grid(
         half,
     };
     match ty {
-        ValueType::Float => drop(tree::read_tree::<f32>(&mut cur, codec, false, &|_| ())?),
-        ValueType::Double => drop(tree::read_tree::<f64>(&mut cur, codec, false, &|_| ())?),
-        ValueType::Vec3s => drop(tree::read_tree::<[f32; 3]>(
-            &mut cur,
-            codec,
-            false,
-            &|_| (),
-        )?),
-        ValueType::Vec3d => drop(tree::read_tree::<[f64; 3]>(
-            &mut cur,
-            codec,
-            false,
-            &|_| (),
-        )?),
+        ValueType::Float => drop(tree::locate_tree::<f32>(&mut cur, codec, &|_| ())?),
+        ValueType::Double => drop(tree::locate_tree::<f64>(&mut cur, codec, &|_| ())?),
+        ValueType::Vec3s => drop(tree::locate_tree::<[f32; 3]>(&mut cur, codec, &|_| ())?),
+        ValueType::Vec3d => drop(tree::locate_tree::<[f64; 3]>(&mut cur, codec, &|_| ())?),
         ValueType::Unsupported(t) => {
             return Err(RawError::new(
                 start,
@@ -561,19 +555,23 @@ fn scan_grid(
     Ok((start as u64, cur.pos() as u64))
 }
 
-fn read<V: VdbValue>(
+fn locate<V: VdbValue>(
     cur: &mut Cursor<'_>,
     codec: Codec,
     name: String,
     transform: Transform,
+    source: LeafSource,
     release: &dyn Fn(std::ops::Range<usize>),
-) -> RawResult<Grid<V>> {
-    let t = tree::read_tree::<V>(cur, codec, true, release)?;
-    Ok(Grid {
-        name,
-        transform,
-        background: t.background,
-        leaves: t.leaves,
-        tiles: t.tiles,
+) -> RawResult<Located<V>> {
+    let t = tree::locate_tree::<V>(cur, codec, release)?;
+    Ok(Located {
+        grid: Grid {
+            name,
+            transform,
+            background: t.background,
+            leaves: t.leaves,
+            tiles: t.tiles,
+        },
+        source,
     })
 }

@@ -14,15 +14,8 @@ use super::cursor::Cursor;
 use super::error::{ErrorKind, Invalid, RawError, RawResult};
 use super::values::{decode_values, locate_values, read_values, Codec};
 use crate::bake::memory::leaf_bytes;
-use crate::grid::{Leaf, Tile, LEAF_VOXELS};
-
-/// Everything read from one tree.
-#[derive(Debug)]
-pub(crate) struct TreeData<V> {
-    pub background: V,
-    pub tiles: Vec<Tile<V>>,
-    pub leaves: Vec<Leaf<V>>,
-}
+use crate::cells::LEAF_BATCH;
+use crate::grid::{Leaf, LeafTopology, Tile, LEAF_VOXELS};
 
 const ROOT_CHILD_LOG2: u32 = 12; // 4096 voxels per root child
 const INT1_LOG2: u32 = 5; // 32³ entries in an upper internal node
@@ -33,6 +26,36 @@ const LEAF_LOG2: u32 = 3;
 struct LeafTopo {
     origin: [i32; 3],
     mask: [u64; 8],
+}
+
+/// A leaf whose buffer has been found in the file but not decoded: where it is in the grid
+/// and in the file. Decoding it later ([`decode_leaves`]) reads only its own bytes, so a
+/// bake can decode a grid a batch of leaves at a time into its cells instead of holding
+/// every decoded leaf at once.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LocatedLeaf {
+    pub origin: [i32; 3],
+    pub active: [u64; 8],
+    /// The file bytes of its buffer (the value mask's copy, then the values).
+    pub(crate) bytes: std::ops::Range<usize>,
+}
+
+impl LeafTopology for LocatedLeaf {
+    fn origin(&self) -> [i32; 3] {
+        self.origin
+    }
+    fn active(&self) -> &[u64; 8] {
+        &self.active
+    }
+}
+
+/// A tree with its leaves located, not decoded.
+#[derive(Debug)]
+pub(crate) struct LocatedTree<V> {
+    pub background: V,
+    pub tiles: Vec<Tile<V>>,
+    /// In file order.
+    pub leaves: Vec<LocatedLeaf>,
 }
 
 fn child_origin(parent: [i32; 3], n: usize, log2: u32, child_log2: u32) -> [i32; 3] {
@@ -121,24 +144,93 @@ fn aligned(c: [i32; 3], log2: u32) -> bool {
     c.iter().all(|v| v & ((1 << log2) - 1) == 0)
 }
 
-/// Leaves decoded at once before the file bytes they came from are released: 24 MiB of
-/// vec3s leaves.
-const DECODE_BATCH: usize = 4096;
+/// Every leaf of `tree` decoded from `data` a batch at a time, in file order, after a check
+/// that the shared memory limit holds them all. `release` hears the range of the file each
+/// batch was read from once it is decoded: a reader of a mapped file lets those pages go
+/// ([`files::input::Whole::release`]), so a large file is never held whole beside the
+/// leaves decoded from it.
+pub(crate) fn decode_all<V: VdbValue>(
+    data: &[u8],
+    codec: Codec,
+    tree: &LocatedTree<V>,
+    release: &dyn Fn(std::ops::Range<usize>),
+) -> RawResult<Vec<Leaf<V>>> {
+    // Compressed leaves take a few dozen bytes in the file and kilobytes in memory: the
+    // file's size bounds the leaf count, not their memory, so it is checked here.
+    if let Some(last) = tree.leaves.last() {
+        let n = tree.leaves.len();
+        let need = (n as u64).saturating_mul(leaf_bytes::<V>());
+        files::limits::check_memory(format!("decoding {n} leaves"), need).map_err(|e| {
+            RawError::new(
+                last.bytes.end,
+                "leaf buffers",
+                ErrorKind::Memory(Box::new(e)),
+            )
+        })?;
+    }
+    let mut leaves = Vec::with_capacity(tree.leaves.len());
+    for batch in tree.leaves.chunks(LEAF_BATCH) {
+        leaves.extend(decode_leaves(data, codec, tree.background, batch)?);
+        release(batch_bytes(batch));
+    }
+    Ok(leaves)
+}
 
-/// Reads a whole tree (topology then buffers) starting at the buffer count.
-/// With `decode_leaves` false the leaf buffers are only located (the cursor still ends
-/// after the tree) and no leaves are returned: how a stream-written file is walked.
-///
-/// The leaves are decoded a batch at a time, in file order, and `release` hears the range
-/// of the file each batch was read from once it is decoded: a reader of a mapped file
-/// lets those pages go ([`files::input::Whole::release`]), so a large file is never held
-/// whole beside the leaves decoded from it.
-pub(crate) fn read_tree<V: VdbValue>(
+/// The file bytes a batch of leaves (in file order) was read from.
+pub(crate) fn batch_bytes(batch: &[LocatedLeaf]) -> std::ops::Range<usize> {
+    match (batch.first(), batch.last()) {
+        (Some(a), Some(b)) => a.bytes.start..b.bytes.end,
+        _ => 0..0,
+    }
+}
+
+/// Decodes `leaves` (located in `data` by [`locate_tree`]) in parallel: decompression,
+/// half floats and inactive values are independent per leaf.
+pub(crate) fn decode_leaves<V: VdbValue>(
+    data: &[u8],
+    codec: Codec,
+    background: V,
+    leaves: &[LocatedLeaf],
+) -> RawResult<Vec<Leaf<V>>> {
+    leaves
+        .par_iter()
+        .map_init(Inflater::default, |inflater, leaf| {
+            let mut cur = Cursor::new(&data[..leaf.bytes.end], leaf.bytes.start);
+            // The value mask is stored again; OpenVDB ignores the copy when seeking.
+            cur.skip(64, "leaf buffer")?;
+            let frame = locate_values(
+                &mut cur,
+                codec,
+                background,
+                &leaf.active,
+                LEAF_VOXELS,
+                "leaf buffer",
+            )?;
+            let mut values = Box::new([V::default(); LEAF_VOXELS]);
+            decode_values(&frame, codec, &leaf.active, &mut values[..], inflater)?;
+            Ok(Leaf {
+                origin: leaf.origin,
+                active: leaf.active,
+                values,
+            })
+        })
+        .collect()
+}
+
+/// Bytes of leaf buffers [`locate_tree`] walks before it lets their pages go.
+const LOCATE_RELEASE_BYTES: usize = 64 << 20;
+
+/// Reads a tree's topology and finds its leaf buffers (each one checked to be whole and
+/// well-formed as far as that can be told without decoding it), starting at the buffer
+/// count; the cursor ends after the tree. Every buffer's header is read, so the walk reads
+/// nearly every page of the tree: `release` hears the ranges walked, every
+/// [`LOCATE_RELEASE_BYTES`] and at the end, so that a mapped file's pages are let go behind
+/// it (they are read again when the leaves are decoded).
+pub(crate) fn locate_tree<V: VdbValue>(
     cur: &mut Cursor<'_>,
     codec: Codec,
-    decode_leaves: bool,
     release: &dyn Fn(std::ops::Range<usize>),
-) -> RawResult<TreeData<V>> {
+) -> RawResult<LocatedTree<V>> {
     // Topology: buffer count, root background, root tiles and children.
     let start = cur.pos();
     let buffers = cur.i32("tree buffer count")?;
@@ -231,52 +323,27 @@ pub(crate) fn read_tree<V: VdbValue>(
         leaves: topo,
         ..
     } = reader;
-    let mut frames = Vec::with_capacity(topo.len());
-    // Where each leaf's bytes end in the file (they follow one another).
-    let mut ends = Vec::with_capacity(topo.len());
-    let first = cur.pos();
+    let mut leaves = Vec::with_capacity(topo.len());
+    let mut behind = cur.pos();
     for (_, range) in children {
         for t in &topo[range] {
+            let at = cur.pos();
+            if at - behind >= LOCATE_RELEASE_BYTES {
+                release(behind..at);
+                behind = at;
+            }
             // The value mask is stored again; OpenVDB ignores the copy when seeking.
             cur.skip(64, "leaf buffer")?;
-            let frame = locate_values(cur, codec, background, &t.mask, LEAF_VOXELS, "leaf buffer")?;
-            frames.push((t, frame));
-            ends.push(cur.pos());
+            locate_values(cur, codec, background, &t.mask, LEAF_VOXELS, "leaf buffer")?;
+            leaves.push(LocatedLeaf {
+                origin: t.origin,
+                active: t.mask,
+                bytes: at..cur.pos(),
+            });
         }
     }
-    if !decode_leaves {
-        frames.clear();
-    }
-    // Compressed leaves take a few dozen bytes in the file and kilobytes decoded: the
-    // file's size bounds the leaf count, not their memory, so it is checked here.
-    if !frames.is_empty() {
-        let need = (frames.len() as u64).saturating_mul(leaf_bytes::<V>());
-        files::limits::check_memory(format!("decoding {} leaves", frames.len()), need).map_err(
-            |e| RawError::new(cur.pos(), "leaf buffers", ErrorKind::Memory(Box::new(e))),
-        )?;
-    }
-    // Decoding (decompression, half floats, inactive values) is independent per leaf.
-    let mut leaves = Vec::with_capacity(frames.len());
-    let mut start = first;
-    for (batch, ends) in frames.chunks(DECODE_BATCH).zip(ends.chunks(DECODE_BATCH)) {
-        let decoded = batch
-            .par_iter()
-            .map_init(Inflater::default, |inflater, (t, frame)| {
-                let mut values = Box::new([V::default(); LEAF_VOXELS]);
-                decode_values(frame, codec, &t.mask, &mut values[..], inflater)?;
-                Ok(Leaf {
-                    origin: t.origin,
-                    active: t.mask,
-                    values,
-                })
-            })
-            .collect::<RawResult<Vec<_>>>()?;
-        leaves.extend(decoded);
-        let end = ends.last().copied().unwrap_or(start);
-        release(start..end);
-        start = end;
-    }
-    Ok(TreeData {
+    release(behind..cur.pos());
+    Ok(LocatedTree {
         background,
         tiles,
         leaves,

@@ -3,7 +3,7 @@
 use crate::common::bake::{cells, field, reconstruct, region_boxes};
 use crate::common::Rng;
 use format::BrickFile;
-use qbricks_preprocess::bake::{bake, BakeError, BakeOptions};
+use qbricks_preprocess::bake::{bake, BakeError, BakeGrid, BakeOptions};
 use qbricks_preprocess::derive::Stencil;
 use qbricks_preprocess::fields::FieldKind;
 use qbricks_preprocess::grid::{leaf_offset, AnyGrid, Grid, Leaf, Transform, LEAF_VOXELS};
@@ -110,6 +110,11 @@ fn two_level(n: i32, f: &dyn Fn([f64; 3]) -> [f64; 3]) -> Vec<AnyGrid> {
     let h = 0.5 * w;
     let fine = sample("vel", h, 0.5 * h, [n / 2; 3], [3 * n / 2; 3], f);
     vec![AnyGrid::Vec3d(coarse), AnyGrid::Vec3d(fine)]
+}
+
+/// `grids` as `bake_kept` takes them.
+fn kept(grids: &[AnyGrid]) -> Vec<BakeGrid> {
+    grids.iter().cloned().map(BakeGrid::from).collect()
 }
 
 /// (max, rms) of |Q − Q_exact| over leaf cells at least `margin` from the domain edge.
@@ -492,6 +497,107 @@ fn single_precision_grids_bake_as_their_exact_double_copies() {
     }
 }
 
+/// A bake from a file decodes each grid's leaves a batch at a time, straight into its cells
+/// (`vdb::located`), and keeps the cells' values on disk past `Spill::above` as it does the
+/// fields: the file is the one a bake of the decoded grids held in memory makes, byte for
+/// byte, on two levels whose boundary runs through blocks, with non-finite values
+/// repaired, a staggered grid, an extra scalar field, leaves decoded in the file's order or
+/// in reverse, and on a grid of more than one batch of leaves.
+#[test]
+fn located_grids_with_cells_on_disk_give_the_same_file() {
+    use qbricks_preprocess::bake::{bake_kept, Spill};
+    use qbricks_preprocess::inputs::{read_inputs, ReadOptions};
+    use qbricks_preprocess::vdb::write::{write_vdb, Compression};
+    use qbricks_preprocess::vdb::{AnyLocated, VdbFile};
+
+    let mut doubles = two_level(8, &abc);
+    if let AnyGrid::Vec3d(g) = &mut doubles[1] {
+        let leaf = &mut g.leaves[0];
+        let active: Vec<usize> = (0..LEAF_VOXELS).filter(|&n| leaf.is_active(n)).collect();
+        leaf.values[active[3]] = [f64::NAN, 0.0, 0.0];
+    }
+    let mut grids: Vec<AnyGrid> = doubles
+        .iter()
+        .map(|g| match g {
+            AnyGrid::Vec3d(g) => single_and_double(g).0,
+            _ => unreachable!("two_level makes vec3d grids"),
+        })
+        .collect();
+    let AnyGrid::Vec3s(coarse) = &grids[0] else {
+        unreachable!()
+    };
+    grids.push(AnyGrid::Float(convert(coarse, "density", 0.0f32, |v| v[2])));
+    let dir = tempfile::tempdir().expect("tempdir");
+    let vdb = dir.path().join("two_level.vdb");
+    write_vdb(&vdb, &grids, Compression::Zip).expect("write vdb");
+    let on_disk = |o: &BakeOptions| BakeOptions {
+        spill: Spill {
+            dir: Some(dir.path().to_path_buf()),
+            above: 0,
+            chunk: 700,
+            window: 4096,
+        },
+        ..o.clone()
+    };
+    let written = |baked: qbricks_preprocess::bake::Baked| {
+        let path = dir.path().join("out.qbk");
+        baked.write(&path).expect("write");
+        std::fs::read(&path).expect("read")
+    };
+    let cases = [
+        opts(Stencil::CrossLevel),
+        BakeOptions {
+            staggered: vec!["vel".to_string()],
+            ..opts(Stencil::Central)
+        },
+        BakeOptions {
+            fields: Some(vec![
+                FieldKind::Q,
+                FieldKind::Lambda2,
+                FieldKind::Velocity,
+                FieldKind::Scalar("density".to_string()),
+            ]),
+            ..opts(Stencil::CrossLevel)
+        },
+    ];
+    let file = VdbFile::open(&vdb).expect("open");
+    for o in &cases {
+        let (held, summary) = bake(grids.clone(), o).expect("bake");
+        let held = format::writer::to_bytes(&held).expect("serialise");
+        let read = ReadOptions {
+            extra: vec!["density".to_string()],
+            ..ReadOptions::default()
+        };
+        let (located, _) = read_inputs(&file, &read).expect("locate");
+        assert!(located.iter().all(BakeGrid::is_located));
+        let (baked, s) = bake_kept(located, &on_disk(o), &|_| {}).expect("bake located");
+        assert_eq!(s, summary, "{o:?}");
+        assert!(written(baked) == held, "{o:?}");
+        // Leaves decoded out of the file's order make the same cells.
+        let (mut located, _) = read_inputs(&file, &read).expect("locate");
+        for g in &mut located {
+            match g {
+                BakeGrid::Located(AnyLocated::Vec3s(g)) => g.grid.leaves.reverse(),
+                BakeGrid::Located(AnyLocated::Float(g)) => g.grid.leaves.reverse(),
+                other => panic!("{other:?}"),
+            }
+        }
+        let (baked, _) = bake_kept(located, o, &|_| {}).expect("bake reversed");
+        assert!(written(baked) == held, "{o:?}");
+    }
+    // One grid of 17³ leaves: more than one batch of leaves decoded.
+    let big = sample("vel", L / 136.0, L / 272.0, [0; 3], [136; 3], &abc);
+    let big = vec![single_and_double(&big).0];
+    let path = dir.path().join("big.vdb");
+    write_vdb(&path, &big, Compression::Zip).expect("write vdb");
+    let o = opts(Stencil::Central);
+    let held = format::writer::to_bytes(&bake(big, &o).expect("bake").0).expect("serialise");
+    let file = VdbFile::open(&path).expect("open");
+    let (located, _) = read_inputs(&file, &ReadOptions::default()).expect("locate");
+    let (baked, _) = bake_kept(located, &on_disk(&o), &|_| {}).expect("bake located");
+    assert!(written(baked) == held);
+}
+
 /// Fields kept on disk (`Spill`), chunk after chunk of bricks, read back as they were
 /// written, in memory or streamed from their scratch files into the written file: the
 /// same file as a bake that holds them, on two levels with five fields, chunks of one
@@ -518,6 +624,7 @@ fn fields_kept_on_disk_give_the_same_file() {
                 dir: Some(dir.path().to_path_buf()),
                 above: 0,
                 chunk,
+                window: 4096,
             },
             ..o.clone()
         };
@@ -531,7 +638,7 @@ fn fields_kept_on_disk_give_the_same_file() {
         // Written as `qbricks-bake` writes it: the values streamed from their scratch
         // files into the archive.
         let (baked, summary) =
-            qbricks_preprocess::bake::bake_kept(grids.clone(), &spilled, &|_| {}).expect("kept");
+            qbricks_preprocess::bake::bake_kept(kept(&grids), &spilled, &|_| {}).expect("kept");
         assert_eq!(summary, held.1, "chunk {chunk}");
         let out = tempfile::tempdir().expect("tempdir");
         let path = out.path().join("kept.qbk");
@@ -552,6 +659,7 @@ fn fields_kept_on_disk_give_the_same_file() {
                 dir: Some(gone.clone()),
                 above: 0,
                 chunk: 1,
+                window: 4096,
             },
             ..o
         },

@@ -49,6 +49,12 @@ pub struct Args {
     /// Refuse input with non-finite values (default: replace them and warn).
     #[arg(long)]
     pub strict: bool,
+    /// Keep the bake within this much memory (64M, 2G, …; default: three quarters of the
+    /// machine's): values past a part of it are kept in scratch files beside the output,
+    /// and a bake that needs more even so is refused, naming the least that would do. A
+    /// sequence shares it between the frames baked at once.
+    #[arg(long, value_name = "SIZE", value_parser = memory_arg)]
+    pub memory: Option<u64>,
     /// Print a JSON summary on stdout.
     #[arg(long)]
     pub json: bool,
@@ -62,6 +68,10 @@ pub struct Args {
     /// Show progress on stderr even when it is not a terminal.
     #[arg(long)]
     pub progress: bool,
+}
+
+fn memory_arg(text: &str) -> Result<u64, String> {
+    files::limits::memory_size("--memory", text).map_err(|e| e.to_string())
 }
 
 /// What the arguments ask for, checked once: the read and bake options, for one file or for
@@ -82,6 +92,7 @@ pub fn plan(args: &Args) -> anyhow::Result<Plan> {
         max_brick: args.max_brick,
         strict: args.strict,
         threads: None,
+        memory: args.memory,
     };
     Ok(Plan {
         start: Instant::now(),
@@ -155,7 +166,10 @@ pub fn run(args: Args, plan: Plan) -> anyhow::Result<()> {
     }
     let mut out = QuietStdout::new();
     if args.json {
-        let v = summary_json(&summary, seconds, &output)?;
+        let mut v = summary_json(&summary, seconds, &output)?;
+        if let (Some(peak), Some(map)) = (files::limits::peak_resident(), v.as_object_mut()) {
+            map.insert("peak_memory".to_string(), peak.into());
+        }
         writeln!(out, "{}", serde_json::to_string_pretty(&v)?)?;
     } else if !args.quiet {
         writeln!(
