@@ -364,6 +364,7 @@ def bake(
     threads: Optional[int] = None,
     jobs: Optional[int] = None,
     progress: bool = False,
+    memory: Union[None, int, str] = None,
 ) -> Dict[str, Any]:
     """Bakes an OpenVDB file into a ``.qbk`` file, as ``qbricks-bake SRC -o OUT --json``
     does, and returns its summary (cells, bricks, field ranges, ``seconds``, ``output``,
@@ -377,6 +378,10 @@ def bake(
     ``qbricks-view`` reads; the summary is the sequence's (``frames``, ``failed``,
     ``missing``, ``fields``, ``manifest``…). A frame that fails is named in a
     ``ValueError`` once the others are baked.
+
+    ``memory`` is the budget of ``--memory`` (bytes, or ``"64M"``, ``"2G"``…): values go
+    to scratch files beside the output as far as it needs, the file is the same, and a
+    bake that needs more even so raises ``ValueError`` naming the least budget.
 
     The GIL is released while baking; Ctrl-C stops the bake between its stages (or
     frames) without writing the output and raises ``KeyboardInterrupt``."""
@@ -399,5 +404,6 @@ def bake(
         threads=threads,
         jobs=jobs,
         progress=progress,
+        memory=None if memory is None else str(memory),
     )
     return json.loads(summary)

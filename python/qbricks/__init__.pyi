@@ -129,4 +129,5 @@ def bake(
     threads: Optional[int] = ...,
     jobs: Optional[int] = ...,
     progress: bool = ...,
+    memory: Union[None, int, str] = ...,
 ) -> Dict[str, Any]: ...

@@ -623,7 +623,7 @@ fn open(py: Python<'_>, path: PathBuf, checksum: bool) -> PyResult<Dataset> {
 #[pyfunction]
 #[pyo3(signature = (src, out, *, fields=None, grids=Vec::new(), velocity=Vec::new(),
     layout="auto".to_string(), stencil="central".to_string(), max_brick=None, strict=false,
-    threads=None, jobs=None, progress=false))]
+    threads=None, jobs=None, progress=false, memory=None))]
 #[allow(clippy::too_many_arguments)]
 fn bake(
     py: Python<'_>,
@@ -639,6 +639,7 @@ fn bake(
     threads: Option<usize>,
     jobs: Option<usize>,
     progress: bool,
+    memory: Option<String>,
 ) -> PyResult<String> {
     let cancel = AtomicBool::new(false);
     run_interruptibly(
@@ -660,7 +661,9 @@ fn bake(
                 max_brick: max_brick.unwrap_or(preprocess::bake::DEFAULT_MAX_BRICK),
                 strict,
                 threads,
-                memory: None,
+                memory: memory
+                    .map(|m| files::limits::memory_size("memory", &m))
+                    .transpose()?,
             };
             let plan = request.plan()?;
             let seconds = || start.elapsed().as_secs_f64();

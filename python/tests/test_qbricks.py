@@ -170,8 +170,15 @@ def test_bake_equals_cli(cli, tmp_path):
     for k in ("seconds", "output"):
         summary.pop(k), cli_summary.pop(k)
     summary.pop("warnings")
+    assert cli_summary.pop("peak_memory") > 0
     assert summary == cli_summary
     assert (tmp_path / "py.qbk").read_bytes() == (tmp_path / "cli.qbk").read_bytes()
+    # A memory budget changes where values are kept, not the file; one below any bake is
+    # refused by its size.
+    qbricks.bake(SAMPLE_VDB, tmp_path / "m.qbk", fields="q,speed,vorticity", memory="64M")
+    assert (tmp_path / "m.qbk").read_bytes() == (tmp_path / "cli.qbk").read_bytes()
+    with pytest.raises(ValueError, match="memory: expected 16M"):
+        qbricks.bake(SAMPLE_VDB, tmp_path / "x.qbk", memory=1 << 20)
     assert list(qbricks.open(tmp_path / "py.qbk").fields) == ["q", "speed", "vorticity"]
     with pytest.raises(FileNotFoundError):
         qbricks.bake(tmp_path / "missing.vdb")
