@@ -9,6 +9,18 @@ use std::fs::File;
 use std::marker::PhantomData;
 use std::ops::Range;
 
+/// Makes `file` `bytes` long with its blocks allocated, so that values written through a
+/// mapping of it never need a block the disk has no room for: such a write cannot fail
+/// with an error, it kills the process (`SIGBUS`). A full disk is an error here instead.
+/// Where the file system cannot allocate ahead (`EOPNOTSUPP`), the file is only sized.
+pub fn reserve(file: &File, bytes: u64) -> std::io::Result<()> {
+    match rustix::fs::fallocate(file, rustix::fs::FallocateFlags::empty(), 0, bytes) {
+        Ok(()) => Ok(()),
+        Err(rustix::io::Errno::OPNOTSUPP) => file.set_len(bytes),
+        Err(e) => Err(e.into()),
+    }
+}
+
 /// `len` values of `T` (plain data: `f32` for fields, a cell's velocity for the cells) in a
 /// scratch file, mapped shared and writable.
 pub struct ScratchValues<T = f32> {
@@ -133,12 +145,14 @@ mod tests {
     }
 
     /// Values wider than a byte count the file in their own size: a velocity per value.
+    /// A reserved file reads as zeros.
     #[test]
     fn vectors_are_mapped_in_their_own_size() {
         let dir = tempfile::tempdir().expect("tempdir");
         let file = tempfile::tempfile_in(dir.path()).expect("scratch");
         let n = 5000;
-        file.set_len((n * 12) as u64).expect("size");
+        reserve(&file, (n * 12) as u64).expect("reserve");
+        assert_eq!(file.metadata().expect("metadata").len(), (n * 12) as u64);
         let mut mapped = ScratchValues::<[f32; 3]>::map(&file, n).expect("map");
         assert_eq!(mapped.len(), n);
         assert!(mapped.as_slice().iter().all(|v| *v == [0.0; 3]));

@@ -85,7 +85,7 @@ impl<T: Pod> Slots<T> {
             source,
         };
         let file = tempfile::tempfile_in(&dir).map_err(scratch)?;
-        file.set_len(bytes).map_err(scratch)?;
+        files::scratch::reserve(&file, bytes).map_err(scratch)?;
         Ok(Slots::Mapped(
             ScratchValues::map(&file, n).map_err(scratch)?,
         ))
