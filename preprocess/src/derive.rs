@@ -26,7 +26,7 @@ use serde::Serialize;
 
 use rayon::prelude::*;
 
-use crate::cells::{CellSet, Keep, SlotValues, Slots, BLOCK_CELLS};
+use crate::cells::{CellSet, Keep, SlotValues, SlotView, Slots, BLOCK_CELLS};
 use crate::error::BakeError;
 
 /// Gradient stencil at grid edges and next to missing cells (`--stencil`).
@@ -50,10 +50,27 @@ pub fn speed(u: &[f64; 3]) -> f64 {
 pub(crate) struct VelocityField<'a> {
     pub sets: &'a [CellSet],
     /// Cell-centred velocity per slot (for a staggered grid: [`centre_from_faces`]).
-    pub values: &'a [SlotValues<[f64; 3]>],
+    pub values: Vec<SlotView<'a, [f64; 3]>>,
     /// Per grid: the face values of a staggered grid (as stored), `None` for a
     /// cell-centred one. May be shorter than `sets` (missing entries: cell-centred).
-    pub faces: &'a [Option<SlotValues<[f64; 3]>>],
+    pub faces: Vec<Option<SlotView<'a, [f64; 3]>>>,
+}
+
+impl<'a> VelocityField<'a> {
+    pub(crate) fn new(
+        sets: &'a [CellSet],
+        values: &'a [SlotValues<[f64; 3]>],
+        faces: &'a [Option<SlotValues<[f64; 3]>>],
+    ) -> Self {
+        VelocityField {
+            sets,
+            values: values.iter().map(SlotValues::view).collect(),
+            faces: faces
+                .iter()
+                .map(|f| f.as_ref().map(SlotValues::view))
+                .collect(),
+        }
+    }
 }
 
 /// Cell-centred velocity of a staggered grid from its face values (see the module docs):
@@ -107,7 +124,7 @@ pub(crate) fn centre_from_faces(
 /// (weights 2, −3, 1), or the first-order one over two faces, or zero.
 fn face_derivative(
     set: &CellSet,
-    faces: &SlotValues<[f64; 3]>,
+    faces: &SlotView<'_, [f64; 3]>,
     slot: usize,
     ijk: [i32; 3],
     a: usize,
@@ -149,7 +166,7 @@ pub enum CellChoice {
 pub(crate) fn reconstruct(f: &VelocityField, p: [f64; 3], choice: CellChoice) -> Option<[f64; 3]> {
     let mut sum = [0.0; 3];
     let mut wsum = 0.0;
-    for (set, vals) in f.sets.iter().zip(f.values) {
+    for (set, vals) in f.sets.iter().zip(&f.values) {
         let w = set.width;
         let t = set.transform.translation;
         let mut base = [0i64; 3];

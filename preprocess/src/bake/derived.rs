@@ -66,14 +66,16 @@ impl Default for Spill {
 
 impl Spill {
     /// Settings that keep a bake within `budget` bytes where its input allows (`--memory`):
-    /// values past an eighth of the budget go to disk, passes over them hold an eighth of
-    /// it at most, and a chunk of fields being derived a sixty-fourth; never more than the
-    /// defaults.
+    /// values past an eighth of the budget go to disk (so a large budget keeps more in
+    /// memory than the default, which is faster: writing the cells to disk and reading
+    /// them back cost a few percent), passes over them hold an eighth of it at most, and a
+    /// chunk of fields being derived a sixty-fourth; windows and chunks never larger than
+    /// the defaults.
     pub fn within(budget: u64) -> Spill {
         let d = Spill::default();
         Spill {
             dir: None,
-            above: d.above.min(budget / 8),
+            above: budget / 8,
             chunk: d.chunk.min(budget / 64 / 4).max(1),
             window: d.window.min(budget / 8).max(1 << 20),
         }
@@ -241,11 +243,7 @@ pub(super) fn derive_fields(
                 .unwrap_or(vec![FieldKind::Q, FieldKind::Speed]);
             let names: Vec<String> = kinds.iter().flat_map(FieldKind::names).collect();
             let needs_gradient = kinds.iter().any(FieldKind::needs_gradient);
-            let field = VelocityField {
-                sets,
-                values: vals,
-                faces,
-            };
+            let field = VelocityField::new(sets, vals, faces);
             // The grid of each extra scalar field, looked up once rather than per cell.
             let extras: Vec<Option<&ExtraGrid>> = kinds
                 .iter()
@@ -265,7 +263,7 @@ pub(super) fn derive_fields(
                 &release,
                 |b, out| {
                     let set = &sets[b.set];
-                    let v = &vals[b.set];
+                    let v = &field.values[b.set];
                     let mut hits = vec![0u64; kinds.len()];
                     b.for_each_cell(set, |i, ijk, slot| {
                         let u = slot.map(|s| v.get(s)).unwrap_or_default();
@@ -343,7 +341,7 @@ pub(super) fn derive_fields(
             let release = || cells.release_values();
             let store = per_brick(&bricks.boxes, 1, &opts.spill, &release, |b, out| {
                 let set = &sets[b.set];
-                let v = &vals[b.set];
+                let v = vals[b.set].view();
                 b.for_each_cell(set, |i, _, slot| {
                     out[0][i] = slot.map(|s| v.get(s)).unwrap_or_default() as f32;
                 });

@@ -265,7 +265,8 @@ fn fix_nonfinite<T: CellValue + Widen>(
     let mut found = Vec::new();
     let mut any = vec![false; sets.len()];
     for (((set, vals), label), any) in sets.iter().zip(values.iter()).zip(labels).zip(&mut any) {
-        let rep = nonfinite::count(set, |s| vals.get(s), every, || vals.release());
+        let view = vals.view();
+        let rep = nonfinite::count(set, |s| view.get(s), every, || vals.release());
         *any = rep.count > 0;
         if rep.count > 0 {
             found.push(GridCount {

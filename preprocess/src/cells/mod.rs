@@ -20,7 +20,7 @@ mod values;
 
 pub(crate) use classify::classify_leaves;
 use index::BlockIndex;
-pub(crate) use values::{Keep, SlotValues, Slots, Widen};
+pub(crate) use values::{Keep, SlotValues, SlotView, Slots, Widen};
 
 /// Cells per block (one VDB leaf).
 pub(crate) const BLOCK_CELLS: usize = LEAF_VOXELS;

@@ -123,7 +123,33 @@ pub(crate) enum SlotValues<T: Widen> {
     Wide(Slots<T>),
 }
 
+/// The values of one cell set as slices: what the hot loops read ([`SlotValues::view`]),
+/// so that a value costs one branch, not a look at where the values are kept too.
+#[derive(Debug, Clone, Copy)]
+pub(crate) enum SlotView<'a, T: Widen> {
+    Narrow(&'a [T::Narrow]),
+    Wide(&'a [T]),
+}
+
+impl<T: Widen> SlotView<'_, T> {
+    /// The value of `slot`.
+    #[inline]
+    pub(crate) fn get(&self, slot: usize) -> T {
+        match self {
+            SlotView::Narrow(v) => T::widen(v[slot]),
+            SlotView::Wide(v) => v[slot],
+        }
+    }
+}
+
 impl<T: Widen> SlotValues<T> {
+    pub(crate) fn view(&self) -> SlotView<'_, T> {
+        match self {
+            SlotValues::Narrow(v) => SlotView::Narrow(v.as_slice()),
+            SlotValues::Wide(v) => SlotView::Wide(v.as_slice()),
+        }
+    }
+
     /// The value of `slot`.
     #[inline]
     pub(crate) fn get(&self, slot: usize) -> T {
