@@ -27,6 +27,9 @@ pub struct Limits {
     /// Largest input that is not a regular file (device, FIFO, socket), whose size is not
     /// known in advance: refused once this many bytes have been read.
     pub stream: u64,
+    /// Whether `file` is the address space left to map the file ([`Limits::mapped`]),
+    /// rather than what reading it whole may take: said so when a file is over it.
+    pub address_space: bool,
 }
 
 /// Default cap for inputs that are not regular files: large enough for a piped sample file,
@@ -41,6 +44,19 @@ impl Limits {
         Self {
             file: crate::limits::physical_memory().unwrap_or(u64::MAX),
             stream: STREAM_LIMIT,
+            address_space: false,
+        }
+    }
+
+    /// Limits for a file that is mapped and read a part at a time (a VDB file a bake
+    /// decodes a batch of leaves at a time): a regular file of any size the address space
+    /// can map (its pages are read as they are used and let go after; `ulimit -v` bounds
+    /// the mapping), anything else up to [`STREAM_LIMIT`].
+    pub fn mapped() -> Self {
+        Self {
+            file: crate::limits::address_space_left().unwrap_or(u64::MAX),
+            stream: STREAM_LIMIT,
+            address_space: true,
         }
     }
 
@@ -49,6 +65,7 @@ impl Limits {
         Self {
             file: bytes,
             stream: bytes,
+            address_space: false,
         }
     }
 }
@@ -70,6 +87,11 @@ pub enum InputErrorKind {
     IsDirectory,
     #[error("file is {size} bytes, more than the limit of {limit} bytes for reading it whole")]
     TooLarge { size: u64, limit: u64 },
+    #[error(
+        "file is {size} bytes, more than the limit of {limit} bytes of address space left to \
+         map it (ulimit -v)"
+    )]
+    TooLargeToMap { size: u64, limit: u64 },
     #[error(
         "is not a regular file and is longer than {limit} bytes, the limit for devices and \
          pipes; copy it to a regular file first"
@@ -321,9 +343,11 @@ pub fn map_whole(path: &Path, limits: Limits) -> Result<Whole, InputError> {
     // Mapped or read, a file is decoded into at least its own size.
     let size = meta.len();
     if size > limits.file {
-        return Err(err(InputErrorKind::TooLarge {
-            size,
-            limit: limits.file,
+        let limit = limits.file;
+        return Err(err(if limits.address_space {
+            InputErrorKind::TooLargeToMap { size, limit }
+        } else {
+            InputErrorKind::TooLarge { size, limit }
         }));
     }
     map_read_only(&file)
@@ -334,6 +358,29 @@ pub fn map_whole(path: &Path, limits: Limits) -> Result<Whole, InputError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A file larger than the machine's memory (sparse: it takes no disk) is mapped under
+    /// [`Limits::mapped`], and refused by its size under [`Limits::memory`].
+    #[test]
+    fn a_file_larger_than_memory_is_mapped_not_refused() {
+        let Some(physical) = crate::limits::physical_memory() else {
+            return;
+        };
+        let dir = tempfile::tempdir().expect("tempdir");
+        let p = dir.path().join("big");
+        let f = File::create(&p).expect("create");
+        if f.set_len(physical + (1 << 20)).is_err() {
+            return; // a file system that cannot hold such a file
+        }
+        let whole = map_whole(&p, Limits::mapped()).expect("mapped");
+        assert_eq!(whole.len() as u64, physical + (1 << 20));
+        assert_eq!(whole[whole.len() - 1], 0);
+        whole.release(0..whole.len());
+        assert!(matches!(
+            map_whole(&p, Limits::memory()).map_err(|e| e.kind),
+            Err(InputErrorKind::TooLarge { .. })
+        ));
+    }
 
     #[test]
     fn regular_file_within_the_limit_is_read_whole() {

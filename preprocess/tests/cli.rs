@@ -156,47 +156,12 @@ fn moved_commands_exit_2_naming_qbricks_lab() {
 /// Memory is measured, not time: the bake's own peak resident memory.
 #[test]
 fn bake_peak_memory_stays_near_its_cells() {
-    use qbricks_preprocess::grid::{AnyGrid, Grid, Leaf, Transform, LEAF_VOXELS};
+    use qbricks_preprocess::grid::AnyGrid;
     use qbricks_preprocess::vdb::write::{write_vdb, Compression};
     let dir = tempfile::tempdir().expect("tempdir");
     let (vdb, qbk) = (dir.path().join("abc.vdb"), dir.path().join("abc.qbk"));
     // The ABC flow on 160³ cells of [0, 2π)³.
-    let h = std::f64::consts::TAU / 160.0;
-    let mut leaves = Vec::new();
-    for x in (0..160).step_by(8) {
-        for y in (0..160).step_by(8) {
-            for z in (0..160).step_by(8) {
-                let values = Box::new(std::array::from_fn::<_, LEAF_VOXELS, _>(|n| {
-                    let p = [
-                        x + (n >> 6) as i32,
-                        y + ((n >> 3) & 7) as i32,
-                        z + (n & 7) as i32,
-                    ]
-                    .map(|i| (f64::from(i) + 0.5) * h);
-                    [
-                        (p[2].sin() + p[1].cos()) as f32,
-                        (p[0].sin() + p[2].cos()) as f32,
-                        (p[1].sin() + p[0].cos()) as f32,
-                    ]
-                }));
-                leaves.push(Leaf {
-                    origin: [x, y, z],
-                    active: [u64::MAX; 8],
-                    values,
-                });
-            }
-        }
-    }
-    let grid = Grid {
-        name: "vel".into(),
-        transform: Transform {
-            voxel_size: [h; 3],
-            translation: [0.5 * h; 3],
-        },
-        background: [0.0; 3],
-        leaves,
-        tiles: Vec::new(),
-    };
+    let grid = abc_grid("vel", std::f64::consts::TAU / 160.0, 0, 160);
     write_vdb(&vdb, &[AnyGrid::Vec3s(grid)], Compression::Zip).expect("write");
     let peak = bake_peak(&vdb, &qbk, &[]);
     assert!(qbk.exists());
@@ -234,8 +199,8 @@ fn bake_peak(vdb: &std::path::Path, qbk: &std::path::Path, args: &[&str]) -> u64
     v["peak_memory"].as_u64().expect("peak_memory")
 }
 
-/// A grid of `n³` cells of width `h` from index `lo` on, sampled from `f` at the cell
-/// centres (`translation` h/2), single precision.
+/// The ABC flow on a grid of `n³` cells of width `h` from index `lo` on, sampled at the
+/// cell centres (`translation` h/2), single precision.
 fn abc_grid(name: &str, h: f64, lo: i32, n: i32) -> qbricks_preprocess::grid::Grid<[f32; 3]> {
     use qbricks_preprocess::grid::{Grid, Leaf, Transform, LEAF_VOXELS};
     let mut leaves = Vec::new();

@@ -161,15 +161,17 @@ impl VdbFile {
     /// Maps the file (or reads it, when it is no regular file) and parses its header and
     /// grid descriptors.
     ///
-    /// A regular file is mapped read-only ([`files::input::map_whole`]): its pages are read
-    /// as the grids are decoded and let go once decoded, so a large file is never held
-    /// whole beside its decoded leaves. One larger than the machine's memory is refused by
-    /// its size ([`Limits::memory`]: its leaves could not be decoded). A device or pipe is
-    /// read only up to a cap (`/dev/zero` would otherwise be read until memory runs out).
+    /// A regular file is mapped read-only ([`files::input::map_whole`]), whatever its size
+    /// ([`Limits::mapped`]): its pages are read as the grids are located and decoded and let
+    /// go behind, so a file is never held whole, and a bake decodes a batch of leaves at a
+    /// time ([`located`]), so one larger than the machine's memory bakes too (decoding a
+    /// grid whole, as `read_grid` does, is checked against the memory limit by its leaves).
+    /// A device or pipe is read only up to a cap (`/dev/zero` would otherwise be read until
+    /// memory runs out).
     pub fn open(path: impl AsRef<Path>) -> Result<VdbFile, VdbError> {
         let path = path.as_ref();
         let name = path.display().to_string();
-        let data = map_whole(path, Limits::memory()).map_err(|e| VdbError {
+        let data = map_whole(path, Limits::mapped()).map_err(|e| VdbError {
             file: name.clone(),
             grid: None,
             offset: 0,

@@ -439,6 +439,18 @@ fn single_and_double(g: &Grid<[f64; 3]>) -> (AnyGrid, AnyGrid) {
     (AnyGrid::Vec3s(single), AnyGrid::Vec3d(double))
 }
 
+/// Sets the `k`-th active value of the first leaf of a vec3d grid, for each `(k, value)`.
+fn spoil(grid: &mut AnyGrid, values: &[(usize, [f64; 3])]) {
+    let AnyGrid::Vec3d(g) = grid else {
+        unreachable!("a vec3d grid")
+    };
+    let leaf = &mut g.leaves[0];
+    let active: Vec<usize> = (0..LEAF_VOXELS).filter(|&n| leaf.is_active(n)).collect();
+    for &(k, v) in values {
+        leaf.values[active[k]] = v;
+    }
+}
+
 /// The bake keeps single-precision values as they came (half the memory of widening them,
 /// see `cells::values`), widening them where it reads them: every file is the one the same
 /// values in double precision make, including where values are computed rather than read
@@ -447,12 +459,10 @@ fn single_and_double(g: &Grid<[f64; 3]>) -> (AnyGrid, AnyGrid) {
 fn single_precision_grids_bake_as_their_exact_double_copies() {
     let mut grids = two_level(8, &abc);
     // Two non-finite values in the fine grid (the extra field is made from the coarse one).
-    if let AnyGrid::Vec3d(g) = &mut grids[1] {
-        let leaf = &mut g.leaves[0];
-        let active: Vec<usize> = (0..LEAF_VOXELS).filter(|&n| leaf.is_active(n)).collect();
-        leaf.values[active[0]] = [f64::NAN, 0.0, 0.0];
-        leaf.values[active[9]] = [0.0, f64::INFINITY, 0.0];
-    }
+    spoil(
+        &mut grids[1],
+        &[(0, [f64::NAN, 0.0, 0.0]), (9, [0.0, f64::INFINITY, 0.0])],
+    );
     let (mut singles, mut doubles) = (Vec::new(), Vec::new());
     for g in &grids {
         let AnyGrid::Vec3d(g) = g else {
@@ -511,11 +521,7 @@ fn located_grids_with_cells_on_disk_give_the_same_file() {
     use qbricks_preprocess::vdb::{AnyLocated, VdbFile};
 
     let mut doubles = two_level(8, &abc);
-    if let AnyGrid::Vec3d(g) = &mut doubles[1] {
-        let leaf = &mut g.leaves[0];
-        let active: Vec<usize> = (0..LEAF_VOXELS).filter(|&n| leaf.is_active(n)).collect();
-        leaf.values[active[3]] = [f64::NAN, 0.0, 0.0];
-    }
+    spoil(&mut doubles[1], &[(3, [f64::NAN, 0.0, 0.0])]);
     let mut grids: Vec<AnyGrid> = doubles
         .iter()
         .map(|g| match g {
