@@ -36,8 +36,9 @@ use format::Aabb;
 pub(crate) enum RegionTree {
     /// Space inside the global bounds that no support reaches.
     Empty,
-    /// A region with its sorted brick ids.
-    Region { bounds: Aabb, bricks: Vec<u32> },
+    /// A region with its sorted brick ids (a boxed slice: millions of regions are held at
+    /// once while the tree is built, and a list's spare capacity would be held with them).
+    Region { bounds: Aabb, bricks: Box<[u32]> },
     /// Points with coordinate `< split` on `axis` go left.
     Split {
         axis: u8,
@@ -92,7 +93,7 @@ fn merge(t: RegionTree, b: Aabb, segment: f64) -> Merged {
         RegionTree::Empty => (RegionTree::Empty, 0.0, None),
         RegionTree::Region { bounds, bricks } => {
             let cost = area(&bounds) * segment + volume(&bounds) * bricks.len() as f64;
-            let union = bricks.clone();
+            let union = bricks.to_vec();
             (RegionTree::Region { bounds, bricks }, cost, Some(union))
         }
         RegionTree::Split {
@@ -123,7 +124,7 @@ fn merge(t: RegionTree, b: Aabb, segment: f64) -> Merged {
             let union = sorted_union(&lu, &ru);
             let leaf_cost = area(&b) * segment + volume(&b) * union.len() as f64;
             if leaf_cost <= split_cost {
-                let bricks = union.clone();
+                let bricks = union.clone().into_boxed_slice();
                 (
                     RegionTree::Region { bounds: b, bricks },
                     leaf_cost,
@@ -195,7 +196,10 @@ fn node(sup: &[Aabb], b: Aabb, ids: Vec<u32>) -> RegionTree {
     let Some((axis, split)) = choose_split(sup, &b, &ids) else {
         let mut bricks = ids;
         bricks.sort_unstable();
-        return RegionTree::Region { bounds: b, bricks };
+        return RegionTree::Region {
+            bounds: b,
+            bricks: bricks.into_boxed_slice(),
+        };
     };
     let a = axis as usize;
     let left_ids: Vec<u32> = ids
@@ -469,7 +473,7 @@ mod tests {
             t,
             RegionTree::Region {
                 bounds: s,
-                bricks: vec![0]
+                bricks: vec![0].into()
             }
         );
     }
