@@ -87,7 +87,7 @@ pub(crate) fn centre_from_faces(
 ) -> Result<Slots<[f64; 3]>, BakeError> {
     let what = format!("the cell-centred velocities of grid \"{}\"", set.name);
     let mut out: Slots<[f64; 3]> = Slots::zeroed(&what, faces.len(), keep)?;
-    let span = (keep.window as usize / (BLOCK_CELLS * 24)).max(1) * BLOCK_CELLS;
+    let span = keep.window_values(BLOCK_CELLS * 24) * BLOCK_CELLS;
     for start in (0..faces.len()).step_by(span) {
         let end = (start + span).min(faces.len());
         out.as_mut_slice()[start..end]

@@ -93,7 +93,7 @@ impl Spill {
 
     /// Values of `size` bytes a pass over values on disk reads before it lets them go.
     pub(crate) fn window_values(&self, size: usize) -> usize {
-        (self.window as usize / size.max(1)).max(1)
+        crate::cells::window_values(self.window, size)
     }
 }
 

@@ -261,7 +261,7 @@ fn fix_nonfinite<T: CellValue + Widen>(
     warnings: &mut Vec<String>,
 ) -> Result<u64, BakeError> {
     let labels = grid_labels(sets.iter().map(|s| s.name.as_str()));
-    let every = (keep.window as usize / std::mem::size_of::<T>()).max(1);
+    let every = keep.window_values(std::mem::size_of::<T>());
     let mut found = Vec::new();
     let mut any = vec![false; sets.len()];
     for (((set, vals), label), any) in sets.iter().zip(values.iter()).zip(labels).zip(&mut any) {

@@ -20,7 +20,7 @@ mod values;
 
 pub(crate) use classify::classify_leaves;
 use index::BlockIndex;
-pub(crate) use values::{Keep, SlotValues, SlotView, Slots, Widen};
+pub(crate) use values::{window_values, Keep, SlotValues, SlotView, Slots, Widen};
 
 /// Cells per block (one VDB leaf).
 pub(crate) const BLOCK_CELLS: usize = LEAF_VOXELS;
@@ -164,8 +164,8 @@ impl CellSet {
         };
         // Tiles first, so that leaf voxels win where a (malformed) file has both. A tile can
         // be gigabytes of values: those kept on disk let their pages go as they go.
-        let window = (keep.window / std::mem::size_of::<T>().max(1) as u64).max(1);
-        let mut written = 0u64;
+        let window = keep.window_values(std::mem::size_of::<T>());
+        let mut written = 0usize;
         for (t, (lo, hi)) in grid.tiles.iter().zip(&tile_ranges) {
             let v = conv(t.value);
             for z in lo[2]..hi[2] {
@@ -175,7 +175,7 @@ impl CellSet {
                         put(&mut active, values, [x as i32, y as i32, z as i32], v);
                     }
                 }
-                written += ((hi[1] - lo[1]) * (hi[0] - lo[0])) as u64;
+                written += ((hi[1] - lo[1]) * (hi[0] - lo[0])) as usize;
                 if written >= window {
                     slots.release(0..usize::MAX);
                     written = 0;
@@ -184,7 +184,7 @@ impl CellSet {
         }
         let leaf_bytes = std::mem::size_of::<[V; LEAF_VOXELS]>();
         // A batch of decoded leaves is held beside the values: within the window too.
-        let batch_leaves = (keep.window as usize / leaf_bytes).clamp(1, LEAF_BATCH);
+        let batch_leaves = keep.window_values(leaf_bytes).min(LEAF_BATCH);
         let mut freed = 0usize;
         let mut leaves = grid.leaves.into_iter();
         loop {
@@ -194,7 +194,7 @@ impl CellSet {
             }
             let decoded = decode(batch)?;
             freed += decoded.len() * leaf_bytes;
-            written += (decoded.len() * LEAF_VOXELS) as u64;
+            written += decoded.len() * LEAF_VOXELS;
             let values = slots.as_mut_slice();
             for leaf in decoded {
                 if !is_block_origin(leaf.origin) {

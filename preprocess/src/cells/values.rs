@@ -61,6 +61,21 @@ impl Keep<'_> {
     };
 }
 
+/// Values of `size` bytes a pass over values on disk reads before it lets their pages go,
+/// given a window of `window` bytes: at least one. The one rule every pass uses (cells,
+/// their centred or widened copies, non-finite counts, fields; [`Keep::window_values`],
+/// `Spill::window_values`).
+pub(crate) fn window_values(window: u64, size: usize) -> usize {
+    (window as usize / size.max(1)).max(1)
+}
+
+impl Keep<'_> {
+    /// Values of `size` bytes a pass reads before it lets their pages go.
+    pub(crate) fn window_values(&self, size: usize) -> usize {
+        window_values(self.window, size)
+    }
+}
+
 /// Values of one cell set, in memory or mapped from a scratch file.
 #[derive(Debug)]
 pub(crate) enum Slots<T> {
@@ -181,7 +196,7 @@ impl<T: Widen> SlotValues<T> {
         if let SlotValues::Narrow(v) = self {
             let n = v.as_slice().len();
             let mut wide: Slots<T> = Slots::zeroed(what, n, keep)?;
-            let span = (keep.window as usize / std::mem::size_of::<T>()).max(1);
+            let span = keep.window_values(std::mem::size_of::<T>());
             for start in (0..n).step_by(span) {
                 let end = (start + span).min(n);
                 let from = &v.as_slice()[start..end];
