@@ -1,20 +1,23 @@
-//! Serialises a [`RegionTree`] into the file's KD-tree (format 3): inner nodes in
-//! depth-first, left-first order (node 0 is the root, parents before children), inner
-//! nodes send `coordinate < split` left, and a leaf is a child reference naming a region
-//! or empty space ([`format::kd::LEAF`]). Regions are numbered in the same depth-first,
-//! left-first order, and each sits in one leaf whose cell is its box.
+//! The file's KD-tree over the regions (format 3): inner nodes in depth-first, left-first
+//! order (node 0 is the root, parents before children), inner nodes send `coordinate <
+//! split` left, and a leaf is a child reference naming a region or empty space
+//! ([`format::kd::LEAF`]). Regions are numbered in the same depth-first, left-first order,
+//! and each sits in one leaf whose cell is its box.
+//!
+//! [`crate::regions::build`] writes the tree straight into this layout as it splits, one
+//! [`Part`] per thread, instead of building a tree of boxed nodes first and copying it out:
+//! a bake of a billion cells makes 16.6 M regions, and boxed nodes with a list each cost
+//! about 350 bytes a region while the tree stood whole, against the 80–100 bytes the file's
+//! arrays take.
 
 use format::kd::{self, EMPTY, LEAF, MAX_REGION};
 use format::{Aabb, KdNode, Region};
 
-use crate::regions::RegionTree;
-
 /// Regions as the tree numbers them, laid out as the file stores them: region `r`'s box
 /// is `bounds[r]` (its leaf's cell) and its sorted brick ids are the run `runs[r]` of
 /// `bricks`. Flat, so that a bake's millions of regions cost their ids and a few bytes
-/// each, not a heap allocation each (a copy of each list beside the tree's own made the
-/// regions stage of a billion cells, 16.6 M regions, 1.5 GB larger).
-#[derive(Debug, Default)]
+/// each, not a heap allocation each.
+#[derive(Debug, Default, Clone, PartialEq)]
 pub(crate) struct Regions {
     pub bounds: Vec<Aabb>,
     pub runs: Vec<Region>,
@@ -34,93 +37,177 @@ impl Regions {
     }
 }
 
-/// Why a tree cannot be stored: more regions than a leaf reference can name (counted
-/// whole), or more brick references than a region's `u32` run can reach.
+/// Why a tree cannot be stored: more regions (or inner nodes) than a child reference can
+/// name, counted whole, or more brick references than a region's `u32` run can reach.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum TooLarge {
     Regions(u64),
     BrickRefs(u64),
 }
 
-/// The stored tree (root reference, inner nodes, their axes) and the regions its leaves
-/// reference. The tree is consumed as it is stored (each node freed once emitted), so the
-/// tree and its flat copy are never both held whole.
-pub(crate) fn flatten(tree: RegionTree) -> Result<(kd::Packed, Regions), TooLarge> {
-    let mut out = Flat::default();
-    let root = out.emit(tree);
-    if out.regions_seen > u64::from(MAX_REGION) + 1 || out.nodes_seen > u64::from(LEAF) {
-        return Err(TooLarge::Regions(out.regions_seen));
-    }
-    if out.refs_seen > u64::from(u32::MAX) {
-        return Err(TooLarge::BrickRefs(out.refs_seen));
-    }
-    Ok(((root, out.nodes, out.axes), out.regions))
+/// How many regions, inner nodes and brick references a stored tree may hold.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Limits {
+    pub regions: u64,
+    pub nodes: u64,
+    pub refs: u64,
 }
 
-/// What [`flatten`] has stored so far; past a limit it only counts.
-#[derive(Default)]
-struct Flat {
+impl Limits {
+    /// What the file's references reach: region indices up to [`MAX_REGION`], node
+    /// indices below [`LEAF`], brick runs within `u32`.
+    pub(crate) const FILE: Limits = Limits {
+        regions: MAX_REGION as u64 + 1,
+        nodes: LEAF as u64,
+        refs: u32::MAX as u64,
+    };
+}
+
+/// How much a [`Part`] holds: inner nodes, regions, brick references. Also a point to
+/// [`Part::rollback`] to.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(crate) struct Mark {
+    nodes: u64,
+    regions: u64,
+    refs: u64,
+}
+
+/// A tree, or the part of one a thread builds, in the file's layout: its own nodes and
+/// regions numbered from 0, appended to the part before it once done ([`Part::append`]).
+/// Past its [`Limits`] it only counts, so that a tree too large to store is reported with
+/// its size instead of wrapping its references; while within them, what it stores is
+/// exactly what it counts.
+#[derive(Debug)]
+pub(crate) struct Part {
+    limits: Limits,
     nodes: Vec<KdNode>,
     axes: Vec<u8>,
     regions: Regions,
-    regions_seen: u64,
-    refs_seen: u64,
-    nodes_seen: u64,
+    count: Mark,
 }
 
-impl Flat {
-    fn full(&self) -> bool {
-        self.regions_seen > u64::from(MAX_REGION) + 1
-            || self.refs_seen > u64::from(u32::MAX)
-            || self.nodes_seen > u64::from(LEAF)
+impl Part {
+    pub(crate) fn new(limits: Limits) -> Self {
+        Part {
+            limits,
+            nodes: Vec::new(),
+            axes: Vec::new(),
+            regions: Regions::default(),
+            count: Mark::default(),
+        }
     }
 
-    /// The child reference of `t`, after storing its subtree.
-    fn emit(&mut self, t: RegionTree) -> u32 {
-        match t {
-            RegionTree::Empty => EMPTY,
-            RegionTree::Region { bounds, bricks } => {
-                let r = self.regions_seen;
-                self.regions_seen += 1;
-                let start = self.refs_seen;
-                self.refs_seen += bricks.len() as u64;
-                if self.full() {
-                    return EMPTY;
-                }
-                let rs = &mut self.regions;
-                rs.bounds.push(bounds);
-                rs.runs.push(Region {
-                    bricks_start: start as u32,
-                    bricks_len: bricks.len() as u32,
-                });
-                rs.bricks.extend_from_slice(&bricks);
-                LEAF | r as u32
-            }
-            RegionTree::Split {
-                axis,
-                split,
-                left,
-                right,
-            } => {
-                let id = self.nodes.len();
-                self.nodes_seen += 1;
-                if !self.full() {
-                    self.nodes.push(KdNode {
-                        split,
-                        left: EMPTY,
-                        right: EMPTY,
-                    });
-                    self.axes.push(axis);
-                }
-                let l = self.emit(*left);
-                let r = self.emit(*right);
-                if let Some(n) = self.nodes.get_mut(id) {
-                    n.left = l;
-                    n.right = r;
-                }
-                id as u32
-            }
+    pub(crate) fn limits(&self) -> Limits {
+        self.limits
+    }
+
+    fn fits(&self) -> bool {
+        let (c, l) = (&self.count, &self.limits);
+        c.nodes <= l.nodes && c.regions <= l.regions && c.refs <= l.refs
+    }
+
+    /// What the part holds now, to roll back to.
+    pub(crate) fn mark(&self) -> Mark {
+        self.count
+    }
+
+    /// Drops everything added since `mark` was taken (marks are rolled back to in the
+    /// reverse order they were taken, as a recursion does).
+    pub(crate) fn rollback(&mut self, mark: Mark) {
+        self.count = mark;
+        self.nodes.truncate(mark.nodes as usize);
+        self.axes.truncate(mark.nodes as usize);
+        self.regions.bounds.truncate(mark.regions as usize);
+        self.regions.runs.truncate(mark.regions as usize);
+        self.regions.bricks.truncate(mark.refs as usize);
+    }
+
+    /// Adds an inner node splitting at `split` on `axis`, its children empty until
+    /// [`Part::close`]; returns its reference.
+    pub(crate) fn open(&mut self, axis: u8, split: f64) -> u32 {
+        let id = self.count.nodes;
+        self.count.nodes += 1;
+        if !self.fits() {
+            return EMPTY;
         }
+        self.nodes.push(KdNode {
+            split,
+            left: EMPTY,
+            right: EMPTY,
+        });
+        self.axes.push(axis);
+        id as u32
+    }
+
+    /// Sets the children of the node `open` returned `node` for.
+    pub(crate) fn close(&mut self, node: u32, left: u32, right: u32) {
+        if let Some(n) = self.nodes.get_mut(node as usize) {
+            n.left = left;
+            n.right = right;
+        }
+    }
+
+    /// Adds a region with its box and sorted brick ids; returns its leaf reference.
+    pub(crate) fn region(&mut self, bounds: Aabb, bricks: &[u32]) -> u32 {
+        let (r, start) = (self.count.regions, self.count.refs);
+        self.count.regions += 1;
+        self.count.refs += bricks.len() as u64;
+        if !self.fits() {
+            return EMPTY;
+        }
+        let rs = &mut self.regions;
+        rs.bounds.push(bounds);
+        rs.runs.push(Region {
+            bricks_start: start as u32,
+            bricks_len: bricks.len() as u32,
+        });
+        rs.bricks.extend_from_slice(bricks);
+        LEAF | r as u32
+    }
+
+    /// Appends `other` after everything this part holds; returns the reference `root`
+    /// (one of `other`'s) as this part numbers it.
+    pub(crate) fn append(&mut self, other: Part, root: u32) -> u32 {
+        let at = self.count;
+        self.count.nodes += other.count.nodes;
+        self.count.regions += other.count.regions;
+        self.count.refs += other.count.refs;
+        if !self.fits() || !other.fits() {
+            return EMPTY;
+        }
+        // Within the limits, so every shifted index still fits its reference.
+        let shift = |r: u32| match r {
+            EMPTY => EMPTY,
+            r if r & LEAF != 0 => LEAF | ((r & !LEAF) + at.regions as u32),
+            r => r + at.nodes as u32,
+        };
+        self.nodes.extend(other.nodes.iter().map(|n| KdNode {
+            split: n.split,
+            left: shift(n.left),
+            right: shift(n.right),
+        }));
+        self.axes.extend_from_slice(&other.axes);
+        let rs = &mut self.regions;
+        rs.bounds.extend_from_slice(&other.regions.bounds);
+        rs.runs.extend(other.regions.runs.iter().map(|r| Region {
+            bricks_start: r.bricks_start + at.refs as u32,
+            bricks_len: r.bricks_len,
+        }));
+        rs.bricks.extend_from_slice(&other.regions.bricks);
+        shift(root)
+    }
+
+    /// The stored tree with root reference `root`, and its regions; or what is too large
+    /// to store.
+    pub(crate) fn finish(self, root: u32) -> Result<(kd::Packed, Regions), TooLarge> {
+        let (c, l) = (self.count, self.limits);
+        if c.regions > l.regions || c.nodes > l.nodes {
+            return Err(TooLarge::Regions(c.regions));
+        }
+        if c.refs > l.refs {
+            return Err(TooLarge::BrickRefs(c.refs));
+        }
+        Ok(((root, self.nodes, self.axes), self.regions))
     }
 }
 

@@ -1,9 +1,9 @@
 //! Active brick regions: boxes partitioning the union of brick supports, each listing every
 //! brick whose support overlaps it.
 //!
-//! Built in two passes. First by recursive splitting at support boundaries (a KD-style
-//! build), so the KD-tree over the regions falls out of the recursion ([`crate::kdtree`]
-//! serialises it). A node whose box has no support boundary strictly inside is a region:
+//! Built by recursive splitting at support boundaries (a KD-style build), so the KD-tree
+//! over the regions falls out of the recursion, written as it goes in the file's layout
+//! ([`crate::kdtree`]). A node whose box has no support boundary strictly inside is a region:
 //! every support that overlaps it covers it. Otherwise it splits at the boundary plane with
 //! the lowest cost `cut − shared`: `cut` supports straddle the plane (each is fragmented by
 //! it), `shared` supports have a face on it (the plane is a cut the partition needs anyway).
@@ -15,8 +15,8 @@
 //! needs where bricks are large, and far too much where many small supports of several
 //! levels cross (next to an obstacle whose cells are inactive on every level, where thin
 //! shells of partly covered coarse cells lie over small fine bricks): there a ray crosses
-//! dozens of regions of a few bricks each. So the second pass ([`merge`]) replaces a
-//! subtree by one region, listing the union of its regions' bricks, wherever that costs a
+//! dozens of regions of a few bricks each. So as each subtree is finished, bottom-up,
+//! it is replaced by one region, listing the union of its regions' bricks, wherever that costs a
 //! ray less: a region costs `A·s` for the walk to it and the segment (A its surface area,
 //! which a random ray's chance of crossing it is proportional to; `s` a length, see
 //! [`build`]) plus `V·n` for sampling it (V its volume, which the ray's expected path in it
@@ -29,47 +29,77 @@
 //! and every brick's lattice is among the region's, so `exact` still cuts every plane
 //! where the reconstruction stops being one cubic.
 
+use format::kd::{self, EMPTY};
 use format::Aabb;
 
-/// The region tree before serialisation.
-#[derive(Debug, Clone, PartialEq)]
-pub(crate) enum RegionTree {
-    /// Space inside the global bounds that no support reaches.
-    Empty,
-    /// A region with its sorted brick ids (a boxed slice: millions of regions are held at
-    /// once while the tree is built, and a list's spare capacity would be held with them).
-    Region { bounds: Aabb, bricks: Box<[u32]> },
-    /// Points with coordinate `< split` on `axis` go left.
-    Split {
-        axis: u8,
-        split: f64,
-        left: Box<RegionTree>,
-        right: Box<RegionTree>,
-    },
-}
+use crate::kdtree::{Limits, Part, Regions, TooLarge};
 
 /// A region's walk and segment cost as a length of path through one brick's samples, in
 /// finest cell widths (`s` of the module docs over the finest width). Measured on issue
-/// 33's benchmark files: see `merge`'s tests and BENCHMARKS.md.
+/// 33's benchmark files: see BENCHMARKS.md.
 pub(crate) const SEGMENT_COST_CELLS: f64 = 0.5;
 
-/// Builds the region tree over `supports` (indexed by brick id), merging subtrees where a
+/// The regions over a set of supports and the KD-tree that finds them, as the file stores
+/// them.
+#[derive(Debug)]
+pub(crate) struct Built {
+    /// The union box of all supports (None when there are none).
+    pub bounds: Option<Aabb>,
+    pub tree: kd::Packed,
+    pub regions: Regions,
+}
+
+/// Builds the regions over `supports` (indexed by brick id), merging subtrees where a
 /// region costs `segment` (a length) per crossing (see the module docs; 0 keeps one region
-/// per overlap). Returns the union box of all supports (None when there are none) and the
-/// tree.
-pub(crate) fn build(supports: &[Aabb], segment: f64) -> (Option<Aabb>, RegionTree) {
+/// per overlap), straight into the file's layout ([`crate::kdtree`]).
+pub(crate) fn build(supports: &[Aabb], segment: f64) -> Result<Built, TooLarge> {
+    build_within(
+        supports,
+        segment,
+        Limits::FILE,
+        parallel_min(supports.len()),
+    )
+}
+
+/// Below this many supports a node recurses on the current thread.
+const PARALLEL_MIN: usize = 64;
+
+/// Supports at which a node still hands its right half to another thread: a few tasks per
+/// thread balance the load, and each hand-off copies that half's nodes and regions once
+/// more, so the split stops well above [`PARALLEL_MIN`] on large inputs.
+fn parallel_min(supports: usize) -> usize {
+    (supports / (8 * rayon::current_num_threads())).max(PARALLEL_MIN)
+}
+
+fn build_within(
+    supports: &[Aabb],
+    segment: f64,
+    limits: Limits,
+    parallel_min: usize,
+) -> Result<Built, TooLarge> {
+    let mut part = Part::new(limits);
     let Some(first) = supports.first() else {
-        return (None, RegionTree::Empty);
+        let (tree, regions) = part.finish(EMPTY)?;
+        return Ok(Built {
+            bounds: None,
+            tree,
+            regions,
+        });
     };
     let bounds = supports.iter().fold(*first, |acc, s| acc.union(*s));
     let ids: Vec<u32> = (0..supports.len() as u32).collect();
-    let tree = node(supports, bounds, ids);
-    let tree = if segment > 0.0 {
-        merge(tree, bounds, segment).0
-    } else {
-        tree
+    let split = Splitter {
+        sup: supports,
+        segment,
+        parallel_min,
     };
-    (Some(bounds), tree)
+    let root = split.node(bounds, ids, &mut part).root;
+    let (tree, regions) = part.finish(root)?;
+    Ok(Built {
+        bounds: Some(bounds),
+        tree,
+        regions,
+    })
 }
 
 /// Surface area (the whole surface: only ratios matter).
@@ -81,83 +111,135 @@ fn volume(b: &Aabb) -> f64 {
     (0..3).map(|a| (b.max[a] - b.min[a]).max(0.0)).product()
 }
 
-/// What [`merge`] returns for a subtree: the subtree, its cost, and the sorted union of its
-/// regions' bricks when it holds no empty space (None: it may not be merged).
-type Merged = (RegionTree, f64, Option<Vec<u32>>);
-
-/// Replaces every subtree of `t` (whose box is `b`) that holds no empty space by one region
-/// when that costs less (see the module docs); bottom-up, so each subtree is compared with
-/// the best of its own subtrees.
-fn merge(t: RegionTree, b: Aabb, segment: f64) -> Merged {
-    match t {
-        RegionTree::Empty => (RegionTree::Empty, 0.0, None),
-        RegionTree::Region { bounds, bricks } => {
-            let cost = area(&bounds) * segment + volume(&bounds) * bricks.len() as f64;
-            let union = bricks.to_vec();
-            (RegionTree::Region { bounds, bricks }, cost, Some(union))
-        }
-        RegionTree::Split {
-            axis,
-            split,
-            left,
-            right,
-        } => {
-            let a = axis as usize;
-            let (mut lb, mut rb) = (b, b);
-            lb.max[a] = split;
-            rb.min[a] = split;
-            let ((lt, lc, lu), (rt, rc, ru)) = if PARALLEL_MIN_MERGE <= count_regions(&left) {
-                rayon::join(|| merge(*left, lb, segment), || merge(*right, rb, segment))
-            } else {
-                (merge(*left, lb, segment), merge(*right, rb, segment))
-            };
-            let split_cost = area(&b) * segment + lc + rc;
-            let tree = RegionTree::Split {
-                axis,
-                split,
-                left: Box::new(lt),
-                right: Box::new(rt),
-            };
-            let (Some(lu), Some(ru)) = (lu, ru) else {
-                return (tree, split_cost, None);
-            };
-            let union = sorted_union(&lu, &ru);
-            let leaf_cost = area(&b) * segment + volume(&b) * union.len() as f64;
-            if leaf_cost <= split_cost {
-                let bricks = union.clone().into_boxed_slice();
-                (
-                    RegionTree::Region { bounds: b, bricks },
-                    leaf_cost,
-                    Some(union),
-                )
-            } else {
-                (tree, split_cost, Some(union))
-            }
-        }
-    }
+/// What the split of a box left in the part.
+struct Sub {
+    /// Its reference (a node, a region or empty space).
+    root: u32,
+    /// Its cost (see the module docs).
+    cost: f64,
+    /// The sorted union of its regions' bricks, when it holds no empty space and may be
+    /// merged (or is a region, whose bricks the parent compares with its sibling's).
+    union: Option<Vec<u32>>,
+    /// One region per overlap, not merged: two such siblings listing the same bricks are
+    /// one region (a plane inside an overlap that a split elsewhere needed).
+    leaf: bool,
+    empty: bool,
 }
 
-/// Below this many regions a subtree is merged on the current thread.
-const PARALLEL_MIN_MERGE: usize = 256;
+const EMPTY_SUB: Sub = Sub {
+    root: EMPTY,
+    cost: 0.0,
+    union: None,
+    leaf: false,
+    empty: true,
+};
 
-/// Regions of `t`, counted up to [`PARALLEL_MIN_MERGE`] (enough to decide on a thread).
-fn count_regions(t: &RegionTree) -> usize {
-    let mut n = 0;
-    let mut todo = vec![t];
-    while let Some(t) = todo.pop() {
-        match t {
-            RegionTree::Empty => {}
-            RegionTree::Region { .. } => n += 1,
-            RegionTree::Split { left, right, .. } => {
-                if n >= PARALLEL_MIN_MERGE {
-                    break;
-                }
-                todo.push(left);
-                todo.push(right);
-            }
+/// The recursive split (see the module docs), merging each subtree as soon as its two
+/// halves are done: bottom-up, so each subtree is compared with the best of its own
+/// subtrees, and what a merged subtree had stored is dropped from the part at once.
+struct Splitter<'a> {
+    sup: &'a [Aabb],
+    segment: f64,
+    parallel_min: usize,
+}
+
+impl Splitter<'_> {
+    fn region(&self, part: &mut Part, b: Aabb, bricks: Vec<u32>, leaf: bool) -> Sub {
+        Sub {
+            root: part.region(b, &bricks),
+            cost: area(&b) * self.segment + volume(&b) * bricks.len() as f64,
+            union: Some(bricks),
+            leaf,
+            empty: false,
         }
     }
-    n
+
+    fn node(&self, b: Aabb, ids: Vec<u32>, part: &mut Part) -> Sub {
+        let sup = self.sup;
+        if ids.is_empty() {
+            return EMPTY_SUB;
+        }
+        let Some((axis, split)) = choose_split(sup, &b, &ids) else {
+            let mut bricks = ids;
+            bricks.sort_unstable();
+            return self.region(part, b, bricks, true);
+        };
+        let mark = part.mark();
+        let id = part.open(axis, split);
+        let a = axis as usize;
+        let left_ids: Vec<u32> = ids
+            .iter()
+            .copied()
+            .filter(|&i| sup[i as usize].min[a] < split)
+            .collect();
+        let right_ids: Vec<u32> = ids
+            .into_iter()
+            .filter(|&i| sup[i as usize].max[a] > split)
+            .collect();
+        let mut lb = b;
+        lb.max[a] = split;
+        let mut rb = b;
+        rb.min[a] = split;
+        let (left, right) = if left_ids.len() + right_ids.len() >= self.parallel_min {
+            let limits = part.limits();
+            let (left, (right, right_part)) = rayon::join(
+                || self.node(lb, left_ids, part),
+                || {
+                    let mut own = Part::new(limits);
+                    let right = self.node(rb, right_ids, &mut own);
+                    (right, own)
+                },
+            );
+            let root = part.append(right_part, right.root);
+            (left, Sub { root, ..right })
+        } else {
+            let left = self.node(lb, left_ids, part);
+            (left, self.node(rb, right_ids, part))
+        };
+        if left.empty && right.empty {
+            part.rollback(mark);
+            return EMPTY_SUB;
+        }
+        if left.leaf && right.leaf && left.union == right.union {
+            part.rollback(mark);
+            let bricks = left.union.unwrap_or_default();
+            return self.region(part, b, bricks, true);
+        }
+        part.close(id, left.root, right.root);
+        let split_cost = area(&b) * self.segment + left.cost + right.cost;
+        let (Some(lu), Some(ru)) = (left.union, right.union) else {
+            return Sub {
+                root: id,
+                cost: split_cost,
+                union: None,
+                leaf: false,
+                empty: false,
+            };
+        };
+        if self.segment <= 0.0 {
+            // Nothing is merged: no union is needed.
+            return Sub {
+                root: id,
+                cost: split_cost,
+                union: None,
+                leaf: false,
+                empty: false,
+            };
+        }
+        let union = sorted_union(&lu, &ru);
+        let leaf_cost = area(&b) * self.segment + volume(&b) * union.len() as f64;
+        if leaf_cost <= split_cost {
+            part.rollback(mark);
+            return self.region(part, b, union, false);
+        }
+        Sub {
+            root: id,
+            cost: split_cost,
+            union: Some(union),
+            leaf: false,
+            empty: false,
+        }
+    }
 }
 
 /// The union of two sorted lists of ids, sorted.
@@ -184,57 +266,6 @@ fn sorted_union(a: &[u32], b: &[u32]) -> Vec<u32> {
     out.extend_from_slice(&a[i..]);
     out.extend_from_slice(&b[j..]);
     out
-}
-
-/// Below this many supports a node recurses on the current thread.
-const PARALLEL_MIN: usize = 64;
-
-fn node(sup: &[Aabb], b: Aabb, ids: Vec<u32>) -> RegionTree {
-    if ids.is_empty() {
-        return RegionTree::Empty;
-    }
-    let Some((axis, split)) = choose_split(sup, &b, &ids) else {
-        let mut bricks = ids;
-        bricks.sort_unstable();
-        return RegionTree::Region {
-            bounds: b,
-            bricks: bricks.into_boxed_slice(),
-        };
-    };
-    let a = axis as usize;
-    let left_ids: Vec<u32> = ids
-        .iter()
-        .copied()
-        .filter(|&i| sup[i as usize].min[a] < split)
-        .collect();
-    let right_ids: Vec<u32> = ids
-        .into_iter()
-        .filter(|&i| sup[i as usize].max[a] > split)
-        .collect();
-    let mut lb = b;
-    lb.max[a] = split;
-    let mut rb = b;
-    rb.min[a] = split;
-    let (left, right) = if left_ids.len() + right_ids.len() >= PARALLEL_MIN {
-        rayon::join(|| node(sup, lb, left_ids), || node(sup, rb, right_ids))
-    } else {
-        (node(sup, lb, left_ids), node(sup, rb, right_ids))
-    };
-    match (&left, &right) {
-        (RegionTree::Empty, RegionTree::Empty) => RegionTree::Empty,
-        (RegionTree::Region { bricks: l, .. }, RegionTree::Region { bricks: r, .. }) if l == r => {
-            RegionTree::Region {
-                bounds: b,
-                bricks: l.clone(),
-            }
-        }
-        _ => RegionTree::Split {
-            axis,
-            split,
-            left: Box::new(left),
-            right: Box::new(right),
-        },
-    }
 }
 
 /// Differences of balance (distance to the middle over the box's extent) below this are
@@ -299,22 +330,12 @@ fn choose_split(sup: &[Aabb], b: &Aabb, ids: &[u32]) -> Option<(u8, f64)> {
     best.map(|(_, _, a, v)| (a, v))
 }
 
-/// Regions (bounds, bricks) of a tree in depth-first, left-first order.
+/// Regions (bounds, bricks) in the order the tree numbers them (depth-first, left-first).
 #[cfg(test)]
-pub(crate) fn leaves(tree: &RegionTree) -> Vec<(Aabb, &[u32])> {
-    let mut out = Vec::new();
-    fn walk<'t>(t: &'t RegionTree, out: &mut Vec<(Aabb, &'t [u32])>) {
-        match t {
-            RegionTree::Empty => {}
-            RegionTree::Region { bounds, bricks } => out.push((*bounds, bricks)),
-            RegionTree::Split { left, right, .. } => {
-                walk(left, out);
-                walk(right, out);
-            }
-        }
-    }
-    walk(tree, &mut out);
-    out
+pub(crate) fn leaves(regions: &Regions) -> Vec<(Aabb, &[u32])> {
+    (0..regions.len())
+        .map(|r| (regions.bounds[r], regions.bricks_of(r)))
+        .collect()
 }
 
 #[cfg(test)]
@@ -371,9 +392,9 @@ mod tests {
             pts in prop::collection::vec((0.0f64..1.0, 0.0f64..1.0, 0.0f64..1.0), 32),
             segment in prop_oneof![Just(0.0), Just(0.5), Just(4.0)],
         ) {
-            let (bounds, tree) = build(&sup, segment);
-            let bounds = bounds.expect("non-empty");
-            let regs = leaves(&tree);
+            let built = build(&sup, segment).expect("few regions");
+            let bounds = built.bounds.expect("non-empty");
+            let regs = leaves(&built.regions);
             // Disjoint.
             for i in 0..regs.len() {
                 prop_assert!(volume(&regs[i].0) > 0.0);
@@ -409,18 +430,69 @@ mod tests {
                 // and no region lists a brick whose support it does not overlap (checked
                 // above), so the union of regions is exactly the union of supports.
             }
-            // The serialised KD-tree finds the same region as brute force.
-            let (packed, flat) = crate::kdtree::flatten(tree.clone()).expect("few regions");
-            prop_assert_eq!(flat.len(), regs.len());
+            // The stored KD-tree finds the same region as brute force.
+            let (packed, flat) = (&built.tree, &built.regions);
             for (x, y, z) in pts {
                 let f = [x, y, z];
                 let p = [0, 1, 2].map(|a| bounds.min[a] + f[a] * (bounds.max[a] - bounds.min[a]));
                 let brute = flat.bounds.iter().position(|b| {
                     (0..3).all(|a| p[a] >= b.min[a] && p[a] < b.max[a])
                 });
-                prop_assert_eq!(crate::kdtree::locate(&packed, p), brute.map(|r| r as u32));
+                prop_assert_eq!(crate::kdtree::locate(packed, p), brute.map(|r| r as u32));
                 let in_support = sup.iter().any(|s| (0..3).all(|a| p[a] >= s.min[a] && p[a] < s.max[a]));
                 prop_assert_eq!(brute.is_some(), in_support);
+            }
+            // Parents before children, and every region in exactly one leaf, in order.
+            let (root, nodes, axes) = packed;
+            prop_assert_eq!(nodes.len(), axes.len());
+            let mut seen = Vec::new();
+            let mut todo = vec![(*root, None::<u32>)];
+            while let Some((r, parent)) = todo.pop() {
+                if r == EMPTY {
+                    continue;
+                }
+                if r & kd::LEAF != 0 {
+                    seen.push(r & !kd::LEAF);
+                    continue;
+                }
+                prop_assert!(parent.is_none_or(|p| r > p));
+                let n = &nodes[r as usize];
+                todo.push((n.right, Some(r)));
+                todo.push((n.left, Some(r)));
+            }
+            prop_assert_eq!(seen, (0..flat.len() as u32).collect::<Vec<_>>());
+            // Handing halves to other threads (at every node, or none) builds the same.
+            for every in [1, usize::MAX] {
+                let other = build_within(&sup, segment, Limits::FILE, every).expect("few regions");
+                prop_assert_eq!(&other.tree, &built.tree);
+                prop_assert_eq!(&other.regions, &built.regions);
+            }
+            // Just past what the limits allow, the tree is refused with its size; at
+            // them, it is built as before.
+            let size = Limits {
+                regions: flat.len() as u64,
+                nodes: nodes.len() as u64,
+                refs: flat.bricks.len() as u64,
+            };
+            for every in [1, usize::MAX] {
+                let at = build_within(&sup, segment, size, every).expect("at the limits");
+                prop_assert_eq!(&at.regions, &built.regions);
+                let fewer = |l: Limits| build_within(&sup, segment, l, every).map(|b| b.regions);
+                let regions = size.regions;
+                prop_assert_eq!(
+                    fewer(Limits { regions: regions - 1, ..size }),
+                    Err(TooLarge::Regions(regions))
+                );
+                prop_assert_eq!(
+                    fewer(Limits { refs: size.refs - 1, ..size }),
+                    Err(TooLarge::BrickRefs(size.refs))
+                );
+                if size.nodes > 0 {
+                    prop_assert_eq!(
+                        fewer(Limits { nodes: size.nodes - 1, ..size }),
+                        Err(TooLarge::Regions(regions))
+                    );
+                }
             }
         }
     }
@@ -442,9 +514,10 @@ mod tests {
                 });
             }
         }
-        let (_, exact) = build(&sup, 0.0);
-        let (bounds, merged) = build(&sup, 0.5);
-        let (exact, merged) = (leaves(&exact), leaves(&merged));
+        let exact = build(&sup, 0.0).expect("few regions");
+        let merged = build(&sup, 0.5).expect("few regions");
+        let bounds = merged.bounds;
+        let (exact, merged) = (leaves(&exact.regions), leaves(&merged.regions));
         assert!(
             merged.len() * 4 < exact.len(),
             "{} regions merged from {}",
@@ -468,13 +541,16 @@ mod tests {
             min: [0.0; 3],
             max: [1.0, 2.0, 3.0],
         };
-        let (_, t) = build(&[s], 0.5);
-        assert_eq!(
-            t,
-            RegionTree::Region {
-                bounds: s,
-                bricks: vec![0].into()
-            }
-        );
+        let built = build(&[s], 0.5).expect("one region");
+        assert_eq!(built.tree, (kd::LEAF, vec![], vec![]));
+        assert_eq!(leaves(&built.regions), vec![(s, &[0u32][..])]);
+    }
+
+    #[test]
+    fn no_support_is_an_empty_tree() {
+        let built = build(&[], 0.5).expect("nothing");
+        assert_eq!(built.bounds, None);
+        assert_eq!(built.tree, (EMPTY, vec![], vec![]));
+        assert_eq!(built.regions.len(), 0);
     }
 }

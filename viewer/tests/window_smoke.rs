@@ -29,10 +29,17 @@ fn have_xvfb() -> bool {
 }
 
 /// Runs qbricks-view with `args` in a fresh X server.
+/// Runs the viewer under `xvfb-run`, with its X authority file in a directory of ours: left
+/// to itself, xvfb-run makes its own under /tmp and, when removing it fails at exit (seen
+/// once under the whole suite's parallel load), exits 5 in place of the viewer's status.
 fn in_xvfb(args: &[&str], dir: &Path) -> Output {
     let runtime = tempfile::tempdir().expect("runtime dir");
+    let auth = runtime.path().join("Xauthority");
+    std::fs::write(&auth, b"").expect("auth file");
     Command::new("xvfb-run")
         .args(["-a", "-s", "-screen 0 1400x1000x24"])
+        .arg("-f")
+        .arg(&auth)
         .arg(env!("CARGO_BIN_EXE_qbricks-view"))
         .args(args)
         .current_dir(dir)

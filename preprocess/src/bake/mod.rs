@@ -10,7 +10,7 @@
 use rayon::prelude::*;
 use serde::Serialize;
 
-use format::{Aabb, BrickFile, SourceGrid};
+use format::{BrickFile, SourceGrid};
 
 use crate::bricks::{make_bricks, BrickBox};
 use crate::cells::{classify_leaves, CellSet, Keep, SlotValues, Widen};
@@ -381,8 +381,9 @@ fn run(
     )?;
 
     stage("building regions");
-    let (bounds, tree) = build_regions(&sets, &bricks, selection.widths[0]);
-    let kd = kd_tree(tree, &bricks, &fields, &opts.spill)?;
+    let built = build_regions(&sets, &bricks, selection.widths[0])?;
+    let bounds = built.bounds;
+    let kd = kd_tree(built, &bricks, &fields, &opts.spill);
 
     stage("assembling");
     check_archive(leaf_cells, nfields, archive_bytes(&bricks, &fields, &kd))?;
@@ -737,15 +738,24 @@ fn clamp_fields(
 
 /// Region stage: the bricks' supports, snapped so that neighbouring lattices agree (see
 /// [`snapped_supports`]), split into regions and merged where many small ones would cost
-/// rays more (see [`regions::build`]). Returns the union of
-/// the supports and the region tree.
+/// rays more, with the KD-tree over them (see [`regions::build`]); or how far past what
+/// the file can store they are.
 fn build_regions(
     sets: &[CellSet],
     bricks: &Bricks,
     finest: f64,
-) -> (Option<Aabb>, regions::RegionTree) {
+) -> Result<regions::Built, BakeError> {
     let supports = snapped_supports(sets, &bricks.boxes, finest);
-    regions::build(&supports, regions::SEGMENT_COST_CELLS * finest)
+    regions::build(&supports, regions::SEGMENT_COST_CELLS * finest).map_err(|e| match e {
+        TooLarge::Regions(regions) => BakeError::TooManyRegions {
+            regions,
+            limit: u64::from(format::kd::MAX_REGION) + 1,
+        },
+        TooLarge::BrickRefs(refs) => BakeError::TooManyBrickRefs {
+            refs,
+            limit: u64::from(u32::MAX),
+        },
+    })
 }
 
 /// The region tree as the file stores it.
@@ -758,25 +768,14 @@ struct Kd {
     ranges: Vec<[f32; 2]>,
 }
 
-/// KD-tree stage: flattens the region tree (consumed, see [`crate::kdtree::flatten`]) and
-/// computes each region's value range per field, which lets the viewer skip regions an
-/// iso-value cannot cross.
-fn kd_tree(
-    tree: regions::RegionTree,
-    bricks: &Bricks,
-    fields: &FieldValues,
-    spill: &Spill,
-) -> Result<Kd, BakeError> {
-    let (packed, regions) = crate::kdtree::flatten(tree).map_err(|e| match e {
-        TooLarge::Regions(regions) => BakeError::TooManyRegions {
-            regions,
-            limit: u64::from(format::kd::MAX_REGION) + 1,
-        },
-        TooLarge::BrickRefs(refs) => BakeError::TooManyBrickRefs {
-            refs,
-            limit: u64::from(u32::MAX),
-        },
-    })?;
+/// KD-tree stage: each region's value range per field, which lets the viewer skip regions
+/// an iso-value cannot cross.
+fn kd_tree(built: regions::Built, bricks: &Bricks, fields: &FieldValues, spill: &Spill) -> Kd {
+    let regions::Built {
+        tree: packed,
+        regions,
+        ..
+    } = built;
     let slices = fields.slices();
     let release = |f: usize, r: std::ops::Range<usize>| fields.release(f, r);
     let ranges = region_ranges(
@@ -790,11 +789,11 @@ fn kd_tree(
         &fields.brick_values(&slices, &release),
         spill.window_values(4),
     );
-    Ok(Kd {
+    Kd {
         tree: packed,
         regions,
         ranges,
-    })
+    }
 }
 
 /// Names of the fields a bake of `input` makes.
