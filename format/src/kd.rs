@@ -60,6 +60,20 @@ pub trait KdTree {
     fn node(&self, i: u32) -> Option<Node>;
 }
 
+/// A borrowed tree walks as the tree (so that a walk may hold the tree or a reference).
+impl<T: KdTree + ?Sized> KdTree for &T {
+    fn node_count(&self) -> usize {
+        (**self).node_count()
+    }
+    fn root(&self) -> u32 {
+        (**self).root()
+    }
+    #[inline(always)]
+    fn node(&self, i: u32) -> Option<Node> {
+        (**self).node(i)
+    }
+}
+
 /// A tree as a file stores it (format 3): a root reference, the inner nodes, their axes.
 /// `N` is the native node while baking and the archived one when reading a file.
 #[derive(Debug)]
@@ -340,35 +354,67 @@ pub fn leaf_cells<T: KdTree + ?Sized, F: FnMut(u32, [f64; 3], [f64; 3])>(
     shift: [f64; 3],
     mut f: F,
 ) {
-    let lo: [f64; 3] = std::array::from_fn(|a| min[a] - shift[a]);
-    let hi: [f64; 3] = std::array::from_fn(|a| max[a] - shift[a]);
-    let mut budget = tree.node_count().saturating_mul(2).saturating_add(1);
-    let mut stack = vec![(tree.root(), lo, hi)];
-    while let Some((n, lo, hi)) = stack.pop() {
-        if budget == 0 {
-            return;
+    for (r, lo, hi) in LeafCells::new(tree, min, max, shift) {
+        f(r, lo, hi);
+    }
+}
+
+/// [`leaf_cells`] as an iterator of `(region, min, max)`, for a reader that takes the
+/// cells a batch at a time instead of holding one per region. It holds `tree` (a tree or
+/// a reference to one).
+pub struct LeafCells<T: KdTree> {
+    tree: T,
+    shift: [f64; 3],
+    budget: usize,
+    stack: Vec<(u32, [f64; 3], [f64; 3])>,
+}
+
+impl<T: KdTree> LeafCells<T> {
+    pub fn new(tree: T, min: [f64; 3], max: [f64; 3], shift: [f64; 3]) -> Self {
+        let lo: [f64; 3] = std::array::from_fn(|a| min[a] - shift[a]);
+        let hi: [f64; 3] = std::array::from_fn(|a| max[a] - shift[a]);
+        LeafCells {
+            shift,
+            budget: tree.node_count().saturating_mul(2).saturating_add(1),
+            stack: vec![(tree.root(), lo, hi)],
+            tree,
         }
-        budget -= 1;
-        match tree.node(n) {
-            Some(Node::Inner {
-                axis,
-                split,
-                left,
-                right,
-            }) => {
-                let a = axis.min(2);
-                // Clamped to the cell: a split outside it leaves one child empty, as the
-                // descent and the ray walk see it, and no box reaches past its parent's.
-                let s = (split - shift[a]).max(lo[a]).min(hi[a]);
-                let (mut lhi, mut rlo) = (hi, lo);
-                lhi[a] = s;
-                rlo[a] = s;
-                stack.push((right, rlo, hi));
-                stack.push((left, lo, lhi));
+    }
+}
+
+impl<T: KdTree> Iterator for LeafCells<T> {
+    type Item = (u32, [f64; 3], [f64; 3]);
+
+    fn next(&mut self) -> Option<Self::Item> {
+        while let Some((n, lo, hi)) = self.stack.pop() {
+            if self.budget == 0 {
+                self.stack.clear();
+                return None;
             }
-            Some(Node::Leaf(Some(r))) => f(r, lo, hi),
-            _ => {}
+            self.budget -= 1;
+            match self.tree.node(n) {
+                Some(Node::Inner {
+                    axis,
+                    split,
+                    left,
+                    right,
+                }) => {
+                    let a = axis.min(2);
+                    // Clamped to the cell: a split outside it leaves one child empty, as
+                    // the descent and the ray walk see it, and no box reaches past its
+                    // parent's.
+                    let s = (split - self.shift[a]).max(lo[a]).min(hi[a]);
+                    let (mut lhi, mut rlo) = (hi, lo);
+                    lhi[a] = s;
+                    rlo[a] = s;
+                    self.stack.push((right, rlo, hi));
+                    self.stack.push((left, lo, lhi));
+                }
+                Some(Node::Leaf(Some(r))) => return Some((r, lo, hi)),
+                _ => {}
+            }
         }
+        None
     }
 }
 

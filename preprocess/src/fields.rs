@@ -1,6 +1,7 @@
 //! Baked fields: which ones, their per-cell values brick after brick, global range and
 //! histogram, and per-region value bounds.
 
+use format::Aabb;
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -146,7 +147,9 @@ pub(crate) enum BrickValues<'a> {
 }
 
 /// Per-region, per-field `(min, max)` over every cell of the region's bricks whose tent
-/// `(c − w, c + w)` reaches into the region box; conservative by a hair at the edges.
+/// `(c − w, c + w)` reaches into the region box (`boxes` gives them in region order, see
+/// [`crate::kdtree::leaf_boxes`]; a region without one gets no cells); conservative by a
+/// hair at the edges.
 ///
 /// Regions are taken [`REGION_BATCH`] at a time, in parallel within a batch, and fewer
 /// when their bricks hold more than `window` values (all fields). Mapped values are read a
@@ -158,16 +161,18 @@ pub(crate) enum BrickValues<'a> {
 pub(crate) fn region_ranges(
     input: &RangeInput,
     regions: &Regions,
+    boxes: impl Iterator<Item = Aabb>,
     values: &BrickValues,
     window: usize,
 ) -> Vec<[f32; 2]> {
-    ranges_in_batches(input, regions, values, REGION_BATCH, window)
+    ranges_in_batches(input, regions, boxes, values, REGION_BATCH, window)
 }
 
 /// [`region_ranges`], at most `batch` regions at a time.
 fn ranges_in_batches(
     input: &RangeInput,
     regions: &Regions,
+    mut boxes: impl Iterator<Item = Aabb>,
     values: &BrickValues,
     batch_regions: usize,
     window: usize,
@@ -214,13 +219,14 @@ fn ranges_in_batches(
         let (batch, tail) = std::mem::take(&mut rest).split_at_mut(regs.len() * nf);
         rest = tail;
         let first = regs.start;
+        let batch_boxes: Vec<Aabb> = boxes.by_ref().take(regs.len()).collect();
         match values {
             BrickValues::Resident(v) => {
                 let get = |f: usize, b: usize| {
                     let at = input.first[b] as usize;
                     &v[f][at..at + cells(b)]
                 };
-                ranges_of_batch(input, regions, first, nf, batch, &get);
+                ranges_of_batch(input, regions, first, &batch_boxes, nf, batch, &get);
             }
             BrickValues::Mapped { values, release } => {
                 let regs = first..first + batch.len() / nf;
@@ -256,7 +262,7 @@ fn ranges_in_batches(
                     let i = slot[b] as usize;
                     &copied[f][at[i]..at[i + 1]]
                 };
-                ranges_of_batch(input, regions, first, nf, batch, &get);
+                ranges_of_batch(input, regions, first, &batch_boxes, nf, batch, &get);
                 for &b in &ids {
                     slot[b as usize] = NONE;
                 }
@@ -276,14 +282,22 @@ fn ranges_of_batch<'v>(
     input: &RangeInput,
     regions: &Regions,
     first: usize,
+    boxes: &[Aabb],
     nf: usize,
     out: &mut [[f32; 2]],
     get: &(dyn Fn(usize, usize) -> &'v [f32] + Sync),
 ) {
+    const NO_BOX: Aabb = Aabb {
+        min: [0.0; 3],
+        max: [0.0; 3],
+    };
     out.par_chunks_mut(nf).enumerate().for_each(|(k, out)| {
         let r = first + k;
-        let rb = &regions.bounds[r];
-        let bricks = regions.bricks_of(r);
+        // Without a box (a tree with fewer region leaves than regions) no cell counts.
+        let (rb, bricks) = match boxes.get(k) {
+            Some(rb) => (rb, regions.bricks_of(r)),
+            None => (&NO_BOX, &[][..]),
+        };
         for &b in bricks {
             let b = b as usize;
             let bx = &input.bricks[b];
@@ -330,7 +344,7 @@ fn ranges_of_batch<'v>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use format::{Aabb, Region};
+    use format::Region;
 
     /// Mapped values, copied out a batch at a time, give the ranges read in place, for
     /// batches of one region to all of them; every value's pages are let go after each
@@ -366,6 +380,7 @@ mod tests {
         let values = [field(0), field(1)];
         let slices: Vec<&[f32]> = values.iter().map(Vec::as_slice).collect();
         let mut regions = Regions::default();
+        let mut boxes = Vec::new();
         for r in 0..9 {
             let lo = r as f64 * 0.45 - 0.3;
             let ids: Vec<u32> = [0, (r % 5 + 1) as u32, ((r * 2) % 6) as u32]
@@ -373,7 +388,7 @@ mod tests {
                 .collect::<std::collections::BTreeSet<_>>()
                 .into_iter()
                 .collect();
-            regions.bounds.push(Aabb {
+            boxes.push(Aabb {
                 min: [lo, 0.0, -0.6],
                 max: [lo + 0.9, 1.4, 0.4],
             });
@@ -389,7 +404,13 @@ mod tests {
             widths: &widths,
             first: &first,
         };
-        let in_place = region_ranges(&input, &regions, &BrickValues::Resident(&slices), 1 << 20);
+        let in_place = region_ranges(
+            &input,
+            &regions,
+            boxes.iter().copied(),
+            &BrickValues::Resident(&slices),
+            1 << 20,
+        );
         assert_eq!(in_place.len(), 9 * 2);
         assert!(in_place.iter().all(|r| r[0].is_finite() && r[0] <= r[1]));
         for batch in [1, 2, 4, 9, 100] {
@@ -401,7 +422,14 @@ mod tests {
                 values: &slices,
                 release: &release,
             };
-            let ranges = ranges_in_batches(&input, &regions, &mapped, batch, usize::MAX);
+            let ranges = ranges_in_batches(
+                &input,
+                &regions,
+                boxes.iter().copied(),
+                &mapped,
+                batch,
+                usize::MAX,
+            );
             let bits = |v: &[[f32; 2]]| -> Vec<[u32; 2]> {
                 v.iter().map(|r| r.map(f32::to_bits)).collect()
             };
@@ -415,7 +443,14 @@ mod tests {
             assert_eq!(whole, 2 * 9usize.div_ceil(batch), "batch {batch}");
             // Batches cut by the values their bricks hold give the same ranges.
             for window in [1, 40, 700] {
-                let ranges = ranges_in_batches(&input, &regions, &mapped, batch, window);
+                let ranges = ranges_in_batches(
+                    &input,
+                    &regions,
+                    boxes.iter().copied(),
+                    &mapped,
+                    batch,
+                    window,
+                );
                 assert_eq!(
                     bits(&ranges),
                     bits(&in_place),

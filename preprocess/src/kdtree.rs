@@ -7,19 +7,20 @@
 //! [`crate::regions::build`] writes the tree straight into this layout as it splits, one
 //! [`Part`] per thread, instead of building a tree of boxed nodes first and copying it out:
 //! a bake of a billion cells makes 16.6 M regions, and boxed nodes with a list each cost
-//! about 350 bytes a region while the tree stood whole, against the 80–100 bytes the file's
-//! arrays take.
+//! about 350 bytes a region while the tree stood whole, against the 55 bytes or so the
+//! file's arrays and the value ranges take.
 
 use format::kd::{self, EMPTY, LEAF, MAX_REGION};
 use format::{Aabb, KdNode, Region};
 
-/// Regions as the tree numbers them, laid out as the file stores them: region `r`'s box
-/// is `bounds[r]` (its leaf's cell) and its sorted brick ids are the run `runs[r]` of
-/// `bricks`. Flat, so that a bake's millions of regions cost their ids and a few bytes
-/// each, not a heap allocation each.
+/// Regions as the tree numbers them, laid out as the file stores them: region `r`'s sorted
+/// brick ids are the run `runs[r]` of `bricks`. Flat, so that a bake's millions of regions
+/// cost their ids and a few bytes each, not a heap allocation each. A region's box is its
+/// leaf's cell, which [`leaf_boxes`] derives in region order when it is needed (the file
+/// does not store it, and at 48 bytes a region it was the largest part of the structure
+/// a bake held).
 #[derive(Debug, Default, Clone, PartialEq)]
 pub(crate) struct Regions {
-    pub bounds: Vec<Aabb>,
     pub runs: Vec<Region>,
     pub bricks: Vec<u32>,
 }
@@ -117,7 +118,6 @@ impl Part {
         self.count = mark;
         self.nodes.truncate(mark.nodes as usize);
         self.axes.truncate(mark.nodes as usize);
-        self.regions.bounds.truncate(mark.regions as usize);
         self.regions.runs.truncate(mark.regions as usize);
         self.regions.bricks.truncate(mark.refs as usize);
     }
@@ -147,8 +147,8 @@ impl Part {
         }
     }
 
-    /// Adds a region with its box and sorted brick ids; returns its leaf reference.
-    pub(crate) fn region(&mut self, bounds: Aabb, bricks: &[u32]) -> u32 {
+    /// Adds a region with its sorted brick ids; returns its leaf reference.
+    pub(crate) fn region(&mut self, bricks: &[u32]) -> u32 {
         let (r, start) = (self.count.regions, self.count.refs);
         self.count.regions += 1;
         self.count.refs += bricks.len() as u64;
@@ -156,7 +156,6 @@ impl Part {
             return EMPTY;
         }
         let rs = &mut self.regions;
-        rs.bounds.push(bounds);
         rs.runs.push(Region {
             bricks_start: start as u32,
             bricks_len: bricks.len() as u32,
@@ -188,7 +187,6 @@ impl Part {
         }));
         self.axes.extend_from_slice(&other.axes);
         let rs = &mut self.regions;
-        rs.bounds.extend_from_slice(&other.regions.bounds);
         rs.runs.extend(other.regions.runs.iter().map(|r| Region {
             bricks_start: r.bricks_start + at.refs as u32,
             bricks_len: r.bricks_len,
@@ -209,6 +207,20 @@ impl Part {
         }
         Ok(((root, self.nodes, self.axes), self.regions))
     }
+}
+
+/// The box of every region of `tree`, in region order: the cells of its region leaves,
+/// depth-first and left-first from `root` (the box of the whole tree), cut at each inner
+/// node's split as the build cut them, so each is bit for bit the box the region was made
+/// for ([`format::kd::LeafCells`], the walk the viewer derives its region table with).
+pub(crate) fn leaf_boxes(tree: &kd::Packed, root: Aabb) -> impl Iterator<Item = Aabb> + '_ {
+    let (top, nodes, axes) = tree;
+    let stored = kd::Stored {
+        root: *top,
+        nodes,
+        axes,
+    };
+    kd::LeafCells::new(stored, root.min, root.max, [0.0; 3]).map(|(_, min, max)| Aabb { min, max })
 }
 
 /// Region containing `p` by descending the tree (for tests and the baker's self-check):

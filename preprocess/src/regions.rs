@@ -146,7 +146,7 @@ struct Splitter<'a> {
 impl Splitter<'_> {
     fn region(&self, part: &mut Part, b: Aabb, bricks: Vec<u32>, leaf: bool) -> Sub {
         Sub {
-            root: part.region(b, &bricks),
+            root: part.region(&bricks),
             cost: area(&b) * self.segment + volume(&b) * bricks.len() as f64,
             union: Some(bricks),
             leaf,
@@ -330,11 +330,18 @@ fn choose_split(sup: &[Aabb], b: &Aabb, ids: &[u32]) -> Option<(u8, f64)> {
     best.map(|(_, _, a, v)| (a, v))
 }
 
-/// Regions (bounds, bricks) in the order the tree numbers them (depth-first, left-first).
+/// Regions (box, bricks) in the order the tree numbers them (depth-first, left-first).
 #[cfg(test)]
-pub(crate) fn leaves(regions: &Regions) -> Vec<(Aabb, &[u32])> {
-    (0..regions.len())
-        .map(|r| (regions.bounds[r], regions.bricks_of(r)))
+pub(crate) fn leaves(built: &Built) -> Vec<(Aabb, &[u32])> {
+    let Some(bounds) = built.bounds else {
+        return Vec::new();
+    };
+    let boxes: Vec<Aabb> = crate::kdtree::leaf_boxes(&built.tree, bounds).collect();
+    assert_eq!(boxes.len(), built.regions.len(), "a box for every region");
+    boxes
+        .into_iter()
+        .enumerate()
+        .map(|(r, b)| (b, built.regions.bricks_of(r)))
         .collect()
 }
 
@@ -394,7 +401,7 @@ mod tests {
         ) {
             let built = build(&sup, segment).expect("few regions");
             let bounds = built.bounds.expect("non-empty");
-            let regs = leaves(&built.regions);
+            let regs = leaves(&built);
             // Disjoint.
             for i in 0..regs.len() {
                 prop_assert!(volume(&regs[i].0) > 0.0);
@@ -435,7 +442,7 @@ mod tests {
             for (x, y, z) in pts {
                 let f = [x, y, z];
                 let p = [0, 1, 2].map(|a| bounds.min[a] + f[a] * (bounds.max[a] - bounds.min[a]));
-                let brute = flat.bounds.iter().position(|b| {
+                let brute = regs.iter().map(|(b, _)| b).position(|b| {
                     (0..3).all(|a| p[a] >= b.min[a] && p[a] < b.max[a])
                 });
                 prop_assert_eq!(crate::kdtree::locate(packed, p), brute.map(|r| r as u32));
@@ -517,7 +524,7 @@ mod tests {
         let exact = build(&sup, 0.0).expect("few regions");
         let merged = build(&sup, 0.5).expect("few regions");
         let bounds = merged.bounds;
-        let (exact, merged) = (leaves(&exact.regions), leaves(&merged.regions));
+        let (exact, merged) = (leaves(&exact), leaves(&merged));
         assert!(
             merged.len() * 4 < exact.len(),
             "{} regions merged from {}",
@@ -543,7 +550,7 @@ mod tests {
         };
         let built = build(&[s], 0.5).expect("one region");
         assert_eq!(built.tree, (kd::LEAF, vec![], vec![]));
-        assert_eq!(leaves(&built.regions), vec![(s, &[0u32][..])]);
+        assert_eq!(leaves(&built), vec![(s, &[0u32][..])]);
     }
 
     #[test]

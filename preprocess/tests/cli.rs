@@ -300,13 +300,25 @@ fn a_bake_within_a_memory_budget_stays_under_it_and_writes_the_same_file() {
     assert!(free_peak > 3 * budget, "{free_peak}");
     assert!(within == free, "the budgeted bake wrote another file");
     // Within the budget and the fixed overhead the docs state (the program, its threads'
-    // stacks, the pages the kernel maps around faults): 45-53 MiB measured, and from 30 to
-    // 32 MiB at budgets of 20 and 24 MiB, run to run.
+    // stacks, the pages the kernel maps around faults): 45-53 MiB measured, and 25-32 MiB
+    // at budgets of 16 to 24 MiB, run to run.
     assert!(peak <= budget + (16 << 20), "{} MiB", peak >> 20);
 
+    // A budget below what the structure of 16.8 M cells needs (eight active 128³ tiles: a
+    // file of a few kilobytes) is refused before anything is decoded, naming the least.
+    let tile = dir.path().join("tile.vdb");
+    let mut grid = abc_grid("vel", h, 0, 0);
+    for k in 0..8 {
+        grid.tiles.push(qbricks_preprocess::grid::Tile {
+            origin: [k & 1, (k >> 1) & 1, k >> 2].map(|c| 128 * c),
+            size: 128,
+            value: [1.0, 0.0, 0.0],
+        });
+    }
+    write_vdb(&tile, &[AnyGrid::Vec3s(grid)], Compression::Zip).expect("write");
     let out = run(&[
         "bake",
-        vdb.to_str().expect("utf-8"),
+        tile.to_str().expect("utf-8"),
         "-o",
         dir.path().join("small.qbk").to_str().expect("utf-8"),
         "--memory",
@@ -315,7 +327,9 @@ fn a_bake_within_a_memory_budget_stays_under_it_and_writes_the_same_file() {
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
-        err.contains("even with every value kept on disk") && err.contains("give --memory "),
+        err.contains("the bake of 16777216 input cells (grid \"vel\") needs about ")
+            && err.contains("even with every value kept on disk")
+            && err.contains("give --memory "),
         "{err}"
     );
     assert!(!dir.path().join("small.qbk").exists());

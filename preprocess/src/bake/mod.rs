@@ -772,10 +772,14 @@ struct Kd {
 /// an iso-value cannot cross.
 fn kd_tree(built: regions::Built, bricks: &Bricks, fields: &FieldValues, spill: &Spill) -> Kd {
     let regions::Built {
+        bounds,
         tree: packed,
         regions,
-        ..
     } = built;
+    let boxes = bounds
+        .map(|b| crate::kdtree::leaf_boxes(&packed, b))
+        .into_iter()
+        .flatten();
     let slices = fields.slices();
     let release = |f: usize, r: std::ops::Range<usize>| fields.release(f, r);
     let ranges = region_ranges(
@@ -786,6 +790,7 @@ fn kd_tree(built: regions::Built, bricks: &Bricks, fields: &FieldValues, spill: 
             first: &bricks.first,
         },
         &regions,
+        boxes,
         &fields.brick_values(&slices, &release),
         spill.window_values(4),
     );
