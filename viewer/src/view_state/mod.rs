@@ -237,13 +237,9 @@ impl ViewState {
             self.frame_boxes(&[(vol.to_world(vol.bounds_min), vol.to_world(vol.bounds_max))]);
             return;
         }
-        let v = glam::DVec3::from_array;
-        let source = |each: &mut dyn FnMut(glam::DVec3, glam::DVec3)| {
-            boxes.for_each(vol, |lo, hi| each(v(vol.to_world(lo)), v(vol.to_world(hi))));
-        };
         let aspect = f64::from(self.width.max(1)) / f64::from(self.height.max(1));
         let fill = crate::framing::DEFAULT_FILL;
-        self.camera = crate::framing::fit_boxes_from(&source, aspect, fill, self.camera.projection);
+        self.camera = boxes.fit(vol, aspect, fill, self.camera.projection);
         self.lights_follow_camera();
     }
 
