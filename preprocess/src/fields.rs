@@ -422,14 +422,11 @@ mod tests {
                 values: &slices,
                 release: &release,
             };
-            let ranges = ranges_in_batches(
-                &input,
-                &regions,
-                boxes.iter().copied(),
-                &mapped,
-                batch,
-                usize::MAX,
-            );
+            let in_batches = |window: usize| {
+                let boxes = boxes.iter().copied();
+                ranges_in_batches(&input, &regions, boxes, &mapped, batch, window)
+            };
+            let ranges = in_batches(usize::MAX);
             let bits = |v: &[[f32; 2]]| -> Vec<[u32; 2]> {
                 v.iter().map(|r| r.map(f32::to_bits)).collect()
             };
@@ -443,14 +440,7 @@ mod tests {
             assert_eq!(whole, 2 * 9usize.div_ceil(batch), "batch {batch}");
             // Batches cut by the values their bricks hold give the same ranges.
             for window in [1, 40, 700] {
-                let ranges = ranges_in_batches(
-                    &input,
-                    &regions,
-                    boxes.iter().copied(),
-                    &mapped,
-                    batch,
-                    window,
-                );
+                let ranges = in_batches(window);
                 assert_eq!(
                     bits(&ranges),
                     bits(&in_place),

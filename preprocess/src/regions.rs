@@ -207,35 +207,23 @@ impl Splitter<'_> {
         }
         part.close(id, left.root, right.root);
         let split_cost = area(&b) * self.segment + left.cost + right.cost;
-        let (Some(lu), Some(ru)) = (left.union, right.union) else {
-            return Sub {
-                root: id,
-                cost: split_cost,
-                union: None,
-                leaf: false,
-                empty: false,
-            };
+        // Only a subtree without empty space may be merged, and nothing is when a
+        // crossing costs nothing (then no union is needed).
+        let mut union = match (left.union, right.union) {
+            (Some(lu), Some(ru)) if self.segment > 0.0 => Some(sorted_union(&lu, &ru)),
+            _ => None,
         };
-        if self.segment <= 0.0 {
-            // Nothing is merged: no union is needed.
-            return Sub {
-                root: id,
-                cost: split_cost,
-                union: None,
-                leaf: false,
-                empty: false,
-            };
-        }
-        let union = sorted_union(&lu, &ru);
-        let leaf_cost = area(&b) * self.segment + volume(&b) * union.len() as f64;
-        if leaf_cost <= split_cost {
+        // One region costs what `region` counts for it.
+        let cheaper =
+            |u: &mut Vec<u32>| area(&b) * self.segment + volume(&b) * u.len() as f64 <= split_cost;
+        if let Some(union) = union.take_if(cheaper) {
             part.rollback(mark);
             return self.region(part, b, union, false);
         }
         Sub {
             root: id,
             cost: split_cost,
-            union: Some(union),
+            union,
             leaf: false,
             empty: false,
         }
