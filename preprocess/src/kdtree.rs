@@ -214,27 +214,23 @@ impl Part {
 /// node's split as the build cut them, so each is bit for bit the box the region was made
 /// for ([`format::kd::LeafCells`], the walk the viewer derives its region table with).
 pub(crate) fn leaf_boxes(tree: &kd::Packed, root: Aabb) -> impl Iterator<Item = Aabb> + '_ {
-    let (top, nodes, axes) = tree;
-    let stored = kd::Stored {
-        root: *top,
+    kd::LeafCells::new(stored(tree), root.min, root.max, [0.0; 3])
+        .map(|(_, min, max)| Aabb { min, max })
+}
+
+/// The packed tree as the file's walks read it.
+fn stored(tree: &kd::Packed) -> kd::Stored<'_, KdNode> {
+    let (root, nodes, axes) = tree;
+    kd::Stored {
+        root: *root,
         nodes,
         axes,
-    };
-    kd::LeafCells::new(stored, root.min, root.max, [0.0; 3]).map(|(_, min, max)| Aabb { min, max })
+    }
 }
 
 /// Region containing `p` by descending the tree (for tests and the baker's self-check):
 /// the file's own descent, [`format::kd::locate`].
 #[cfg(test)]
 pub(crate) fn locate(tree: &kd::Packed, p: [f64; 3]) -> Option<u32> {
-    let (root, nodes, axes) = tree;
-    format::kd::locate(
-        &kd::Stored {
-            root: *root,
-            nodes,
-            axes,
-        },
-        p,
-        [0.0; 3],
-    )
+    format::kd::locate(&stored(tree), p, [0.0; 3])
 }

@@ -148,33 +148,31 @@ impl SurfaceBoxes {
         b: u32,
         masks: &'a [u8],
     ) -> impl Iterator<Item = ([f64; 3], [f64; 3])> + 'a {
-        {
-            let br = vol.brick(b);
-            let nb = br.dims.map(|n| (n + BLOCK - 1) / BLOCK);
-            masks.iter().enumerate().filter_map(move |(block, &mask)| {
-                if mask == 0 {
-                    return None;
-                }
-                let block = block as i64;
-                let at = [
-                    block % nb[0],
-                    (block / nb[0]) % nb[1],
-                    block / (nb[0] * nb[1]),
-                ];
-                // A cell's support edges grow with its index (every step of their
-                // arithmetic is monotonic), so the box of the marked cells is that of
-                // their lowest and highest index per axis.
-                let mut above = Aabb::default();
-                for corner in [low_cell(mask), high_cell(mask)] {
-                    let c: [f64; 3] = std::array::from_fn(|a| (at[a] * BLOCK + corner[a]) as f64);
-                    let centre: [f64; 3] = std::array::from_fn(|a| br.origin[a] + c[a] * br.w);
-                    above.grow(centre, br.w);
-                }
-                let lo: [f64; 3] = std::array::from_fn(|a| above.min[a].max(self.clip.min[a]));
-                let hi: [f64; 3] = std::array::from_fn(|a| above.max[a].min(self.clip.max[a]));
-                (0..3).all(|a| lo[a] <= hi[a]).then_some((lo, hi))
-            })
-        }
+        let br = vol.brick(b);
+        let nb = br.dims.map(|n| (n + BLOCK - 1) / BLOCK);
+        masks.iter().enumerate().filter_map(move |(block, &mask)| {
+            if mask == 0 {
+                return None;
+            }
+            let block = block as i64;
+            let at = [
+                block % nb[0],
+                (block / nb[0]) % nb[1],
+                block / (nb[0] * nb[1]),
+            ];
+            // A cell's support edges grow with its index (every step of their
+            // arithmetic is monotonic), so the box of the marked cells is that of
+            // their lowest and highest index per axis.
+            let mut above = Aabb::default();
+            for corner in [low_cell(mask), high_cell(mask)] {
+                let c: [f64; 3] = std::array::from_fn(|a| (at[a] * BLOCK + corner[a]) as f64);
+                let centre: [f64; 3] = std::array::from_fn(|a| br.origin[a] + c[a] * br.w);
+                above.grow(centre, br.w);
+            }
+            let lo: [f64; 3] = std::array::from_fn(|a| above.min[a].max(self.clip.min[a]));
+            let hi: [f64; 3] = std::array::from_fn(|a| above.max[a].min(self.clip.max[a]));
+            (0..3).all(|a| lo[a] <= hi[a]).then_some((lo, hi))
+        })
     }
 
     /// [`fit_boxes_from`] for these boxes in world coordinates (`vol`'s), the same camera,
