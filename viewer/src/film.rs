@@ -49,10 +49,8 @@ pub(crate) fn mean_colour(sum: [f64; 3], samples: u32) -> [f32; 3] {
 pub(crate) struct Film {
     pub width: u32,
     pub height: u32,
-    sum: Vec<[f64; 3]>,
-    /// Samples added per pixel.
-    samples: Vec<u32>,
-    /// Of those, samples whose ray hit the surface (iso) or gathered opacity (dvr).
+    colours: Colours,
+    /// Samples whose ray hit the surface (iso) or gathered opacity (dvr), per pixel.
     hits: Vec<u32>,
     /// What sample 0 of each pixel met first: its distance (infinite before sample 0 and
     /// where nothing was met) and the colour field's value there.
@@ -60,14 +58,62 @@ pub(crate) struct Film {
     values: Vec<f32>,
 }
 
+/// How a film holds its colours.
+#[derive(Debug, Clone)]
+enum Colours {
+    /// Per pixel the sum of its samples' colours and their count: samples arrive in
+    /// several waves (the window's accumulation).
+    Waves {
+        sum: Vec<[f64; 3]>,
+        samples: Vec<u32>,
+    },
+    /// Per pixel its mean colour, written once: every sample of a pixel arrives in one
+    /// tile (a frame rendered in one pass). It holds the same numbers as `Waves` would
+    /// resolve to, in half the memory a frame touches, and hands them over without a copy.
+    OnePass { rgb: Vec<[f32; 3]> },
+}
+
+/// A finished film's per-pixel buffers (row-major), as a [`crate::render::Frame`] holds them.
+pub(crate) struct FilmParts {
+    pub rgb: Vec<[f32; 3]>,
+    pub hits: Vec<u32>,
+    pub depth: Vec<f32>,
+    pub values: Vec<f32>,
+}
+
 impl Film {
+    /// A film for samples added in any number of waves.
     pub(crate) fn new(width: u32, height: u32) -> Film {
+        let n = width as usize * height as usize;
+        Film::with(
+            width,
+            height,
+            Colours::Waves {
+                sum: vec![[0.0; 3]; n],
+                samples: vec![0; n],
+            },
+        )
+    }
+
+    /// A film each of whose pixels is added at most once (one tile result holding all its
+    /// samples): a frame rendered in one pass.
+    pub(crate) fn one_pass(width: u32, height: u32) -> Film {
+        let n = width as usize * height as usize;
+        Film::with(
+            width,
+            height,
+            Colours::OnePass {
+                rgb: vec![[0.0; 3]; n],
+            },
+        )
+    }
+
+    fn with(width: u32, height: u32, colours: Colours) -> Film {
         let n = width as usize * height as usize;
         Film {
             width,
             height,
-            sum: vec![[0.0; 3]; n],
-            samples: vec![0; n],
+            colours,
             hits: vec![0; n],
             depth: vec![f32::INFINITY; n],
             values: vec![f32::NAN; n],
@@ -88,18 +134,23 @@ impl Film {
                     self.depth[i] = f.t;
                     self.values[i] = f.value;
                 }
-                for a in 0..3 {
-                    self.sum[i][a] += c[a];
+                match &mut self.colours {
+                    Colours::Waves { sum, samples } => {
+                        for a in 0..3 {
+                            sum[i][a] += c[a];
+                        }
+                        samples[i] += n;
+                    }
+                    Colours::OnePass { rgb } => {
+                        if n > 0 {
+                            // `0.0 +` as a sum that starts at zero adds it (-0.0 becomes 0.0).
+                            rgb[i] = mean_colour(c.map(|v| 0.0 + v), n);
+                        }
+                    }
                 }
-                self.samples[i] += n;
                 self.hits[i] += r.hit_samples.get(j).copied().unwrap_or(0);
             }
         }
-    }
-
-    /// Per pixel (row-major), how many of its samples hit.
-    pub(crate) fn hit_samples(&self) -> &[u32] {
-        &self.hits
     }
 
     /// Per pixel (row-major), the distance to the first surface sample 0 met.
@@ -115,15 +166,37 @@ impl Film {
     /// Mean colour of pixel `i` (row-major), `None` before its first sample.
     #[inline]
     pub(crate) fn pixel(&self, i: usize) -> Option<[f32; 3]> {
-        let n = self.samples[i];
-        (n > 0).then(|| mean_colour(self.sum[i], n))
+        match &self.colours {
+            Colours::Waves { sum, samples } => {
+                let n = samples[i];
+                (n > 0).then(|| mean_colour(sum[i], n))
+            }
+            Colours::OnePass { rgb } => Some(rgb[i]),
+        }
     }
 
     /// The image: each pixel's mean over its samples (black where none yet).
     pub(crate) fn resolve(&self) -> Vec<[f32; 3]> {
-        (0..self.sum.len())
-            .map(|i| self.pixel(i).unwrap_or([0.0; 3]))
-            .collect()
+        match &self.colours {
+            Colours::Waves { sum, .. } => (0..sum.len())
+                .map(|i| self.pixel(i).unwrap_or([0.0; 3]))
+                .collect(),
+            Colours::OnePass { rgb } => rgb.clone(),
+        }
+    }
+
+    /// The resolved image and the per-pixel buffers, moved out of the film.
+    pub(crate) fn into_parts(self) -> FilmParts {
+        let rgb = match self.colours {
+            Colours::OnePass { rgb } => rgb,
+            Colours::Waves { .. } => self.resolve(),
+        };
+        FilmParts {
+            rgb,
+            hits: self.hits,
+            depth: self.depth,
+            values: self.values,
+        }
     }
 }
 
@@ -205,4 +278,84 @@ fn write_png(path: &Path, bytes: Result<Vec<u8>, EncodeError>) -> Result<(), Fil
         path: path.to_path_buf(),
         error,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ray::FirstSurface;
+    use crate::sampling::Stats;
+
+    /// A tile of `samples` over pixels `[x0, x1) × [y0, y1)` whose colours, hits and first
+    /// surfaces follow from the pixel, with negative zeros, tiny and large sums among them.
+    fn tile(x0: u32, y0: u32, x1: u32, y1: u32, samples: std::ops::Range<u32>) -> TileResult {
+        let mut r = TileResult {
+            tile: Tile { x0, y0, x1, y1 },
+            samples: samples.clone(),
+            sum: Vec::new(),
+            hit_samples: Vec::new(),
+            first: Vec::new(),
+            stats: Stats::default(),
+            rays: 0,
+            hits: 0,
+        };
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let k = f64::from(x * 7 + y * 13 + samples.start);
+                r.sum.push([-0.0, (k * 0.37).sin() * 1e-300, k / 3.0]);
+                r.hit_samples.push((x + y) % (samples.len() as u32 + 1));
+                if samples.start == 0 {
+                    r.first.push(FirstSurface {
+                        t: k as f32,
+                        value: -(k as f32),
+                    });
+                }
+            }
+        }
+        r
+    }
+
+    /// A frame filled in one pass (its mean written per pixel) hands over the same bits as
+    /// the same samples summed in one wave and resolved, and as a film of two waves whose
+    /// second adds nothing but zeros; pixels no tile reached are black, with no hits, an
+    /// infinite depth and a NaN value, in both.
+    #[test]
+    fn one_pass_films_resolve_to_the_bits_of_summed_ones() {
+        let (w, h) = (37, 21);
+        let tiles = [
+            tile(0, 0, 16, 16, 0..3),
+            tile(16, 0, 37, 16, 0..3),
+            tile(0, 16, 30, 21, 0..3),
+        ];
+        let mut once = Film::one_pass(w, h);
+        let mut waves = Film::new(w, h);
+        for t in &tiles {
+            once.add(t);
+            waves.add(t);
+        }
+        let bits = |p: FilmParts| {
+            (
+                p.rgb
+                    .iter()
+                    .flatten()
+                    .map(|v| v.to_bits())
+                    .collect::<Vec<_>>(),
+                p.hits,
+                p.depth.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                p.values.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            )
+        };
+        assert_eq!(once.pixel(0), waves.pixel(0));
+        assert_eq!(once.resolve(), waves.resolve());
+        let (a, b) = (bits(once.into_parts()), bits(waves.into_parts()));
+        assert_eq!(a, b);
+        // A pixel of the untouched corner (x ≥ 30, y ≥ 16), and a reached one.
+        let i = 20 * w as usize + 33;
+        assert_eq!((a.0[3 * i..3 * i + 3].to_vec(), a.1[i]), (vec![0; 3], 0));
+        assert_eq!(f32::from_bits(a.2[i]), f32::INFINITY);
+        assert!(f32::from_bits(a.3[i]).is_nan());
+        assert!(a.0.iter().any(|&v| f32::from_bits(v) > 1.0));
+        // The negative zeros of the sums are positive zeros, as a sum from zero makes them.
+        assert_eq!(a.0[0], 0.0f32.to_bits());
+    }
 }

@@ -11,7 +11,8 @@
 //! stale frame never replaces a newer one, and full-resolution work is only ever
 //! published for the newest job. The finished full-resolution image is the same,
 //! pixel for pixel, as the headless [`crate::render::render`] of the same view state,
-//! because both sum the same samples in the same order into a [`Film`].
+//! because both take each pixel's samples in the same order into a [`Film`] (summed wave
+//! by wave here, in one pass there) and divide the same sum by the same count.
 //!
 //! The render thread keeps the accelerations of the last few views of the open file
 //! ([`crate::accel::AccelCache`]), so that a view that only moves the camera (every frame of an orbit),
@@ -408,7 +409,7 @@ fn run_job(
         ps.spp = 1;
         let scene = Scene::cached(vol, &ps, &job.meshes, cache)?;
         let t = Instant::now();
-        let acc = Mutex::new((Film::new(ps.width, ps.height), Counts::default()));
+        let acc = Mutex::new((Film::one_pass(ps.width, ps.height), Counts::default()));
         let sink = |r: TileResult| {
             let mut g = acc.lock().unwrap_or_else(|e| e.into_inner());
             g.0.add(&r);
@@ -425,7 +426,7 @@ fn run_job(
         }
         let ms = since(t);
         let (film, counts) = acc.into_inner().unwrap_or_else(|e| e.into_inner());
-        let rgb = film.resolve();
+        let rgb = film.into_parts().rgb;
         backdrop = Some(upscale(&rgb, ps.width, ps.height, w, h));
         // Keep the preview near its time budget: coarser when slow, finer when fast.
         {

@@ -221,7 +221,7 @@ pub fn render_cancellable(scene: &Scene, cancel: &CancelToken) -> Option<Frame> 
 /// The frame, and whether every tile of it was rendered (not cancelled).
 fn render_under(scene: &Scene, cancel: &CancelToken) -> (Frame, bool) {
     let (w, h) = (scene.state.width, scene.state.height);
-    let acc = Mutex::new((Film::new(w, h), Counts::default()));
+    let acc = Mutex::new((Film::one_pass(w, h), Counts::default()));
     let sink = |r: TileResult| {
         // A poisoned lock only means another tile panicked; its panic propagates anyway.
         let mut g = acc.lock().unwrap_or_else(|e| e.into_inner());
@@ -236,13 +236,14 @@ fn render_under(scene: &Scene, cancel: &CancelToken) -> (Frame, bool) {
         &sink,
     );
     let (film, counts) = acc.into_inner().unwrap_or_else(|e| e.into_inner());
+    let parts = film.into_parts();
     let frame = Frame {
         width: w,
         height: h,
-        rgb: film.resolve(),
-        pixel_hits: film.hit_samples().to_vec(),
-        depth: film.depth().to_vec(),
-        surface_values: film.surface_values().to_vec(),
+        rgb: parts.rgb,
+        pixel_hits: parts.hits,
+        depth: parts.depth,
+        surface_values: parts.values,
         stats: counts.stats,
         rays: counts.rays,
         hits: counts.hits,
