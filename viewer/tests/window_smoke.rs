@@ -153,6 +153,8 @@ fn orbit_reports_frame_rates_as_json() {
         "window",
         "threads",
         "jobs",
+        "first_ui_ms",
+        "framed_ms",
     ] {
         assert!(j.get(key).is_some(), "missing {key}: {j}");
     }
@@ -168,6 +170,12 @@ fn orbit_reports_frame_rates_as_json() {
     assert!(j["preview_scale"].as_u64().unwrap_or(0) >= 4);
     assert!(j["refine_ms"].as_f64().unwrap_or(-1.0) > 0.0);
     assert!(j["previews_shown"].as_u64().unwrap_or(0) >= 1, "{j}");
+    // The first UI frame comes before (or with) the framed view the orbit starts from.
+    let (first, framed) = (j["first_ui_ms"].as_f64(), j["framed_ms"].as_f64());
+    assert!(
+        first.is_some_and(|f| f > 0.0 && framed.is_some_and(|g| g >= f)),
+        "{j}"
+    );
 }
 
 /// A scripted window (`--screenshot`) on a file that does not open has nothing to show:

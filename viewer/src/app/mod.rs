@@ -10,7 +10,8 @@
 //!
 //! One file per concern: `viewer` is the window and the one place that handles what the
 //! panel asks for (`command`); `document` the open data, `view` the window's own view
-//! settings, `frames` the renderer and its images, `dialogs` the file dialogs, `picking`
+//! settings, `frames` the renderer and its images, `framing` the camera fit to the
+//! surface off the UI thread, `dialogs` the file dialogs, `picking`
 //! the values under the cursor, `history` undo and redo of the view, `keys` the table of
 //! key and mouse bindings; `menu`, `panel` (with its `surfaces` and `cuts`), `canvas`,
 //! `status`, `help` and `widgets` draw; the rest (`navigation`, `player`, `script`, `options`) is state and rules without
@@ -22,6 +23,7 @@ mod cuts;
 mod dialogs;
 mod document;
 mod frames;
+mod framing;
 mod help;
 mod history;
 mod keys;

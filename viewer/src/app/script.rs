@@ -47,6 +47,12 @@ pub struct OrbitReport {
     /// Render image size (the central area) in pixels.
     pub window: [u32; 2],
     pub threads: usize,
+    /// From the window's start (before its file is opened) to its first UI frame, ms:
+    /// how long the window was unresponsive while it opened the file.
+    pub first_ui_ms: f64,
+    /// From the window's start to the camera framing the surface (the orbit starts
+    /// then), ms.
+    pub framed_ms: f64,
 }
 
 /// What the window should do before drawing a frame.

@@ -4,13 +4,18 @@ use super::document::Doc;
 use super::picking::PickInfo;
 use crate::progressive::{Level, Update};
 
-/// The status line: the image `shown`, the open `doc`, the `pick`ed point.
+/// The status line: the image `shown`, the open `doc`, the `pick`ed point, whether the
+/// camera is being `framing` to the surface.
 pub(crate) fn status_text(
     shown: Option<&Update>,
     doc: Option<&Doc>,
     pick: Option<&PickInfo>,
+    framing: bool,
 ) -> String {
     let mut parts = Vec::new();
+    if framing {
+        parts.push("framing the surface…".to_string());
+    }
     match shown {
         Some(u) => {
             let rays = u.counts.rays.max(1) as f64;

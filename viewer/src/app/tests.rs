@@ -21,3 +21,111 @@ fn load_view_clears_the_values_picked() {
     // The values belonged to the old view's surface: they must not stay on screen.
     assert!(app.picking.pick.is_none());
 }
+
+/// Polls the window's camera fit until it is taken (or 60 s pass).
+fn finish_framing(app: &mut ViewerApp) {
+    let ctx = eframe::egui::Context::default();
+    let t = std::time::Instant::now();
+    while app.framing_pending() {
+        assert!(t.elapsed().as_secs() < 60, "the fit never arrived");
+        std::thread::sleep(std::time::Duration::from_millis(2));
+        app.poll_framing(&ctx);
+    }
+}
+
+fn sample() -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/wake_small.qbk")
+}
+
+/// The camera the library fits to the surface of `state`'s view of the sample.
+fn framed(state: &crate::view_state::ViewState) -> crate::camera::Camera {
+    let dataset = crate::dataset::Dataset::open(&sample()).expect("open");
+    let mut s = state.clone();
+    s.frame_surface(dataset.volume());
+    s.camera
+}
+
+/// F on data whose fit takes longer than the window waits: `handle` returns with the
+/// camera where it was (the UI thread does not wait on the fit), the status line says
+/// so, and the camera moves to the library's fit, with the pivot and the lights, when
+/// the fit arrives.
+#[test]
+fn a_late_fit_to_the_surface_moves_the_camera_when_it_arrives() {
+    let mut app = ViewerApp::for_tests(&sample(), Some(1)).expect("app");
+    app.framing_wait = std::time::Duration::ZERO;
+    crate::app::orbit(&mut app.state.camera, app.pivot, 0.7, 0.2);
+    let turned = app.state.camera;
+    let want = framed(&app.state);
+    assert_ne!(want, turned);
+    app.handle(super::command::AppCommand::FrameSurface);
+    assert!(app.framing_pending());
+    assert_eq!(app.state.camera, turned, "the window waited for the fit");
+    let status = super::status::status_text(None, None, None, app.framing_pending());
+    assert!(status.contains("framing the surface"), "{status}");
+    finish_framing(&mut app);
+    assert_eq!(app.state.camera, want);
+    assert_eq!(app.pivot, want.look_at);
+    let mut lit = app.state.clone();
+    lit.lights_follow_camera();
+    app.controls.relight(&mut lit);
+    assert_eq!(app.state.lights, lit.lights);
+}
+
+/// A fit made for a view that is no longer shown (another iso value, a view from the
+/// history, a loaded state) leaves the camera alone when it arrives.
+#[test]
+fn a_fit_for_a_view_no_longer_shown_is_dropped() {
+    for change in 0..3 {
+        let mut app = ViewerApp::for_tests(&sample(), Some(1)).expect("app");
+        let dir = tempfile::tempdir().expect("tempdir");
+        let saved = dir.path().join("view.json");
+        crate::app::orbit(&mut app.state.camera, app.pivot, 0.7, 0.2);
+        app.save_state(&saved);
+        app.framing_wait = std::time::Duration::ZERO;
+        if change == 1 {
+            // Back to the opening (framed) view, so that the view redone is the turned one.
+            app.handle(super::command::AppCommand::Undo);
+        }
+        app.handle(super::command::AppCommand::FrameSurface);
+        assert!(app.framing_pending());
+        match change {
+            0 => app.state.iso *= 1.5,
+            1 => app.handle(super::command::AppCommand::Redo),
+            _ => app.load_state(&saved),
+        }
+        assert_ne!(app.state.camera, framed(&app.state), "change {change}");
+        let before = app.state.camera;
+        std::thread::sleep(std::time::Duration::from_millis(50));
+        finish_framing(&mut app);
+        assert_eq!(app.state.camera, before, "change {change}");
+    }
+}
+
+/// A file opened with a fit that arrives late: its first view is the whole data, and
+/// becomes the framed default view (`ViewState::default_for_volume`, as `render` frames
+/// it) when the fit arrives, as the first step of the history; unless the user moved
+/// the camera meanwhile.
+#[test]
+fn a_file_opened_with_a_late_fit_is_framed_when_it_arrives_unless_moved() {
+    for moved in [false, true] {
+        let mut app = ViewerApp::for_tests(&sample(), Some(1)).expect("app");
+        app.framing_wait = std::time::Duration::ZERO;
+        app.open_file(&sample());
+        assert!(app.framing_pending());
+        let dataset = crate::dataset::Dataset::open(&sample()).expect("open");
+        let whole = crate::view_state::ViewState::default_unframed(dataset.volume()).camera;
+        let want = crate::view_state::ViewState::default_for_volume(dataset.volume()).camera;
+        assert_eq!(app.state.camera, whole);
+        if moved {
+            crate::app::orbit(&mut app.state.camera, app.pivot, 0.3, 0.0);
+        }
+        let before = app.state.camera;
+        finish_framing(&mut app);
+        if moved {
+            assert_eq!(app.state.camera, before);
+        } else {
+            assert_eq!(app.state.camera, want);
+            assert!(!app.history.can_undo(), "the framing became an undo step");
+        }
+    }
+}

@@ -13,6 +13,7 @@ use super::command::{AppCommand, Cut};
 use super::dialogs::{self, DialogPurpose, Dialogs};
 use super::document::{self, Doc, Document, DEFAULT_FILE};
 use super::frames::Frames;
+use super::framing::{self, Fit, Purpose};
 use super::help;
 use super::history::{History, Snapshot};
 use super::keys::{self, KeyAction};
@@ -74,6 +75,15 @@ pub struct ViewerApp {
     /// The error of opening the file or the state the window was started with.
     startup_error: Option<String>,
     last_ui: Option<Instant>,
+    /// The camera fit to the surface on its way (a file's first view, or F).
+    framing: Option<Fit>,
+    /// How long the UI thread waits for a fit before leaving it to arrive later.
+    pub(crate) framing_wait: std::time::Duration,
+    /// When the window was made, and then its first UI frame and the first framed view
+    /// (ms after it), for the script's report.
+    created: Instant,
+    first_ui_ms: Option<f64>,
+    framed_ms: Option<f64>,
 }
 
 impl ViewerApp {
@@ -84,6 +94,7 @@ impl ViewerApp {
         options: WindowOptions,
         outcome: Outcome,
     ) -> anyhow::Result<ViewerApp> {
+        let created = Instant::now();
         let placeholder = [FieldRange {
             name: "q".into(),
             min: 0.0,
@@ -109,6 +120,11 @@ impl ViewerApp {
             outcome,
             startup_error: None,
             last_ui: None,
+            framing: None,
+            framing_wait: framing::WAIT,
+            created,
+            first_ui_ms: None,
+            framed_ms: None,
         };
         let file = options
             .file
@@ -167,17 +183,79 @@ impl ViewerApp {
         match Doc::open(path) {
             Ok(doc) => {
                 let vol = doc.dataset.volume();
-                let state = ViewState::default_for_volume(vol);
+                // The camera on the whole data until the fit to the surface arrives
+                // (`ViewState::default_for_volume`, off the UI thread).
+                let state = ViewState::default_unframed(vol);
                 self.document.ranges = vol.fields.clone();
+                let fit = Fit::start(Arc::clone(&doc.dataset), &state, Purpose::Open);
                 self.start_view(state);
                 self.document.doc = Some(doc);
                 self.frames.finished = None;
                 self.picking.forget();
                 self.sequence = None;
                 self.history.reset(self.snapshot());
+                self.await_fit(fit);
             }
             Err(e) => self.error = Some(e),
         }
+    }
+
+    /// Applies the fit if it arrives within [`Self::framing_wait`], else leaves it to
+    /// [`Self::poll_framing`].
+    fn await_fit(&mut self, fit: Fit) {
+        match fit.wait(self.framing_wait) {
+            framing::Outcome::Pending => self.framing = Some(fit),
+            outcome => self.take_fit(&fit, outcome),
+        }
+    }
+
+    /// Applies a finished fit when it still fits the view shown ([`Fit::applies`]).
+    fn take_fit(&mut self, fit: &Fit, outcome: framing::Outcome) {
+        self.framing = None;
+        let camera = match outcome {
+            framing::Outcome::Done(camera) => camera,
+            framing::Outcome::Failed => {
+                self.error = Some("Frame surface: the camera fit failed".to_string());
+                return;
+            }
+            framing::Outcome::Pending => return,
+        };
+        let dataset = self.document.doc.as_ref().map(|d| &d.dataset);
+        if !fit.applies(dataset, &self.state) {
+            return;
+        }
+        self.state.camera = camera;
+        self.state.lights_follow_camera();
+        self.pivot = camera.look_at;
+        match fit.purpose {
+            // As the file's first view, which nothing can undo back to.
+            Purpose::Open => {
+                if !self.history.can_undo() {
+                    self.history.reset(self.snapshot());
+                }
+            }
+            Purpose::Asked => self.controls.relight(&mut self.state),
+        }
+    }
+
+    /// Takes the fit on its way if it is done; asks for another UI frame while it is not.
+    pub(crate) fn poll_framing(&mut self, ctx: &egui::Context) {
+        let Some(fit) = self.framing.take() else {
+            return;
+        };
+        match fit.poll() {
+            framing::Outcome::Pending => {
+                self.framing = Some(fit);
+                ctx.request_repaint_after(std::time::Duration::from_millis(30));
+            }
+            outcome => self.take_fit(&fit, outcome),
+        }
+    }
+
+    /// Whether a camera fit is on its way.
+    #[cfg(test)]
+    pub(crate) fn framing_pending(&self) -> bool {
+        self.framing.is_some()
     }
 
     /// Opens a frame sequence: one view state for every frame, derived from what the
@@ -271,6 +349,8 @@ impl ViewerApp {
             });
         match loaded {
             Ok(s) => {
+                // The loaded camera is the user's: no fit made before replaces it.
+                self.framing = None;
                 self.pivot = s.camera.look_at;
                 // The loaded lights are the user's: keep them where they are.
                 self.controls.lights_follow = false;
@@ -365,13 +445,13 @@ impl ViewerApp {
                 }
                 self.controls.relight(&mut self.state);
             }
-            AppCommand::FrameSurface => {
-                if let Some(doc) = &self.document.doc {
-                    self.state.frame_surface(doc.dataset.volume());
-                    self.pivot = self.state.camera.look_at;
+            AppCommand::FrameSurface => match &self.document.doc {
+                Some(doc) => {
+                    let fit = Fit::start(Arc::clone(&doc.dataset), &self.state, Purpose::Asked);
+                    self.await_fit(fit);
                 }
-                self.controls.relight(&mut self.state);
-            }
+                None => self.controls.relight(&mut self.state),
+            },
             AppCommand::Relight => self.controls.relight(&mut self.state),
             AppCommand::Dialog(purpose) => {
                 let open = self.document.doc.as_ref().map(|d| d.path.clone());
@@ -457,6 +537,8 @@ impl ViewerApp {
         let Some(s) = snapshot else {
             return;
         };
+        // A view of the history replaces the one a fit on its way was made for.
+        self.framing = None;
         let (width, height) = (self.state.width, self.state.height);
         self.state = s.state;
         self.state.width = width;
@@ -601,6 +683,8 @@ impl ViewerApp {
         let now = Instant::now();
         let frame_interval = self.last_ui.map(|t| now.duration_since(t));
         self.last_ui = Some(now);
+        let since_created = || now.duration_since(self.created).as_secs_f64() * 1e3;
+        self.first_ui_ms.get_or_insert_with(since_created);
 
         // A scripted run (`--screenshot`, `--orbit-frames`) whose file or state failed to
         // open has nothing to show: it fails with that error and writes nothing, as
@@ -612,7 +696,12 @@ impl ViewerApp {
             ctx.send_viewport_cmd(egui::ViewportCommand::Close);
             return;
         }
-        if let Some(script) = &mut self.script {
+        // A script starts once the camera frames the surface (its pictures are of that view).
+        let framed = self.framing.is_none();
+        if framed {
+            self.framed_ms.get_or_insert_with(since_created);
+        }
+        if let Some(script) = self.script.as_mut().filter(|_| framed) {
             if let ScriptStep::Orbit(yaw) = script.before_frame(frame_interval) {
                 navigation::orbit(&mut self.state.camera, self.pivot, yaw, 0.0);
                 self.handle(AppCommand::Relight);
@@ -635,6 +724,7 @@ impl ViewerApp {
             self.frames.shown.as_ref().map(|s| &s.update),
             self.document.doc.as_ref(),
             self.picking.pick.as_ref(),
+            self.framing.is_some(),
         );
         egui::Panel::bottom("status")
             .exact_size(24.0)
@@ -645,6 +735,7 @@ impl ViewerApp {
         help::show(&ctx, &mut self.help_open);
         self.handle_dialog(&ctx);
 
+        self.poll_framing(&ctx);
         self.submit_if_changed();
         // A button held down (a slider, the image) or the wheel turning: the change goes
         // on, and becomes one step when it ends.
@@ -674,6 +765,10 @@ impl ViewerApp {
         let Some(script) = &mut self.script else {
             return;
         };
+        if self.framing.is_some() {
+            ctx.request_repaint();
+            return;
+        }
         let shown = self.frames.shown.as_ref().map(|s| &s.update);
         let no_image = self.document.doc.is_none() && self.sequence.is_none();
         let scale = self.frames.renderer().preview_scale();
@@ -696,6 +791,8 @@ impl ViewerApp {
             report.threads = self.frames.renderer().threads();
             report.jobs = self.generation;
             report.window = [self.viewport_px[0], self.viewport_px[1]];
+            report.first_ui_ms = self.first_ui_ms.unwrap_or(0.0);
+            report.framed_ms = self.framed_ms.unwrap_or(0.0);
         }
     }
 }
