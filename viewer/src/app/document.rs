@@ -6,6 +6,7 @@ use std::sync::Arc;
 
 use format::sequence::FieldRange;
 
+use super::background::Pending;
 use super::player::Player;
 use crate::dataset::Dataset;
 use crate::mesh::MeshInstance;
@@ -29,6 +30,28 @@ pub(crate) struct FieldSummary {
     pub min: f32,
     pub max: f32,
     pub histogram: Vec<u64>,
+}
+
+/// A file being opened off the UI thread (see `background`).
+pub(crate) struct Opening {
+    pub path: PathBuf,
+    pub job: Pending<Result<Doc, String>>,
+    /// The window's own first file: its error is the startup error, and `state` (the
+    /// `--state` file) is loaded once it is open.
+    pub startup: bool,
+    pub state: Option<PathBuf>,
+}
+
+impl Opening {
+    pub(crate) fn start(path: &Path) -> Opening {
+        let p = path.to_path_buf();
+        Opening {
+            path: path.to_path_buf(),
+            job: Pending::start("qbricks-open", move || Doc::open(&p)),
+            startup: false,
+            state: None,
+        }
+    }
 }
 
 impl Doc {

@@ -10,13 +10,14 @@
 //!
 //! One file per concern: `viewer` is the window and the one place that handles what the
 //! panel asks for (`command`); `document` the open data, `view` the window's own view
-//! settings, `frames` the renderer and its images, `framing` the camera fit to the
-//! surface off the UI thread, `dialogs` the file dialogs, `picking`
+//! settings, `frames` the renderer and its images, `background` the work the window
+//! does beside drawing (opening a file, `framing` the camera to the surface), `dialogs` the file dialogs, `picking`
 //! the values under the cursor, `history` undo and redo of the view, `keys` the table of
 //! key and mouse bindings; `menu`, `panel` (with its `surfaces` and `cuts`), `canvas`,
 //! `status`, `help` and `widgets` draw; the rest (`navigation`, `player`, `script`, `options`) is state and rules without
 //! egui where it can be.
 
+mod background;
 mod canvas;
 mod command;
 mod cuts;

@@ -4,17 +4,17 @@ use super::document::Doc;
 use super::picking::PickInfo;
 use crate::progressive::{Level, Update};
 
-/// The status line: the image `shown`, the open `doc`, the `pick`ed point, whether the
-/// camera is being `framing` to the surface.
+/// The status line: the image `shown`, the open `doc`, the `pick`ed point, what the
+/// window is `busy` with beside rendering (opening a file, framing the surface).
 pub(crate) fn status_text(
     shown: Option<&Update>,
     doc: Option<&Doc>,
     pick: Option<&PickInfo>,
-    framing: bool,
+    busy: Option<&str>,
 ) -> String {
     let mut parts = Vec::new();
-    if framing {
-        parts.push("framing the surface…".to_string());
+    if let Some(b) = busy {
+        parts.push(b.to_string());
     }
     match shown {
         Some(u) => {

@@ -26,10 +26,10 @@ fn load_view_clears_the_values_picked() {
 fn finish_framing(app: &mut ViewerApp) {
     let ctx = eframe::egui::Context::default();
     let t = std::time::Instant::now();
-    while app.framing_pending() {
+    while app.background_pending() {
         assert!(t.elapsed().as_secs() < 60, "the fit never arrived");
         std::thread::sleep(std::time::Duration::from_millis(2));
-        app.poll_framing(&ctx);
+        app.poll_background(&ctx);
     }
 }
 
@@ -52,15 +52,15 @@ fn framed(state: &crate::view_state::ViewState) -> crate::camera::Camera {
 #[test]
 fn a_late_fit_to_the_surface_moves_the_camera_when_it_arrives() {
     let mut app = ViewerApp::for_tests(&sample(), Some(1)).expect("app");
-    app.framing_wait = std::time::Duration::ZERO;
+    app.background_wait = std::time::Duration::ZERO;
     crate::app::orbit(&mut app.state.camera, app.pivot, 0.7, 0.2);
     let turned = app.state.camera;
     let want = framed(&app.state);
     assert_ne!(want, turned);
     app.handle(super::command::AppCommand::FrameSurface);
-    assert!(app.framing_pending());
+    assert!(app.background_pending());
     assert_eq!(app.state.camera, turned, "the window waited for the fit");
-    let status = super::status::status_text(None, None, None, app.framing_pending());
+    let status = super::status::status_text(None, None, None, app.busy().as_deref());
     assert!(status.contains("framing the surface"), "{status}");
     finish_framing(&mut app);
     assert_eq!(app.state.camera, want);
@@ -81,13 +81,13 @@ fn a_fit_for_a_view_no_longer_shown_is_dropped() {
         let saved = dir.path().join("view.json");
         crate::app::orbit(&mut app.state.camera, app.pivot, 0.7, 0.2);
         app.save_state(&saved);
-        app.framing_wait = std::time::Duration::ZERO;
+        app.background_wait = std::time::Duration::ZERO;
         if change == 1 {
             // Back to the opening (framed) view, so that the view redone is the turned one.
             app.handle(super::command::AppCommand::Undo);
         }
         app.handle(super::command::AppCommand::FrameSurface);
-        assert!(app.framing_pending());
+        assert!(app.background_pending());
         match change {
             0 => app.state.iso *= 1.5,
             1 => app.handle(super::command::AppCommand::Redo),
@@ -101,6 +101,62 @@ fn a_fit_for_a_view_no_longer_shown_is_dropped() {
     }
 }
 
+/// Polls until the file being opened is taken (the fit it starts is not looked at yet).
+fn finish_opening(app: &mut ViewerApp) {
+    let ctx = eframe::egui::Context::default();
+    let t = std::time::Instant::now();
+    while app.opening_pending() {
+        assert!(t.elapsed().as_secs() < 60, "the open never finished");
+        std::thread::sleep(std::time::Duration::from_millis(2));
+        app.poll_background(&ctx);
+    }
+}
+
+/// A file whose open takes longer than the window waits: `open_file` returns at once with
+/// the file shown before still open and the status line saying what is being opened;
+/// the new file (or its error, naming it) comes when the open is done.
+#[test]
+fn a_late_open_keeps_the_window_drawing_and_arrives() {
+    let mut app = ViewerApp::for_tests(&sample(), Some(1)).expect("app");
+    let before = app
+        .document
+        .doc
+        .as_ref()
+        .map(|d| std::sync::Arc::clone(&d.dataset));
+    let dir = tempfile::tempdir().expect("tempdir");
+    let copy = dir.path().join("copy.qbk");
+    std::fs::copy(sample(), &copy).expect("copy");
+    let broken = dir.path().join("broken.qbk");
+    std::fs::write(&broken, b"not a brick file at all, too short").expect("write");
+    app.background_wait = std::time::Duration::ZERO;
+    app.open_file(&copy);
+    assert!(app.opening_pending());
+    let busy = app.busy().unwrap_or_default();
+    assert!(
+        busy.contains("opening") && busy.contains("copy.qbk"),
+        "{busy}"
+    );
+    let now = app
+        .document
+        .doc
+        .as_ref()
+        .map(|d| std::sync::Arc::clone(&d.dataset));
+    assert!(matches!((&before, &now), (Some(a), Some(b)) if std::sync::Arc::ptr_eq(a, b)));
+    finish_opening(&mut app);
+    assert_eq!(app.file(), Some(copy.as_path()));
+    assert!(app.error.is_none(), "{:?}", app.error);
+    app.open_file(&broken);
+    assert!(app.opening_pending() && app.error.is_none());
+    finish_opening(&mut app);
+    let e = app.error.clone().unwrap_or_default();
+    assert!(e.contains("broken.qbk"), "{e}");
+    assert_eq!(
+        app.file(),
+        Some(copy.as_path()),
+        "a failed open keeps the file open"
+    );
+}
+
 /// A file opened with a fit that arrives late: its first view is the whole data, and
 /// becomes the framed default view (`ViewState::default_for_volume`, as `render` frames
 /// it) when the fit arrives, as the first step of the history; unless the user moved
@@ -109,9 +165,10 @@ fn a_fit_for_a_view_no_longer_shown_is_dropped() {
 fn a_file_opened_with_a_late_fit_is_framed_when_it_arrives_unless_moved() {
     for moved in [false, true] {
         let mut app = ViewerApp::for_tests(&sample(), Some(1)).expect("app");
-        app.framing_wait = std::time::Duration::ZERO;
+        app.background_wait = std::time::Duration::ZERO;
         app.open_file(&sample());
-        assert!(app.framing_pending());
+        finish_opening(&mut app);
+        assert!(app.background_pending());
         let dataset = crate::dataset::Dataset::open(&sample()).expect("open");
         let whole = crate::view_state::ViewState::default_unframed(dataset.volume()).camera;
         let want = crate::view_state::ViewState::default_for_volume(dataset.volume()).camera;

@@ -8,10 +8,11 @@ use std::time::Instant;
 use eframe::egui;
 use format::sequence::FramePattern;
 
+use super::background::{self, Poll};
 use super::canvas::{self, Canvas};
 use super::command::{AppCommand, Cut};
 use super::dialogs::{self, DialogPurpose, Dialogs};
-use super::document::{self, Doc, Document, DEFAULT_FILE};
+use super::document::{self, Doc, Document, Opening, DEFAULT_FILE};
 use super::frames::Frames;
 use super::framing::{self, Fit, Purpose};
 use super::help;
@@ -31,6 +32,9 @@ use crate::mesh::MeshInstance;
 use crate::planes::{Plane, Slice, MAX_CLIP_PLANES, MAX_SLICES};
 use crate::progressive::Progressive;
 use crate::view_state::{FieldRange, ViewCommand, ViewState};
+
+/// How often the window looks at work on its way while nothing else redraws it.
+const BACKGROUND_POLL: std::time::Duration = std::time::Duration::from_millis(50);
 
 /// Samples per pixel the window refines to when the view state does not say.
 const WINDOW_SPP: u32 = 4;
@@ -75,10 +79,13 @@ pub struct ViewerApp {
     /// The error of opening the file or the state the window was started with.
     startup_error: Option<String>,
     last_ui: Option<Instant>,
+    /// A file being opened, off the UI thread.
+    opening: Option<Opening>,
     /// The camera fit to the surface on its way (a file's first view, or F).
     framing: Option<Fit>,
-    /// How long the UI thread waits for a fit before leaving it to arrive later.
-    pub(crate) framing_wait: std::time::Duration,
+    /// How long the UI thread waits for an open or a fit before leaving it to arrive
+    /// later ([`background::WAIT`]).
+    pub(crate) background_wait: std::time::Duration,
     /// When the window was made, and then its first UI frame and the first framed view
     /// (ms after it), for the script's report.
     created: Instant,
@@ -120,8 +127,9 @@ impl ViewerApp {
             outcome,
             startup_error: None,
             last_ui: None,
+            opening: None,
             framing: None,
-            framing_wait: framing::WAIT,
+            background_wait: background::WAIT,
             created,
             first_ui_ms: None,
             framed_ms: None,
@@ -131,13 +139,24 @@ impl ViewerApp {
             .clone()
             .unwrap_or_else(|| PathBuf::from(DEFAULT_FILE));
         app.open_file(&file);
-        if let Some(s) = &options.state {
-            app.load_state(s);
+        match app.opening.as_mut() {
+            Some(o) => {
+                o.startup = true;
+                o.state = options.state.clone();
+            }
+            None => app.after_startup_open(options.state.as_deref()),
         }
-        app.startup_error = app.error.clone();
-        // The view the window starts with is the oldest step.
-        app.history.reset(app.snapshot());
         Ok(app)
+    }
+
+    /// Once the window's first file is open (or failed to): loads the `--state` file,
+    /// and the view it starts with becomes the oldest step.
+    fn after_startup_open(&mut self, state: Option<&Path>) {
+        if let Some(s) = state {
+            self.load_state(s);
+        }
+        self.startup_error = self.error.clone();
+        self.history.reset(self.snapshot());
     }
 
     /// A window for tests: no script, no eframe, repaints requested on `ctx` once the
@@ -180,31 +199,51 @@ impl ViewerApp {
                 }
             }
         }
-        match Doc::open(path) {
-            Ok(doc) => {
-                let vol = doc.dataset.volume();
-                // The camera on the whole data until the fit to the surface arrives
-                // (`ViewState::default_for_volume`, off the UI thread).
-                let state = ViewState::default_unframed(vol);
-                self.document.ranges = vol.fields.clone();
-                let fit = Fit::start(Arc::clone(&doc.dataset), &state, Purpose::Open);
-                self.start_view(state);
-                self.document.doc = Some(doc);
-                self.frames.finished = None;
-                self.picking.forget();
-                self.sequence = None;
-                self.history.reset(self.snapshot());
-                self.await_fit(fit);
-            }
-            Err(e) => self.error = Some(e),
+        // Another file asked for replaces one on its way.
+        let opening = Opening::start(path);
+        match opening.job.wait(self.background_wait) {
+            Poll::Pending => self.opening = Some(opening),
+            outcome => self.take_open(opening, outcome),
         }
     }
 
-    /// Applies the fit if it arrives within [`Self::framing_wait`], else leaves it to
-    /// [`Self::poll_framing`].
+    /// Shows the file opened (or the error) of `opening`.
+    fn take_open(&mut self, opening: Opening, outcome: Poll<Result<Doc, String>>) {
+        self.opening = None;
+        match outcome {
+            Poll::Done(Ok(doc)) => self.show_doc(doc),
+            Poll::Done(Err(e)) => self.error = Some(e),
+            Poll::Failed => {
+                self.error = Some(format!("{}: opening failed", opening.path.display()));
+            }
+            Poll::Pending => return,
+        }
+        if opening.startup {
+            self.after_startup_open(opening.state.as_deref());
+        }
+    }
+
+    /// Shows a newly opened file in its default view: the camera on the whole data until
+    /// the fit to the surface arrives (`ViewState::default_for_volume`, off the UI thread).
+    fn show_doc(&mut self, doc: Doc) {
+        let vol = doc.dataset.volume();
+        let state = ViewState::default_unframed(vol);
+        self.document.ranges = vol.fields.clone();
+        let fit = Fit::start(Arc::clone(&doc.dataset), &state, Purpose::Open);
+        self.start_view(state);
+        self.document.doc = Some(doc);
+        self.frames.finished = None;
+        self.picking.forget();
+        self.sequence = None;
+        self.history.reset(self.snapshot());
+        self.await_fit(fit);
+    }
+
+    /// Applies the fit if it arrives within [`Self::background_wait`], else leaves it to
+    /// [`Self::poll_background`].
     fn await_fit(&mut self, fit: Fit) {
-        match fit.wait(self.framing_wait) {
-            framing::Outcome::Pending => self.framing = Some(fit),
+        match fit.job.wait(self.background_wait) {
+            Poll::Pending => self.framing = Some(fit),
             outcome => self.take_fit(&fit, outcome),
         }
     }
@@ -213,12 +252,12 @@ impl ViewerApp {
     fn take_fit(&mut self, fit: &Fit, outcome: framing::Outcome) {
         self.framing = None;
         let camera = match outcome {
-            framing::Outcome::Done(camera) => camera,
-            framing::Outcome::Failed => {
+            Poll::Done(camera) => camera,
+            Poll::Failed => {
                 self.error = Some("Frame surface: the camera fit failed".to_string());
                 return;
             }
-            framing::Outcome::Pending => return,
+            Poll::Pending => return,
         };
         let dataset = self.document.doc.as_ref().map(|d| &d.dataset);
         if !fit.applies(dataset, &self.state) {
@@ -238,24 +277,48 @@ impl ViewerApp {
         }
     }
 
-    /// Takes the fit on its way if it is done; asks for another UI frame while it is not.
-    pub(crate) fn poll_framing(&mut self, ctx: &egui::Context) {
-        let Some(fit) = self.framing.take() else {
-            return;
-        };
-        match fit.poll() {
-            framing::Outcome::Pending => {
-                self.framing = Some(fit);
-                ctx.request_repaint_after(std::time::Duration::from_millis(30));
+    /// Takes the file being opened and the camera fit on their way if they are done;
+    /// asks for another UI frame while they are not.
+    pub(crate) fn poll_background(&mut self, ctx: &egui::Context) {
+        // The fit first: one that an open taken here starts is looked at next frame.
+        if let Some(fit) = self.framing.take() {
+            match fit.job.poll() {
+                Poll::Pending => self.framing = Some(fit),
+                outcome => self.take_fit(&fit, outcome),
             }
-            outcome => self.take_fit(&fit, outcome),
+        }
+        if let Some(opening) = self.opening.take() {
+            match opening.job.poll() {
+                Poll::Pending => self.opening = Some(opening),
+                outcome => self.take_open(opening, outcome),
+            }
+        }
+        if self.background_pending() {
+            // Often enough to take the result soon after it comes; seldom enough that
+            // drawing the window (a software renderer's full repaint) takes little
+            // from the work. Input repaints at once anyway.
+            ctx.request_repaint_after(BACKGROUND_POLL);
         }
     }
 
-    /// Whether a camera fit is on its way.
+    /// Whether a file is being opened or the camera fitted.
+    pub(crate) fn background_pending(&self) -> bool {
+        self.opening.is_some() || self.framing.is_some()
+    }
+
+    /// Whether a file is being opened.
     #[cfg(test)]
-    pub(crate) fn framing_pending(&self) -> bool {
-        self.framing.is_some()
+    pub(crate) fn opening_pending(&self) -> bool {
+        self.opening.is_some()
+    }
+
+    /// What the window is busy with beside rendering, for the status line.
+    pub(crate) fn busy(&self) -> Option<String> {
+        match (&self.opening, &self.framing) {
+            (Some(o), _) => Some(format!("opening {}…", o.path.display())),
+            (None, Some(_)) => Some("framing the surface…".to_string()),
+            (None, None) => None,
+        }
     }
 
     /// Opens a frame sequence: one view state for every frame, derived from what the
@@ -662,8 +725,17 @@ impl ViewerApp {
         }
     }
 
-    /// Hands the view to the renderer if it changed since the last job.
+    /// Hands the view to the renderer if it changed since the last job. Not while a newly
+    /// opened file's camera is being fitted: a picture of the whole data would take the
+    /// cores (and the disk) from the fit, and the framed view would come later.
     fn submit_if_changed(&mut self) {
+        if self
+            .framing
+            .as_ref()
+            .is_some_and(|f| f.purpose == Purpose::Open)
+        {
+            return;
+        }
         let Some(doc) = &self.document.doc else {
             return;
         };
@@ -683,8 +755,10 @@ impl ViewerApp {
         let now = Instant::now();
         let frame_interval = self.last_ui.map(|t| now.duration_since(t));
         self.last_ui = Some(now);
-        let since_created = || now.duration_since(self.created).as_secs_f64() * 1e3;
+        let created = self.created;
+        let since_created = || now.duration_since(created).as_secs_f64() * 1e3;
         self.first_ui_ms.get_or_insert_with(since_created);
+        self.poll_background(&ctx);
 
         // A scripted run (`--screenshot`, `--orbit-frames`) whose file or state failed to
         // open has nothing to show: it fails with that error and writes nothing, as
@@ -697,7 +771,7 @@ impl ViewerApp {
             return;
         }
         // A script starts once the camera frames the surface (its pictures are of that view).
-        let framed = self.framing.is_none();
+        let framed = !self.background_pending();
         if framed {
             self.framed_ms.get_or_insert_with(since_created);
         }
@@ -724,7 +798,7 @@ impl ViewerApp {
             self.frames.shown.as_ref().map(|s| &s.update),
             self.document.doc.as_ref(),
             self.picking.pick.as_ref(),
-            self.framing.is_some(),
+            self.busy().as_deref(),
         );
         egui::Panel::bottom("status")
             .exact_size(24.0)
@@ -735,7 +809,6 @@ impl ViewerApp {
         help::show(&ctx, &mut self.help_open);
         self.handle_dialog(&ctx);
 
-        self.poll_framing(&ctx);
         self.submit_if_changed();
         // A button held down (a slider, the image) or the wheel turning: the change goes
         // on, and becomes one step when it ends.
@@ -762,11 +835,12 @@ impl ViewerApp {
         if playing {
             ctx.request_repaint();
         }
+        let pending = self.background_pending();
         let Some(script) = &mut self.script else {
             return;
         };
-        if self.framing.is_some() {
-            ctx.request_repaint();
+        if pending {
+            // `poll_background` asks for the frame that looks again.
             return;
         }
         let shown = self.frames.shown.as_ref().map(|s| &s.update);
