@@ -382,6 +382,57 @@ impl<T: KdTree> LeafCells<T> {
     }
 }
 
+impl<T: KdTree + Copy> LeafCells<T> {
+    /// The walk of [`LeafCells::new`] cut into the walks of the subtrees `depth` levels
+    /// below the root (fewer where a leaf comes first), in the whole walk's order: walked
+    /// one after the other they give the whole walk's leaves, in its order. So the leaves
+    /// can be walked on several threads; each part is bounded as a whole walk is.
+    pub fn split(tree: T, min: [f64; 3], max: [f64; 3], shift: [f64; 3], depth: u32) -> Vec<Self> {
+        let whole = LeafCells::new(tree, min, max, shift);
+        let mut frontier = Vec::new();
+        let mut stack: Vec<(u32, [f64; 3], [f64; 3], u32)> = whole
+            .stack
+            .iter()
+            .map(|&(n, lo, hi)| (n, lo, hi, 0))
+            .collect();
+        // Each expansion adds one node: a malformed tree cannot make this loop long.
+        let mut budget = 1usize << depth.min(20);
+        while let Some((n, lo, hi, d)) = stack.pop() {
+            let inner = match tree.node(n) {
+                Some(Node::Inner {
+                    axis,
+                    split,
+                    left,
+                    right,
+                }) if d < depth && budget > 0 => Some((axis, split, left, right)),
+                _ => None,
+            };
+            let Some((axis, split, left, right)) = inner else {
+                frontier.push((n, lo, hi));
+                continue;
+            };
+            budget -= 1;
+            // The same cut as the walk's (`next`).
+            let a = axis.min(2);
+            let s = (split - shift[a]).max(lo[a]).min(hi[a]);
+            let (mut lhi, mut rlo) = (hi, lo);
+            lhi[a] = s;
+            rlo[a] = s;
+            stack.push((right, rlo, hi, d + 1));
+            stack.push((left, lo, lhi, d + 1));
+        }
+        frontier
+            .into_iter()
+            .map(|(n, lo, hi)| LeafCells {
+                shift,
+                budget: whole.budget,
+                stack: vec![(n, lo, hi)],
+                tree,
+            })
+            .collect()
+    }
+}
+
 impl<T: KdTree> Iterator for LeafCells<T> {
     type Item = (u32, [f64; 3], [f64; 3]);
 

@@ -219,7 +219,7 @@ pub(crate) fn leaf_boxes(tree: &kd::Packed, root: Aabb) -> impl Iterator<Item = 
 }
 
 /// The packed tree as the file's walks read it.
-fn stored(tree: &kd::Packed) -> kd::Stored<'_, KdNode> {
+pub(crate) fn stored(tree: &kd::Packed) -> kd::Stored<'_, KdNode> {
     let (root, nodes, axes) = tree;
     kd::Stored {
         root: *root,

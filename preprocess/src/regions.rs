@@ -390,6 +390,18 @@ mod tests {
             let built = build(&sup, segment).expect("few regions");
             let bounds = built.bounds.expect("non-empty");
             let regs = leaves(&built);
+            // The walk cut into subtrees (how the viewer derives its region table on all
+            // cores) gives the whole walk's leaves, bit for bit and in order.
+            let tree = crate::kdtree::stored(&built.tree);
+            let bits = |(r, lo, hi): (u32, [f64; 3], [f64; 3])| (r, lo.map(f64::to_bits), hi.map(f64::to_bits));
+            let whole: Vec<_> = format::kd::LeafCells::new(tree, bounds.min, bounds.max, [0.0; 3]).map(bits).collect();
+            prop_assert_eq!(whole.len(), regs.len());
+            for depth in [0, 1, 2, 5, 40] {
+                let parts = format::kd::LeafCells::split(tree, bounds.min, bounds.max, [0.0; 3], depth);
+                prop_assert!(parts.len() <= 1 << depth.min(20));
+                let joined: Vec<_> = parts.into_iter().flatten().map(bits).collect();
+                prop_assert_eq!(&joined, &whole, "depth {}", depth);
+            }
             // Disjoint.
             for i in 0..regs.len() {
                 prop_assert!(volume(&regs[i].0) > 0.0);

@@ -106,6 +106,80 @@ pub struct Volume<'a> {
     pub finest_w: f64,
 }
 
+/// Fills `table` from the walk of `tree` cut into subtrees, on `threads` threads, each
+/// subtree's regions into its own stretch of the table; `false` (part of it filled) when
+/// the regions are not numbered in leaf order, so that a subtree's are no stretch.
+#[allow(clippy::too_many_arguments)]
+fn fill_in_stretches<T: format::kd::KdTree + Copy + Send>(
+    table: &mut [RegionN],
+    tree: T,
+    lo: [f64; 3],
+    hi: [f64; 3],
+    shift: [f64; 3],
+    threads: usize,
+    region: &(dyn Fn(u32, [f64; 3], [f64; 3]) -> RegionN + Sync),
+) -> bool {
+    use format::kd::LeafCells;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    // Several subtrees a thread, so that uneven ones even out.
+    let depth = (threads * 8).next_power_of_two().trailing_zeros();
+    let firsts: Vec<Option<u32>> = LeafCells::split(tree, lo, hi, shift, depth)
+        .into_iter()
+        .map(|mut part| part.next().map(|(r, _, _)| r))
+        .collect();
+    let parts = LeafCells::split(tree, lo, hi, shift, depth);
+    // Each subtree's stretch: from its first region to the next subtree's first.
+    let mut starts: Vec<(usize, LeafCells<T>)> = Vec::new();
+    for (part, first) in parts.into_iter().zip(firsts) {
+        let Some(first) = first else {
+            continue;
+        };
+        if starts.last().is_some_and(|&(s, _)| s >= first as usize) {
+            return false;
+        }
+        starts.push((first as usize, part));
+    }
+    let mut work = Vec::new();
+    let mut rest = table;
+    let mut at = 0;
+    for i in 0..starts.len() {
+        let start = starts[i].0;
+        let end = starts.get(i + 1).map_or(at + rest.len(), |s| s.0);
+        if start < at || end > at + rest.len() {
+            return false;
+        }
+        let (_, from_start) = std::mem::take(&mut rest).split_at_mut(start - at);
+        let (stretch, after) = from_start.split_at_mut(end - start);
+        rest = after;
+        at = end;
+        work.push((start, stretch));
+    }
+    let parts: Vec<_> = starts.into_iter().map(|(_, p)| p).collect();
+    let queue = std::sync::Mutex::new(parts.into_iter().zip(work).collect::<Vec<_>>());
+    let ordered = AtomicBool::new(true);
+    std::thread::scope(|scope| {
+        for _ in 0..threads {
+            scope.spawn(|| loop {
+                let item = queue.lock().ok().and_then(|mut q| q.pop());
+                let Some((part, (start, stretch))) = item else {
+                    return;
+                };
+                for (r, min, max) in part {
+                    let Some(slot) = (r as usize)
+                        .checked_sub(start)
+                        .and_then(|i| stretch.get_mut(i))
+                    else {
+                        ordered.store(false, Ordering::Relaxed);
+                        return;
+                    };
+                    *slot = region(r, min, max);
+                }
+            });
+        }
+    });
+    ordered.load(Ordering::Relaxed)
+}
+
 impl<'a> Volume<'a> {
     /// The ray caster's view of a file that [`BrickFileView`] has validated (every index
     /// the hot loops use was checked there, once).
@@ -233,39 +307,62 @@ impl<'a> Volume<'a> {
     /// level's; see `region_table`).
     fn region_table(&self) -> &[RegionN] {
         self.region_table.get_or_init(|| {
-            let file = self.file;
-            let empty = RegionN {
-                min: [f64::INFINITY; 3],
-                max: [f64::NEG_INFINITY; 3],
-                finest_w: self.finest_w,
+            // A billion cells have tens of millions of regions: a second or more on one
+            // core, in the first frame.
+            let threads = if self.file.regions.len() >= 1 << 16 {
+                std::thread::available_parallelism().map_or(1, |n| n.get())
+            } else {
+                1
             };
-            let mut table = vec![empty; file.regions.len()];
-            let b = &file.bounds;
-            format::kd::leaf_cells(
-                &format::kd::file_tree(file),
-                std::array::from_fn(|a| b.min[a].to_native()),
-                std::array::from_fn(|a| b.max[a].to_native()),
-                self.frame,
-                |r, min, max| {
-                    let Some(slot) = table.get_mut(r as usize) else {
-                        return;
-                    };
-                    let finest = format::query::region_bricks(file, r)
-                        .iter()
-                        .filter_map(|&id| file.bricks.get(id.to_native() as usize))
-                        .map(|br| br.level.to_native())
-                        .min();
-                    *slot = RegionN {
-                        min,
-                        max,
-                        finest_w: finest
-                            .and_then(|l| self.level_w.get(l as usize).copied())
-                            .unwrap_or(self.finest_w),
-                    };
-                },
-            );
-            table
+            self.derive_region_table(threads)
         })
+    }
+
+    /// The region table on `threads` threads: the KD walk cut into subtrees
+    /// ([`format::kd::LeafCells::split`]), each filling its own stretch of the table. The
+    /// regions of a subtree are a stretch of their own when the file numbers regions in
+    /// leaf order (as the baker does); for a file that does not, one walk fills the table.
+    /// Plain threads, not rayon: this runs inside a `OnceLock` initialiser, and a rayon
+    /// worker waiting on its pool could be handed a task that asks for this very table.
+    pub(crate) fn derive_region_table(&self, threads: usize) -> Vec<RegionN> {
+        let file = self.file;
+        let empty = RegionN {
+            min: [f64::INFINITY; 3],
+            max: [f64::NEG_INFINITY; 3],
+            finest_w: self.finest_w,
+        };
+        let mut table = vec![empty; file.regions.len()];
+        let b = &file.bounds;
+        let (lo, hi): ([f64; 3], [f64; 3]) = (
+            std::array::from_fn(|a| b.min[a].to_native()),
+            std::array::from_fn(|a| b.max[a].to_native()),
+        );
+        let tree = format::kd::file_tree(file);
+        let region = |r: u32, min: [f64; 3], max: [f64; 3]| {
+            let finest = format::query::region_bricks(file, r)
+                .iter()
+                .filter_map(|&id| file.bricks.get(id.to_native() as usize))
+                .map(|br| br.level.to_native())
+                .min();
+            RegionN {
+                min,
+                max,
+                finest_w: finest
+                    .and_then(|l| self.level_w.get(l as usize).copied())
+                    .unwrap_or(self.finest_w),
+            }
+        };
+        if threads > 1 && fill_in_stretches(&mut table, tree, lo, hi, self.frame, threads, &region)
+        {
+            return table;
+        }
+        // Every slot a stretch filled is filled again, with the same region.
+        for (r, min, max) in format::kd::LeafCells::new(tree, lo, hi, self.frame) {
+            if let Some(slot) = table.get_mut(r as usize) {
+                *slot = region(r, min, max);
+            }
+        }
+        table
     }
 
     /// Region `r` in the local frame.
@@ -372,6 +469,102 @@ impl<'a> Volume<'a> {
 mod tests {
     use super::*;
     use crate::testvol;
+
+    /// The region table filled on several threads, stretch by stretch, is the one walk's
+    /// bit for bit, on a file of many small regions over two levels.
+    #[test]
+    fn the_region_table_on_several_threads_is_the_one_walks() {
+        let noise = |p: [f64; 3]| ((p[0] * 3.1).sin() + (p[1] * 1.7).cos() * p[2]).fract();
+        let file = testvol::nested(8, [0.5, -3.0, 2.0], &[("n", &noise)], 3);
+        let view = testvol::open(&file).expect("opens");
+        let vol = Volume::new(&view).expect("volume");
+        let bits = |t: Vec<RegionN>| {
+            t.iter()
+                .map(|r| {
+                    (
+                        r.min.map(f64::to_bits),
+                        r.max.map(f64::to_bits),
+                        r.finest_w.to_bits(),
+                    )
+                })
+                .collect::<Vec<_>>()
+        };
+        let one = bits(vol.derive_region_table(1));
+        assert!(one.len() > 200, "{} regions", one.len());
+        assert!(one.iter().all(|r| r.0 != [f64::INFINITY.to_bits(); 3]));
+        for threads in [2, 3, 8] {
+            assert_eq!(
+                bits(vol.derive_region_table(threads)),
+                one,
+                "{threads} threads"
+            );
+        }
+    }
+
+    /// A tree of two leaves (and an empty one) and the regions they hold.
+    struct Leaves(Vec<format::kd::Node>);
+    impl format::kd::KdTree for &Leaves {
+        fn node_count(&self) -> usize {
+            self.0.len()
+        }
+        fn root(&self) -> u32 {
+            0
+        }
+        fn node(&self, i: u32) -> Option<format::kd::Node> {
+            self.0.get(i as usize).copied()
+        }
+    }
+
+    /// Stretches are only taken when the leaves number their regions in order: a tree
+    /// whose left leaf holds the higher region is refused (the one walk fills its table).
+    #[test]
+    fn regions_out_of_leaf_order_are_left_to_the_one_walk() {
+        use format::kd::Node;
+        let tree = |first: u32, second: u32| {
+            Leaves(vec![
+                Node::Inner {
+                    axis: 0,
+                    split: 0.5,
+                    left: 1,
+                    right: 2,
+                },
+                Node::Leaf(Some(first)),
+                Node::Inner {
+                    axis: 1,
+                    split: 0.5,
+                    left: 3,
+                    right: 4,
+                },
+                Node::Leaf(None),
+                Node::Leaf(Some(second)),
+            ])
+        };
+        let region = |r: u32, min: [f64; 3], max: [f64; 3]| RegionN {
+            min,
+            max,
+            finest_w: f64::from(r),
+        };
+        let empty = RegionN {
+            min: [0.0; 3],
+            max: [0.0; 3],
+            finest_w: -1.0,
+        };
+        let (lo, hi) = ([0.0; 3], [1.0; 3]);
+        let mut table = vec![empty; 2];
+        let ordered = tree(0, 1);
+        assert!(fill_in_stretches(
+            &mut table, &ordered, lo, hi, [0.0; 3], 2, &region
+        ));
+        assert_eq!((table[0].max[0], table[1].min[0]), (0.5, 0.5));
+        assert_eq!((table[0].finest_w, table[1].finest_w), (0.0, 1.0));
+        assert_eq!(table[1].max[1], 1.0);
+        assert_eq!(table[1].min[1], 0.5);
+        let swapped = tree(1, 0);
+        let mut table = vec![empty; 2];
+        assert!(!fill_in_stretches(
+            &mut table, &swapped, lo, hi, [0.0; 3], 2, &region
+        ));
+    }
 
     /// Issue 32: a view setting naming a missing field said the field twice wherever a
     /// report prints the chain of sources (`{:#}`, as both programs do): the error is one
