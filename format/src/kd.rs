@@ -686,6 +686,238 @@ pub fn subtree_ranges<T: KdTree + ?Sized>(
     out
 }
 
+/// [`subtree_ranges`] on `threads` threads, the same list: the subtrees a few levels
+/// below the root are counted, then filled, each into its own stretch of the list, and
+/// the nodes above them last. A billion cells make tens of millions of nodes, a second
+/// of the first frame on one core. Plain scoped threads (a caller may be a rayon task
+/// initialising something other tasks wait for).
+pub fn subtree_ranges_on<T: KdTree + Sync + ?Sized>(
+    tree: &T,
+    range: impl Fn(u32) -> Option<(f32, f32)> + Sync,
+    threads: usize,
+) -> Vec<RangedNode> {
+    let budget = tree.node_count().saturating_mul(2).saturating_add(1);
+    if threads <= 1 {
+        return subtree_ranges(tree, range);
+    }
+    // The nodes above the cut in list order, each an inner node (with the entries of its
+    // children) or a subtree below the cut.
+    enum Top {
+        Inner(usize, f64, [usize; 2]),
+        Below(u32),
+    }
+    let depth = (threads * 8).next_power_of_two().trailing_zeros();
+    let mut top: Vec<Top> = Vec::new();
+    // (reference, depth, parent entry and side)
+    let mut todo = vec![(tree.root(), 0u32, None::<(usize, usize)>)];
+    while let Some((n, d, parent)) = todo.pop() {
+        let k = top.len();
+        if let Some((p, side)) = parent {
+            if let Some(Top::Inner(_, _, c)) = top.get_mut(p) {
+                c[side] = k;
+            }
+        }
+        match tree.node(n) {
+            Some(Node::Inner {
+                axis,
+                split,
+                left,
+                right,
+            }) if d < depth => {
+                top.push(Top::Inner(axis, split, [usize::MAX; 2]));
+                todo.push((right, d + 1, Some((k, 1))));
+                todo.push((left, d + 1, Some((k, 0))));
+            }
+            _ => top.push(Top::Below(n)),
+        }
+    }
+    let below: Vec<u32> = top
+        .iter()
+        .filter_map(|t| match t {
+            Top::Below(n) => Some(*n),
+            Top::Inner(..) => None,
+        })
+        .collect();
+    // How many nodes each subtree below the cut lists (`None`: past the budget).
+    let counts = on_threads(
+        below.iter().map(|&n| move || count_nodes(tree, n, budget)),
+        threads,
+    );
+    let mut total = top.len() - below.len();
+    let mut sizes = Vec::with_capacity(counts.len());
+    for c in counts {
+        match c {
+            Some(c) if total.saturating_add(c) <= budget => {
+                total += c;
+                sizes.push(c);
+            }
+            // A malformed tree: the one walk stops where it stops.
+            _ => return subtree_ranges(tree, range),
+        }
+    }
+    let empty = (f32::INFINITY, f32::NEG_INFINITY);
+    let mut out = vec![RangedNode::leaf(None, empty); total];
+    // Where each entry starts in the list; each subtree below the cut gets its stretch.
+    let mut at = Vec::with_capacity(top.len());
+    {
+        let mut work = Vec::with_capacity(below.len());
+        let mut rest: &mut [RangedNode] = &mut out;
+        let mut sizes = sizes.iter();
+        for t in &top {
+            let base = at.last().map_or(0, |&(p, len)| p + len);
+            let len = match t {
+                Top::Inner(..) => 1,
+                Top::Below(_) => sizes.next().copied().unwrap_or(0),
+            };
+            at.push((base, len));
+            let (here, after) = std::mem::take(&mut rest).split_at_mut(len);
+            rest = after;
+            if let Top::Below(n) = t {
+                work.push((*n, base, here));
+            }
+        }
+        let range = &range;
+        on_threads(
+            work.into_iter()
+                .map(|(n, base, stretch)| move || fill_nodes(tree, n, range, stretch, base)),
+            threads,
+        );
+    }
+    // The nodes above the cut, children first.
+    for k in (0..top.len()).rev() {
+        let Top::Inner(axis, split, children) = top[k] else {
+            continue;
+        };
+        let mut node = RangedNode::inner(axis, split, empty);
+        let (mut full, mut lo, mut hi) = (true, empty.0, empty.1);
+        for (side, &c) in children.iter().enumerate() {
+            let pos = at.get(c).map_or(u32::MAX, |&(p, _)| p as u32);
+            if side == 0 {
+                node.a = pos;
+            } else {
+                node.b = pos;
+            }
+            match out.get(pos as usize) {
+                Some(child) => {
+                    full &= child.full;
+                    lo = lo.min(child.min);
+                    hi = hi.max(child.max);
+                }
+                None => full = false,
+            }
+        }
+        (node.full, node.min, node.max) = (full, lo, hi);
+        out[at[k].0] = node;
+    }
+    out
+}
+
+/// Runs each job on one of `threads` scoped threads, taking them in order; their results
+/// in the jobs' order.
+fn on_threads<R: Send, J: FnOnce() -> R + Send>(
+    jobs: impl Iterator<Item = J>,
+    threads: usize,
+) -> Vec<R> {
+    let queue: Vec<(usize, J)> = jobs.enumerate().collect();
+    let n = queue.len();
+    let queue = std::sync::Mutex::new(queue.into_iter());
+    let results = std::sync::Mutex::new(Vec::with_capacity(n));
+    std::thread::scope(|scope| {
+        for _ in 0..threads.min(n) {
+            scope.spawn(|| loop {
+                let job = queue.lock().ok().and_then(|mut q| q.next());
+                let Some((i, job)) = job else {
+                    return;
+                };
+                let r = job();
+                if let Ok(mut g) = results.lock() {
+                    g.push((i, r));
+                }
+            });
+        }
+    });
+    let mut results = results.into_inner().unwrap_or_default();
+    results.sort_by_key(|(i, _)| *i);
+    results.into_iter().map(|(_, r)| r).collect()
+}
+
+/// How many nodes [`subtree_ranges`] lists for the subtree of `root`; `None` past `budget`.
+fn count_nodes<T: KdTree + ?Sized>(tree: &T, root: u32, budget: usize) -> Option<usize> {
+    let mut todo = vec![root];
+    let mut count = 0usize;
+    while let Some(n) = todo.pop() {
+        if count >= budget {
+            return None;
+        }
+        count += 1;
+        if let Some(Node::Inner { left, right, .. }) = tree.node(n) {
+            todo.push(right);
+            todo.push(left);
+        }
+    }
+    Some(count)
+}
+
+/// [`subtree_ranges`] of the subtree of `root` into `out` (exactly as long as its list:
+/// [`count_nodes`]), which starts at position `base` of the whole list.
+fn fill_nodes<T: KdTree + ?Sized>(
+    tree: &T,
+    root: u32,
+    range: &(impl Fn(u32) -> Option<(f32, f32)> + ?Sized),
+    out: &mut [RangedNode],
+    base: usize,
+) {
+    let empty = (f32::INFINITY, f32::NEG_INFINITY);
+    let mut todo: Vec<(u32, Option<(usize, bool)>)> = vec![(root, None)];
+    let mut i = 0;
+    while let Some((n, parent)) = todo.pop() {
+        if i >= out.len() {
+            break;
+        }
+        out[i] = match tree.node(n).unwrap_or(Node::Leaf(None)) {
+            Node::Inner {
+                axis,
+                split,
+                left,
+                right,
+            } => {
+                todo.push((right, Some((i, false))));
+                todo.push((left, Some((i, true))));
+                RangedNode::inner(axis, split, empty)
+            }
+            Node::Leaf(Some(r)) => RangedNode::leaf(Some(r), range(r).unwrap_or(empty)),
+            Node::Leaf(None) => RangedNode::leaf(None, empty),
+        };
+        if let Some((p, left)) = parent {
+            if left {
+                out[p].a = (base + i) as u32;
+            } else {
+                out[p].b = (base + i) as u32;
+            }
+        }
+        i += 1;
+    }
+    for i in (0..out.len()).rev() {
+        if out[i].axis == RangedNode::LEAF {
+            continue;
+        }
+        let (mut full, mut lo, mut hi) = (true, empty.0, empty.1);
+        for c in [out[i].a, out[i].b] {
+            match (c as usize).checked_sub(base).and_then(|c| out.get(c)) {
+                Some(child) => {
+                    full &= child.full;
+                    lo = lo.min(child.min);
+                    hi = hi.max(child.max);
+                }
+                None => full = false,
+            }
+        }
+        out[i].full = full;
+        out[i].min = lo;
+        out[i].max = hi;
+    }
+}
+
 /// A node of [`subtree_ranges`] with its subtree's range of one field (32 bytes: half a
 /// cache line, so a walk reads node and range with one load).
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -370,6 +370,83 @@ fn deep_tree_spills_the_stack_and_stays_correct() {
     assert_eq!(query::region_at(f, [0.0, 0.5, 0.5]), Some(0));
 }
 
+/// Every number of a packed list, as bits (NaN ranges compare too).
+fn ranged_bits(list: &[kd::RangedNode]) -> Vec<(u64, u32, u32, u32, u32, u8, bool)> {
+    list.iter()
+        .map(|n| {
+            (
+                n.split.to_bits(),
+                n.a,
+                n.b,
+                n.min.to_bits(),
+                n.max.to_bits(),
+                n.axis,
+                n.full,
+            )
+        })
+        .collect()
+}
+
+/// A complete tree of `depth` levels over the unit cube, its leaves numbered left to
+/// right, every seventh empty.
+struct Complete(Vec<kd::Node>);
+
+impl Complete {
+    fn new(depth: u32) -> Complete {
+        let mut nodes = Vec::new();
+        let mut leaf = 0u32;
+        fn build(nodes: &mut Vec<kd::Node>, leaf: &mut u32, d: u32, depth: u32) -> u32 {
+            let i = nodes.len() as u32;
+            if d == depth {
+                let r = (*leaf % 7 != 6).then_some(*leaf);
+                *leaf += 1;
+                nodes.push(kd::Node::Leaf(r));
+                return i;
+            }
+            nodes.push(kd::Node::Leaf(None));
+            let left = build(nodes, leaf, d + 1, depth);
+            let right = build(nodes, leaf, d + 1, depth);
+            nodes[i as usize] = kd::Node::Inner {
+                axis: (d % 3) as usize,
+                split: 0.5 + f64::from(d) * 1e-3,
+                left,
+                right,
+            };
+            i
+        }
+        build(&mut nodes, &mut leaf, 0, depth);
+        Complete(nodes)
+    }
+}
+
+impl kd::KdTree for Complete {
+    fn node_count(&self) -> usize {
+        self.0.len()
+    }
+    fn root(&self) -> u32 {
+        0
+    }
+    fn node(&self, i: u32) -> Option<kd::Node> {
+        self.0.get(i as usize).copied()
+    }
+}
+
+/// `subtree_ranges_on` gives `subtree_ranges`' list on large trees, whatever the number of
+/// threads (cuts below, at and above the tree's depth), with missing region ranges.
+#[test]
+fn subtree_ranges_on_threads_are_the_one_walks() {
+    for depth in [0, 1, 3, 6, 11] {
+        let tree = Complete::new(depth);
+        let range = |r: u32| (r % 5 != 3).then_some((r as f32 * 0.5, r as f32 * 0.5 + 2.0));
+        let one = ranged_bits(&kd::subtree_ranges(&tree, range));
+        assert_eq!(one.len(), tree.0.len());
+        for threads in [2, 3, 4, 8, 64] {
+            let on = ranged_bits(&kd::subtree_ranges_on(&tree, range, threads));
+            assert_eq!(on, one, "depth {depth}, {threads} threads");
+        }
+    }
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(64))]
 
@@ -385,6 +462,11 @@ proptest! {
         let range = |r: u32| query::region_range(file, r, field);
         let list = kd::subtree_ranges(&kd::file_tree(file), range);
         prop_assert!(!list.is_empty());
+        // Counted and filled subtree by subtree on several threads: the same list.
+        for threads in [2, 3, 8] {
+            let on = kd::subtree_ranges_on(&kd::file_tree(file), range, threads);
+            prop_assert_eq!(ranged_bits(&on), ranged_bits(&list), "{} threads", threads);
+        }
         // Leaves below each position, by recursion over the list.
         fn leaves(list: &[kd::RangedNode], i: usize, out: &mut Vec<Option<u32>>) {
             match list[i].node() {

@@ -3,7 +3,8 @@
 //! The file stores no per-node value ranges (format 3 keeps its structure small): packing
 //! derives each subtree's range and fullness from the regions' ranges
 //! ([`format::kd::subtree_ranges`]) and puts node, range and fullness into one 32-byte
-//! record per node (a few milliseconds for a quarter of a million nodes), so that a walk
+//! record per node (a few milliseconds for a quarter of a million nodes; larger trees on
+//! all cores, [`format::kd::subtree_ranges_on`]), so that a walk
 //! reads one line per node and skips a whole subtree whose values cannot matter. Which
 //! field is packed is a view setting, so a view's acceleration ([`crate::accel`]) owns
 //! the tree of its iso field; the volume keeps field 0's for point location, which any
@@ -20,14 +21,23 @@ impl Packed {
     /// not have gives no ranges: nothing is skipped).
     pub(crate) fn build(file: &format::ArchivedBrickFile, field: usize) -> Packed {
         let nf = file.fields.len();
-        Packed(format::kd::subtree_ranges(
-            &format::kd::file_tree(file),
+        let tree = format::kd::file_tree(file);
+        // On all cores from a quarter of a million nodes (a few milliseconds on one):
+        // a billion cells make tens of millions, a second of the first frame.
+        let threads = if file.kd_nodes.len() >= 1 << 18 {
+            std::thread::available_parallelism().map_or(1, |n| n.get())
+        } else {
+            1
+        };
+        Packed(format::kd::subtree_ranges_on(
+            &tree,
             |r| {
                 let v = file
                     .region_ranges
                     .get((r as usize).checked_mul(nf)? + field)?;
                 (field < nf).then(|| (v.min.to_native(), v.max.to_native()))
             },
+            threads,
         ))
     }
 }
