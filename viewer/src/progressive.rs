@@ -109,9 +109,14 @@ impl Update {
 pub struct ProgressiveOptions {
     /// Render threads (`None`: one per core).
     pub threads: Option<usize>,
-    /// Time a preview should take, ms; the preview divisor adapts to it.
+    /// Time a preview should take, ms; the preview divisor adapts to it (a preview
+    /// slower than 1.3× this goes coarser, one faster than half of it finer). 30 ms with
+    /// the UI's own frame beside it on two cores keeps 30 previews a second or more on
+    /// the benchmark views.
     pub preview_ms: f64,
-    /// Smallest preview divisor (4: a quarter of the resolution on each axis).
+    /// Smallest preview divisor (3: a third of the resolution on each axis). At 4
+    /// previews never got finer than a quarter on the benchmark views; at 3 with 30 ms
+    /// their median is a third (BENCHMARKS.md, the window).
     pub min_scale: u32,
     pub max_scale: u32,
     /// Unfinished full-resolution frames are published at most this often, ms.
@@ -122,8 +127,8 @@ impl Default for ProgressiveOptions {
     fn default() -> Self {
         ProgressiveOptions {
             threads: None,
-            preview_ms: 25.0,
-            min_scale: 4,
+            preview_ms: 30.0,
+            min_scale: 3,
             max_scale: 16,
             publish_ms: 60.0,
         }

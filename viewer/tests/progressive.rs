@@ -96,16 +96,17 @@ fn refined_frame_equals_headless_render_pixel_for_pixel() {
         );
         assert_eq!(last.counts.stats, want.stats);
         assert_eq!(last.samples, spp);
-        // Previews (when one was seen before a newer image replaced it) are a quarter
-        // of the resolution or coarser, and come before every full-resolution image.
+        // Previews (when one was seen before a newer image replaced it) are at the
+        // smallest divisor or coarser, and come before every full-resolution image.
+        let min = ProgressiveOptions::default().min_scale;
         for (i, u) in updates.iter().enumerate() {
             if let Level::Preview { scale } = u.level {
-                assert!(scale >= 4, "preview scale {scale}");
+                assert!(scale >= min, "preview scale {scale}");
                 assert_eq!(u.width, st.width.div_ceil(scale));
                 assert!(updates[..i].iter().all(|v| v.level != Level::Full));
             }
         }
-        assert!(p.preview_scale() >= 4);
+        assert!(p.preview_scale() >= min);
         // Sample waves arrive in order and every update belongs to this job.
         assert!(updates.iter().all(|u| u.generation == generation));
         let full: Vec<u32> = updates

@@ -148,6 +148,8 @@ fn orbit_reports_frame_rates_as_json() {
         "refine_ms",
         "full_frame_ms",
         "preview_scale",
+        "preview_scale_p50",
+        "preview_scale_max",
         "orbit_frames",
         "previews_shown",
         "window",
@@ -167,7 +169,17 @@ fn orbit_reports_frame_rates_as_json() {
         "{jobs} views submitted for a 12-frame orbit"
     );
     assert_eq!(j["threads"], 2);
-    assert!(j["preview_scale"].as_u64().unwrap_or(0) >= 4);
+    // At the smallest divisor (3) or coarser, and the coarsest shown no finer than the
+    // median.
+    assert!(j["preview_scale"].as_u64().unwrap_or(0) >= 3);
+    let (p50, max) = (
+        j["preview_scale_p50"].as_u64(),
+        j["preview_scale_max"].as_u64(),
+    );
+    assert!(
+        p50.is_some_and(|m| m >= 3 && max.is_some_and(|x| x >= m)),
+        "{j}"
+    );
     assert!(j["refine_ms"].as_f64().unwrap_or(-1.0) > 0.0);
     assert!(j["previews_shown"].as_u64().unwrap_or(0) >= 1, "{j}");
     // The first UI frame comes before (or with) the framed view the orbit starts from.

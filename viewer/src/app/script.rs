@@ -38,6 +38,9 @@ pub struct OrbitReport {
     pub full_frame_ms: f64,
     /// Preview divisor at the end of the orbit (4: a quarter of the resolution).
     pub preview_scale: u32,
+    /// Median and coarsest divisor of the previews shown while orbiting.
+    pub preview_scale_p50: u32,
+    pub preview_scale_max: u32,
     /// UI frames of the orbit and preview images shown during it.
     pub orbit_frames: u32,
     pub previews_shown: u32,
@@ -77,6 +80,8 @@ pub(crate) struct ScriptRunner {
     frames_seen: u32,
     intervals_ms: Vec<f64>,
     preview_times: Vec<Instant>,
+    /// The divisor of each of those previews.
+    preview_scales: Vec<f64>,
     report: OrbitReport,
     started: Instant,
 }
@@ -112,6 +117,7 @@ impl ScriptRunner {
             frames_seen: 0,
             intervals_ms: Vec::new(),
             preview_times: Vec::new(),
+            preview_scales: Vec::new(),
             report: OrbitReport::default(),
             started: Instant::now(),
         }
@@ -161,8 +167,11 @@ impl ScriptRunner {
         let complete = shown.is_some_and(|u| u.complete);
         match &mut self.phase {
             Phase::Orbiting { frame } => {
-                if received && shown.is_some_and(|u| matches!(u.level, Level::Preview { .. })) {
-                    self.preview_times.push(Instant::now());
+                if received {
+                    if let Some(Level::Preview { scale }) = shown.map(|u| u.level) {
+                        self.preview_times.push(Instant::now());
+                        self.preview_scales.push(f64::from(scale));
+                    }
                 }
                 *frame += 1;
                 let orbit_frames = match &self.script {
@@ -243,6 +252,9 @@ impl ScriptRunner {
         let gap = median(&mut gaps);
         self.report.preview_fps = if gap > 0.0 { 1e3 / gap } else { 0.0 };
         self.report.previews_shown = self.preview_times.len() as u32;
+        let mut scales = self.preview_scales.clone();
+        self.report.preview_scale_max = scales.iter().copied().fold(0.0, f64::max) as u32;
+        self.report.preview_scale_p50 = median(&mut scales) as u32;
     }
 }
 
