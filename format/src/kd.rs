@@ -630,7 +630,6 @@ pub fn subtree_ranges<T: KdTree + ?Sized>(
     tree: &T,
     range: impl Fn(u32) -> Option<(f32, f32)>,
 ) -> Vec<RangedNode> {
-    let empty = (f32::INFINITY, f32::NEG_INFINITY);
     let mut out: Vec<RangedNode> = Vec::with_capacity(tree.node_count() * 2 + 1);
     let mut budget = tree.node_count().saturating_mul(2).saturating_add(1);
     // (reference, parent position and side)
@@ -641,20 +640,12 @@ pub fn subtree_ranges<T: KdTree + ?Sized>(
         }
         budget -= 1;
         let i = out.len();
-        out.push(match tree.node(n).unwrap_or(Node::Leaf(None)) {
-            Node::Inner {
-                axis,
-                split,
-                left,
-                right,
-            } => {
-                todo.push((right, Some((i, false))));
-                todo.push((left, Some((i, true))));
-                RangedNode::inner(axis, split, empty)
-            }
-            Node::Leaf(Some(r)) => RangedNode::leaf(Some(r), range(r).unwrap_or(empty)),
-            Node::Leaf(None) => RangedNode::leaf(None, empty),
-        });
+        let (entry, children) = ranged_entry(tree.node(n), &range);
+        out.push(entry);
+        if let Some((left, right)) = children {
+            todo.push((right, Some((i, false))));
+            todo.push((left, Some((i, true))));
+        }
         if let Some((p, left)) = parent {
             if left {
                 out[p].a = i as u32;
@@ -663,14 +654,40 @@ pub fn subtree_ranges<T: KdTree + ?Sized>(
             }
         }
     }
-    // Children come after parents: fold back to front.
-    for i in (0..out.len()).rev() {
-        if out[i].axis == RangedNode::LEAF {
+    fold_ranges(&mut out, 0);
+    out
+}
+
+/// The list entry of a node (an inner node's children not yet placed) and the children
+/// to list after it.
+fn ranged_entry(
+    node: Option<Node>,
+    range: &(impl Fn(u32) -> Option<(f32, f32)> + ?Sized),
+) -> (RangedNode, Option<(u32, u32)>) {
+    let empty = (f32::INFINITY, f32::NEG_INFINITY);
+    match node.unwrap_or(Node::Leaf(None)) {
+        Node::Inner {
+            axis,
+            split,
+            left,
+            right,
+        } => (RangedNode::inner(axis, split, empty), Some((left, right))),
+        Node::Leaf(Some(r)) => (RangedNode::leaf(Some(r), range(r).unwrap_or(empty)), None),
+        Node::Leaf(None) => (RangedNode::leaf(None, empty), None),
+    }
+}
+
+/// Sets every inner node's range and fullness from its children's, back to front
+/// (children come after parents); `list` starts at position `base` of the whole list, and
+/// a child outside it counts as missing (not full).
+fn fold_ranges(list: &mut [RangedNode], base: usize) {
+    for i in (0..list.len()).rev() {
+        if list[i].axis == RangedNode::LEAF {
             continue;
         }
-        let (mut full, mut lo, mut hi) = (true, empty.0, empty.1);
-        for c in [out[i].a, out[i].b] {
-            match out.get(c as usize) {
+        let (mut full, mut lo, mut hi) = (true, f32::INFINITY, f32::NEG_INFINITY);
+        for c in [list[i].a, list[i].b] {
+            match (c as usize).checked_sub(base).and_then(|c| list.get(c)) {
                 Some(child) => {
                     full &= child.full;
                     lo = lo.min(child.min);
@@ -679,11 +696,10 @@ pub fn subtree_ranges<T: KdTree + ?Sized>(
                 None => full = false,
             }
         }
-        out[i].full = full;
-        out[i].min = lo;
-        out[i].max = hi;
+        list[i].full = full;
+        list[i].min = lo;
+        list[i].max = hi;
     }
-    out
 }
 
 /// [`subtree_ranges`] on `threads` threads, the same list: the subtrees a few levels
@@ -867,27 +883,18 @@ fn fill_nodes<T: KdTree + ?Sized>(
     out: &mut [RangedNode],
     base: usize,
 ) {
-    let empty = (f32::INFINITY, f32::NEG_INFINITY);
     let mut todo: Vec<(u32, Option<(usize, bool)>)> = vec![(root, None)];
     let mut i = 0;
     while let Some((n, parent)) = todo.pop() {
         if i >= out.len() {
             break;
         }
-        out[i] = match tree.node(n).unwrap_or(Node::Leaf(None)) {
-            Node::Inner {
-                axis,
-                split,
-                left,
-                right,
-            } => {
-                todo.push((right, Some((i, false))));
-                todo.push((left, Some((i, true))));
-                RangedNode::inner(axis, split, empty)
-            }
-            Node::Leaf(Some(r)) => RangedNode::leaf(Some(r), range(r).unwrap_or(empty)),
-            Node::Leaf(None) => RangedNode::leaf(None, empty),
-        };
+        let (entry, children) = ranged_entry(tree.node(n), range);
+        out[i] = entry;
+        if let Some((left, right)) = children {
+            todo.push((right, Some((i, false))));
+            todo.push((left, Some((i, true))));
+        }
         if let Some((p, left)) = parent {
             if left {
                 out[p].a = (base + i) as u32;
@@ -897,25 +904,7 @@ fn fill_nodes<T: KdTree + ?Sized>(
         }
         i += 1;
     }
-    for i in (0..out.len()).rev() {
-        if out[i].axis == RangedNode::LEAF {
-            continue;
-        }
-        let (mut full, mut lo, mut hi) = (true, empty.0, empty.1);
-        for c in [out[i].a, out[i].b] {
-            match (c as usize).checked_sub(base).and_then(|c| out.get(c)) {
-                Some(child) => {
-                    full &= child.full;
-                    lo = lo.min(child.min);
-                    hi = hi.max(child.max);
-                }
-                None => full = false,
-            }
-        }
-        out[i].full = full;
-        out[i].min = lo;
-        out[i].max = hi;
-    }
+    fold_ranges(out, base);
 }
 
 /// A node of [`subtree_ranges`] with its subtree's range of one field (32 bytes: half a
