@@ -829,8 +829,10 @@ pub fn subtree_ranges_on<T: KdTree + Sync + ?Sized>(
 }
 
 /// Runs each job on one of `threads` scoped threads, taking them in order; their results
-/// in the jobs' order.
-fn on_threads<R: Send, J: FnOnce() -> R + Send>(
+/// in the jobs' order. For work split by subtree (here and in the viewer's region
+/// table) inside initialisers that rayon tasks may wait on, where a rayon pool could
+/// hand the waiting worker the very task it waits for.
+pub fn on_threads<R: Send, J: FnOnce() -> R + Send>(
     jobs: impl Iterator<Item = J>,
     threads: usize,
 ) -> Vec<R> {

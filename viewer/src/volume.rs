@@ -120,7 +120,6 @@ fn fill_in_stretches<T: format::kd::KdTree + Copy + Send>(
     region: &(dyn Fn(u32, [f64; 3], [f64; 3]) -> RegionN + Sync),
 ) -> bool {
     use format::kd::LeafCells;
-    use std::sync::atomic::{AtomicBool, Ordering};
     // Several subtrees a thread, so that uneven ones even out.
     let depth = (threads * 8).next_power_of_two().trailing_zeros();
     let firsts: Vec<Option<u32>> = LeafCells::split(tree, lo, hi, shift, depth)
@@ -154,30 +153,26 @@ fn fill_in_stretches<T: format::kd::KdTree + Copy + Send>(
         at = end;
         work.push((start, stretch));
     }
-    let parts: Vec<_> = starts.into_iter().map(|(_, p)| p).collect();
-    let queue = std::sync::Mutex::new(parts.into_iter().zip(work).collect::<Vec<_>>());
-    let ordered = AtomicBool::new(true);
-    std::thread::scope(|scope| {
-        for _ in 0..threads {
-            scope.spawn(|| loop {
-                let item = queue.lock().ok().and_then(|mut q| q.pop());
-                let Some((part, (start, stretch))) = item else {
-                    return;
-                };
+    let jobs = starts
+        .into_iter()
+        .zip(work)
+        .map(|((_, part), (start, stretch))| {
+            move || {
                 for (r, min, max) in part {
                     let Some(slot) = (r as usize)
                         .checked_sub(start)
                         .and_then(|i| stretch.get_mut(i))
                     else {
-                        ordered.store(false, Ordering::Relaxed);
-                        return;
+                        return false;
                     };
                     *slot = region(r, min, max);
                 }
-            });
-        }
-    });
-    ordered.load(Ordering::Relaxed)
+                true
+            }
+        });
+    format::kd::on_threads(jobs, threads)
+        .into_iter()
+        .all(|ordered| ordered)
 }
 
 impl<'a> Volume<'a> {

@@ -334,6 +334,9 @@ impl ViewerApp {
             }
         };
         let (frames, info) = (plan.frames, plan.info);
+        // A file still opening, or its camera still fitted, would replace the sequence.
+        self.opening = None;
+        self.framing = None;
         self.start_view(info.default_state());
         self.document.ranges = info.fields;
         self.controls.lights_follow = true;
