@@ -40,6 +40,8 @@ pub(crate) struct Opening {
     /// `--state` file) is loaded once it is open.
     pub startup: bool,
     pub state: Option<PathBuf>,
+    /// A frame of the sequence shown: it keeps the view.
+    pub frame: bool,
 }
 
 impl Opening {
@@ -50,6 +52,7 @@ impl Opening {
             job: Pending::start("qbricks-open", move || Doc::open(&p)),
             startup: false,
             state: None,
+            frame: false,
         }
     }
 }

@@ -186,3 +186,53 @@ fn a_file_opened_with_a_late_fit_is_framed_when_it_arrives_unless_moved() {
         }
     }
 }
+
+/// A sequence frame whose open takes longer than the window waits: the frame shown before
+/// stays open, the frame does not count as shown (playback waits for it), and it comes
+/// with the view kept; a broken frame's error names it and counts as shown, so playback
+/// goes on past it.
+#[test]
+fn a_late_sequence_frame_keeps_the_view_and_playback_waits_for_it() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    for i in 0..2 {
+        std::fs::copy(sample(), dir.path().join(format!("f_{i:04}.qbk"))).expect("copy");
+    }
+    std::fs::write(dir.path().join("f_0002.qbk"), b"broken").expect("write");
+    let pattern = dir.path().join("f_####.qbk");
+    let mut app = ViewerApp::for_tests(&pattern, Some(1)).expect("app");
+    assert!(
+        app.sequence.is_some() && app.error.is_none(),
+        "{:?}",
+        app.error
+    );
+    crate::app::orbit(&mut app.state.camera, app.pivot, 0.4, 0.1);
+    let view = app.state.camera;
+    let first = app
+        .document
+        .doc
+        .as_ref()
+        .map(|d| std::sync::Arc::clone(&d.dataset));
+    app.background_wait = std::time::Duration::ZERO;
+    app.sequence.as_mut().map(|p| p.seek(1));
+    app.show_frame();
+    assert!(app.opening_pending() && !app.frame_shown());
+    let still = app
+        .document
+        .doc
+        .as_ref()
+        .map(|d| std::sync::Arc::clone(&d.dataset));
+    assert!(matches!((&first, &still), (Some(a), Some(b)) if std::sync::Arc::ptr_eq(a, b)));
+    finish_opening(&mut app);
+    assert!(app.file().is_some_and(|f| f.ends_with("f_0001.qbk")));
+    assert!(app.error.is_none(), "{:?}", app.error);
+    assert_eq!(app.state.camera, view, "a frame keeps the view");
+    assert!(!app.background_pending(), "a frame is not framed again");
+    app.sequence.as_mut().map(|p| p.seek(2));
+    app.show_frame();
+    assert!(!app.frame_shown());
+    finish_opening(&mut app);
+    let e = app.error.clone().unwrap_or_default();
+    assert!(e.contains("f_0002.qbk"), "{e}");
+    assert!(app.frame_shown(), "a broken frame counts as shown");
+    assert_eq!(app.state.camera, view);
+}

@@ -210,13 +210,15 @@ impl ViewerApp {
     /// Shows the file opened (or the error) of `opening`.
     fn take_open(&mut self, opening: Opening, outcome: Poll<Result<Doc, String>>) {
         self.opening = None;
-        match outcome {
-            Poll::Done(Ok(doc)) => self.show_doc(doc),
-            Poll::Done(Err(e)) => self.error = Some(e),
-            Poll::Failed => {
-                self.error = Some(format!("{}: opening failed", opening.path.display()));
-            }
+        let opened = match outcome {
+            Poll::Done(opened) => opened,
+            Poll::Failed => Err(format!("{}: opening failed", opening.path.display())),
             Poll::Pending => return,
+        };
+        match (opened, opening.frame) {
+            (opened, true) => self.show_frame_doc(opened),
+            (Ok(doc), false) => self.show_doc(doc),
+            (Err(e), false) => self.error = Some(e),
         }
         if opening.startup {
             self.after_startup_open(opening.state.as_deref());
@@ -312,6 +314,13 @@ impl ViewerApp {
         self.opening.is_some()
     }
 
+    /// Whether the sequence's current frame counts as shown (an image of it, or its
+    /// error, is on screen), so that playback may step on.
+    #[cfg(test)]
+    pub(crate) fn frame_shown(&self) -> bool {
+        self.frame_on_screen()
+    }
+
     /// What the window is busy with beside rendering, for the status line.
     pub(crate) fn busy(&self) -> Option<String> {
         match (&self.opening, &self.framing) {
@@ -369,7 +378,19 @@ impl ViewerApp {
         };
         self.picking.forget();
         self.frames.finished = None;
-        match Doc::open(&path) {
+        // Not on screen until it is open and rendered: playback waits for it.
+        self.frame_job = None;
+        let mut opening = Opening::start(&path);
+        opening.frame = true;
+        match opening.job.wait(self.background_wait) {
+            Poll::Pending => self.opening = Some(opening),
+            outcome => self.take_open(opening, outcome),
+        }
+    }
+
+    /// Shows a sequence's frame opened (or its error), keeping the view.
+    fn show_frame_doc(&mut self, opened: Result<Doc, String>) {
+        match opened {
             Ok(doc) => {
                 self.document.doc = Some(doc);
                 self.error = None;
@@ -818,7 +839,11 @@ impl ViewerApp {
         let changing =
             ctx.input(|i| i.pointer.any_down() || i.smooth_scroll_delta != egui::Vec2::ZERO);
         self.history.observe(&self.snapshot(), changing);
-        if self.sequence.is_some() && self.frame_job.is_none() && self.frames.has_job() {
+        if self.sequence.is_some()
+            && self.frame_job.is_none()
+            && self.opening.is_none()
+            && self.frames.has_job()
+        {
             self.frame_job = Some(self.generation);
         }
         let received = self.frames.receive(&ctx);
