@@ -362,6 +362,7 @@ pub fn leaf_cells<T: KdTree + ?Sized, F: FnMut(u32, [f64; 3], [f64; 3])>(
 /// [`leaf_cells`] as an iterator of `(region, min, max)`, for a reader that takes the
 /// cells a batch at a time instead of holding one per region. It holds `tree` (a tree or
 /// a reference to one).
+#[derive(Clone)]
 pub struct LeafCells<T: KdTree> {
     tree: T,
     shift: [f64; 3],
@@ -412,12 +413,7 @@ impl<T: KdTree + Copy> LeafCells<T> {
                 continue;
             };
             budget -= 1;
-            // The same cut as the walk's (`next`).
-            let a = axis.min(2);
-            let s = (split - shift[a]).max(lo[a]).min(hi[a]);
-            let (mut lhi, mut rlo) = (hi, lo);
-            lhi[a] = s;
-            rlo[a] = s;
+            let (lhi, rlo) = cut_cell(axis, split, shift, lo, hi);
             stack.push((right, rlo, hi, d + 1));
             stack.push((left, lo, lhi, d + 1));
         }
@@ -450,14 +446,7 @@ impl<T: KdTree> Iterator for LeafCells<T> {
                     left,
                     right,
                 }) => {
-                    let a = axis.min(2);
-                    // Clamped to the cell: a split outside it leaves one child empty, as
-                    // the descent and the ray walk see it, and no box reaches past its
-                    // parent's.
-                    let s = (split - self.shift[a]).max(lo[a]).min(hi[a]);
-                    let (mut lhi, mut rlo) = (hi, lo);
-                    lhi[a] = s;
-                    rlo[a] = s;
+                    let (lhi, rlo) = cut_cell(axis, split, self.shift, lo, hi);
                     self.stack.push((right, rlo, hi));
                     self.stack.push((left, lo, lhi));
                 }
@@ -467,6 +456,25 @@ impl<T: KdTree> Iterator for LeafCells<T> {
         }
         None
     }
+}
+
+/// The cell `lo..hi` cut by an inner node's split: the left child's upper corner and the
+/// right child's lower corner. Clamped to the cell: a split outside it leaves one child
+/// empty, as the descent and the ray walk see it, and no box reaches past its parent's.
+#[inline]
+fn cut_cell(
+    axis: usize,
+    split: f64,
+    shift: [f64; 3],
+    lo: [f64; 3],
+    hi: [f64; 3],
+) -> ([f64; 3], [f64; 3]) {
+    let a = axis.min(2);
+    let s = (split - shift[a]).max(lo[a]).min(hi[a]);
+    let (mut lhi, mut rlo) = (hi, lo);
+    lhi[a] = s;
+    rlo[a] = s;
+    (lhi, rlo)
 }
 
 /// `1/d` per axis, infinite for a zero component.

@@ -122,15 +122,10 @@ fn fill_in_stretches<T: format::kd::KdTree + Copy + Send>(
     use format::kd::LeafCells;
     // Several subtrees a thread, so that uneven ones even out.
     let depth = (threads * 8).next_power_of_two().trailing_zeros();
-    let firsts: Vec<Option<u32>> = LeafCells::split(tree, lo, hi, shift, depth)
-        .into_iter()
-        .map(|mut part| part.next().map(|(r, _, _)| r))
-        .collect();
-    let parts = LeafCells::split(tree, lo, hi, shift, depth);
     // Each subtree's stretch: from its first region to the next subtree's first.
     let mut starts: Vec<(usize, LeafCells<T>)> = Vec::new();
-    for (part, first) in parts.into_iter().zip(firsts) {
-        let Some(first) = first else {
+    for part in LeafCells::split(tree, lo, hi, shift, depth) {
+        let Some((first, _, _)) = part.clone().next() else {
             continue;
         };
         if starts.last().is_some_and(|&(s, _)| s >= first as usize) {
