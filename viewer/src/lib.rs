@@ -26,6 +26,7 @@ mod packed;
 pub mod palette;
 pub mod parts;
 pub mod planes;
+pub mod preview_scale;
 pub mod probe;
 pub mod progressive;
 pub mod ray;

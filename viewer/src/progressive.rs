@@ -30,6 +30,7 @@ use crate::dataset::{Dataset, DatasetAccels};
 use crate::fields::UnknownField;
 use crate::film::Film;
 use crate::mesh::Meshes;
+use crate::preview_scale::PreviewScale;
 use crate::render::{CancelToken, Counts, Renderer};
 use crate::scene::Scene;
 use crate::tiles::{tiles, TileResult};
@@ -109,10 +110,9 @@ impl Update {
 pub struct ProgressiveOptions {
     /// Render threads (`None`: one per core).
     pub threads: Option<usize>,
-    /// Time a preview should take, ms; the preview divisor adapts to it (a preview
-    /// slower than 1.3× this goes coarser, one faster than half of it finer). 30 ms with
-    /// the UI's own frame beside it on two cores keeps 30 previews a second or more on
-    /// the benchmark views.
+    /// Time a preview should take, ms; the preview divisor adapts to it
+    /// ([`PreviewScale`]). 30 ms with the UI's own frame beside it on two cores keeps 30
+    /// previews a second or more on the benchmark views.
     pub preview_ms: f64,
     /// Smallest preview divisor (3: a third of the resolution on each axis). At 4
     /// previews never got finer than a quarter on the benchmark views; at 3 with 30 ms
@@ -155,7 +155,7 @@ struct Inner {
     completed: u64,
     error: Option<(u64, String)>,
     busy: bool,
-    scale: u32,
+    scale: PreviewScale,
     shutdown: bool,
 }
 
@@ -219,7 +219,7 @@ impl Progressive {
         // The window's frames come first: its renders run below its priority.
         let renderer = Renderer::background(options.threads)?;
         let threads = renderer.threads();
-        let scale = options.min_scale.max(1);
+        let scale = PreviewScale::new(options.min_scale, options.max_scale, options.preview_ms);
         let shared = Arc::new(Shared {
             inner: Mutex::new(Inner {
                 generation: 0,
@@ -296,7 +296,7 @@ impl Progressive {
 
     /// Current preview divisor.
     pub fn preview_scale(&self) -> u32 {
-        self.shared.lock().scale
+        self.shared.lock().scale.scale()
     }
 
     /// Blocks until job `generation` has completed (or failed, or was superseded), or
@@ -391,6 +391,9 @@ fn run_job(
         job,
         cancel,
     } = p;
+    if !accels.holds(&job.dataset) {
+        shared.lock().scale.forget();
+    }
     let cache = accels.of(&job.dataset);
     let opts = &shared.options;
     let state = &job.state;
@@ -406,7 +409,7 @@ fn run_job(
         let scale = {
             let mut g = shared.lock();
             g.in_preview = true;
-            g.scale
+            g.scale.scale()
         };
         let mut ps = state.clone();
         ps.width = w.div_ceil(scale).max(1);
@@ -433,15 +436,9 @@ fn run_job(
         let (film, counts) = acc.into_inner().unwrap_or_else(|e| e.into_inner());
         let rgb = film.into_parts().rgb;
         backdrop = Some(upscale(&rgb, ps.width, ps.height, w, h));
-        // Keep the preview near its time budget: coarser when slow, finer when fast.
-        {
-            let mut g = shared.lock();
-            if ms > 1.3 * opts.preview_ms && g.scale < opts.max_scale {
-                g.scale += 1;
-            } else if ms < 0.5 * opts.preview_ms && g.scale > opts.min_scale {
-                g.scale -= 1;
-            }
-        }
+        // Keep the preview near its time budget.
+        let pixels = u64::from(ps.width) * u64::from(ps.height);
+        shared.lock().scale.record(w, h, pixels, ms);
         shared.publish(Update {
             generation,
             level: Level::Preview { scale },

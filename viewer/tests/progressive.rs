@@ -251,3 +251,42 @@ fn a_view_the_volume_cannot_render_is_reported_not_panicked() {
     let err = p.error().expect("an error");
     assert!(err.contains("vorticity"), "{err}");
 }
+
+/// Submits `n` previewed views of `ds` one after another, each to completion.
+fn previews(p: &Progressive, ds: &Arc<Dataset>, n: usize) {
+    let meshes = Arc::new(Meshes::empty());
+    for i in 0..n {
+        let mut st = state(ds);
+        st.seed = i as u64;
+        let generation = p.submit(Job {
+            dataset: Arc::clone(ds),
+            meshes: Arc::clone(&meshes),
+            state: st,
+            preview: true,
+        });
+        assert!(
+            p.wait_complete(generation, Duration::from_secs(60)),
+            "job {i}"
+        );
+    }
+}
+
+#[test]
+fn previews_take_the_divisor_their_time_budget_allows() {
+    let ds = dataset();
+    let options = |preview_ms| ProgressiveOptions {
+        threads: Some(2),
+        preview_ms,
+        min_scale: 2,
+        max_scale: 5,
+        ..ProgressiveOptions::default()
+    };
+    // No preview can take a picosecond: the coarsest divisor allowed.
+    let slow = Progressive::new(options(1e-9), Box::new(|| {})).expect("start");
+    previews(&slow, &ds, 3);
+    assert_eq!(slow.preview_scale(), 5);
+    // Every preview fits an hour: the finest.
+    let fast = Progressive::new(options(3.6e6), Box::new(|| {})).expect("start");
+    previews(&fast, &ds, 3);
+    assert_eq!(fast.preview_scale(), 2);
+}

@@ -150,6 +150,7 @@ fn orbit_reports_frame_rates_as_json() {
         "preview_scale",
         "preview_scale_p50",
         "preview_scale_max",
+        "preview_scale_counts",
         "orbit_frames",
         "previews_shown",
         "window",
@@ -182,6 +183,12 @@ fn orbit_reports_frame_rates_as_json() {
     );
     assert!(j["refine_ms"].as_f64().unwrap_or(-1.0) > 0.0);
     assert!(j["previews_shown"].as_u64().unwrap_or(0) >= 1, "{j}");
+    // The divisors counted add up to the previews shown, the coarsest among them.
+    let counts = j["preview_scale_counts"].as_object().expect("an object");
+    let total: u64 = counts.values().filter_map(|v| v.as_u64()).sum();
+    assert_eq!(Some(total), j["previews_shown"].as_u64(), "{j}");
+    let coarsest = counts.keys().filter_map(|k| k.parse::<u64>().ok()).max();
+    assert_eq!(coarsest, max, "{j}");
     // The first UI frame comes before (or with) the framed view the orbit starts from.
     let (first, framed) = (j["first_ui_ms"].as_f64(), j["framed_ms"].as_f64());
     assert!(

@@ -41,6 +41,8 @@ pub struct OrbitReport {
     /// Median and coarsest divisor of the previews shown while orbiting.
     pub preview_scale_p50: u32,
     pub preview_scale_max: u32,
+    /// How many previews shown while orbiting had each divisor (`"3": 70, "4": 2`).
+    pub preview_scale_counts: std::collections::BTreeMap<u32, u32>,
     /// UI frames of the orbit and preview images shown during it.
     pub orbit_frames: u32,
     pub previews_shown: u32,
@@ -255,6 +257,14 @@ impl ScriptRunner {
         let mut scales = self.preview_scales.clone();
         self.report.preview_scale_max = scales.iter().copied().fold(0.0, f64::max) as u32;
         self.report.preview_scale_p50 = median(&mut scales) as u32;
+        self.report.preview_scale_counts.clear();
+        for &s in &self.preview_scales {
+            *self
+                .report
+                .preview_scale_counts
+                .entry(s as u32)
+                .or_default() += 1;
+        }
     }
 }
 
