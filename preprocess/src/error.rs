@@ -195,6 +195,8 @@ pub enum BakeError {
     /// A leaf of a grid located in the file (decoded as it becomes cells) is malformed.
     #[error(transparent)]
     Vdb(#[from] Box<crate::vdb::VdbError>),
+    #[error("rank {rank} sent {got} bytes of field values where {want} were due (ranks of one bake disagree: were they given the same input?)")]
+    PeerMessage { rank: usize, got: u64, want: u64 },
     #[error("cannot keep {what} in a scratch file in {}: {source}", dir.display())]
     Scratch {
         /// What was to be kept there: the baked field values, a grid's cells.

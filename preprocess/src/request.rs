@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::Context;
 
-use crate::bake::{bake_kept, BakeOptions, BakeSummary, DEFAULT_MAX_BRICK};
+use crate::bake::{bake_kept_among, Alone, BakeOptions, BakeSummary, Peers, DEFAULT_MAX_BRICK};
 use crate::derive::Stencil;
 use crate::fields::FieldKind;
 use crate::inputs::{read_inputs, Layout, ReadError, ReadOptions};
@@ -133,6 +133,21 @@ pub fn bake_one(
     stage: &(dyn Fn(&str) + Sync),
     cancel: &AtomicBool,
 ) -> anyhow::Result<(PathBuf, BakeSummary)> {
+    let (output, summary) = bake_one_among(input, output, flag, plan, stage, cancel, &Alone)?;
+    Ok((output, summary.expect("a bake in one process writes")))
+}
+
+/// As [`bake_one`], shared between `peers` (the ranks of an MPI run, see
+/// [`Peers`]): rank 0 writes the file and gets its summary, the other ranks `None`.
+pub fn bake_one_among(
+    input: &Path,
+    output: Option<&Path>,
+    flag: &str,
+    plan: &BakePlan,
+    stage: &(dyn Fn(&str) + Sync),
+    cancel: &AtomicBool,
+    peers: &dyn Peers,
+) -> anyhow::Result<(PathBuf, Option<BakeSummary>)> {
     let (role, output) = match output {
         Some(o) => (flag, o.to_path_buf()),
         None => (
@@ -144,7 +159,7 @@ pub fn bake_one(
         .input("input file", input)
         .output(role, &output)
         .check()?;
-    let summary = bake_file(input, &output, plan, stage, cancel)?;
+    let summary = bake_file_among(input, &output, plan, stage, cancel, peers)?;
     Ok((output, summary))
 }
 
@@ -164,6 +179,20 @@ pub fn bake_file(
     stage: &(dyn Fn(&str) + Sync),
     cancel: &AtomicBool,
 ) -> anyhow::Result<BakeSummary> {
+    bake_file_among(input, output, plan, stage, cancel, &Alone)
+        .map(|s| s.expect("a bake in one process writes"))
+}
+
+/// As [`bake_file`], shared between `peers`: rank 0 writes `output` and returns the
+/// summary, the other ranks write nothing and return `None`.
+pub fn bake_file_among(
+    input: &Path,
+    output: &Path,
+    plan: &BakePlan,
+    stage: &(dyn Fn(&str) + Sync),
+    cancel: &AtomicBool,
+    peers: &dyn Peers,
+) -> anyhow::Result<Option<BakeSummary>> {
     let stopped = || -> anyhow::Result<()> {
         match cancel.load(Ordering::Relaxed) {
             true => Err(Cancelled.into()),
@@ -191,12 +220,16 @@ pub fn bake_file(
     drop(file);
     stopped()?;
 
-    let (baked, summary) = bake_kept(grids, &opts, stage).with_context(|| input_name.clone())?;
+    let Some((baked, summary)) =
+        bake_kept_among(grids, &opts, stage, peers).with_context(|| input_name.clone())?
+    else {
+        return Ok(None);
+    };
     stopped()?;
     crate::bake::memory::return_freed();
     stage("writing");
     baked.write(output)?;
-    Ok(summary)
+    Ok(Some(summary))
 }
 
 /// A bake's summary as `qbricks-bake --json` prints it: the [`BakeSummary`] with the run's

@@ -1,6 +1,7 @@
 //! Frame sequences over the ranks of an MPI run: `mpirun -np N qbricks-bake bake 'in_####'`
 //! and `mpirun -np N qbricks-view render 'out_####'` share the frames out, every output is
 //! written once and equals a run in one process, a broken frame is named and fails the run,
+//! one file baked or one frame rendered over ranks equals one process's,
 //! a command that runs in one process is refused, and no run hangs (each has a deadline).
 //!
 //! Needs `mpirun` (Open MPI) and the binaries built with the `mpi` feature:
@@ -275,6 +276,42 @@ fn a_broken_frame_is_named_and_fails_the_run() {
         .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
         .collect();
     assert_eq!(pngs, ["f_0001.png", "f_0003.png"]);
+}
+
+/// One file baked over 2 and 3 ranks (each deriving its share of the fields, rank 0
+/// writing the file) is the file one process bakes, byte for byte, with one report from
+/// rank 0 that counts the ranks; a broken input fails the run with exit 2 naming the file,
+/// writes nothing and does not hang.
+#[test]
+fn one_file_baked_over_ranks_equals_one_process() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let bake = exe("qbricks-bake");
+    let sample = root().join("data/wake_small.vdb").display().to_string();
+    let one = run(d, 0, &[&bake, "bake", &sample, "-o", "one.qbk", "--quiet"]);
+    assert!(one.status.success(), "{}", text(&one.stderr));
+    let want = std::fs::read(d.join("one.qbk")).unwrap();
+    for ranks in [2, 3] {
+        let out = format!("r{ranks}.qbk");
+        let o = run(d, ranks, &[&bake, "bake", &sample, "-o", &out, "--json"]);
+        assert!(o.status.success(), "{}", text(&o.stderr));
+        assert!(
+            std::fs::read(d.join(&out)).unwrap() == want,
+            "{ranks} ranks: not the file one process bakes"
+        );
+        let report: serde_json::Value = serde_json::from_slice(&o.stdout)
+            .unwrap_or_else(|e| panic!("one JSON report ({e}): {}", text(&o.stdout)));
+        assert_eq!(
+            report["ranks"], ranks,
+            "built without the mpi feature? {report}"
+        );
+    }
+    std::fs::write(d.join("broken.vdb"), b"not a vdb").unwrap();
+    let o = run(d, 2, &[&bake, "bake", "broken.vdb", "-o", "broken.qbk"]);
+    let err = text(&o.stderr);
+    assert!(!o.status.success());
+    assert!(err.contains("broken.vdb: file header"), "{err}");
+    assert!(!d.join("broken.qbk").exists());
 }
 
 /// One frame over 2 and 3 ranks (each rank searching its share of the file's KD-tree,

@@ -28,6 +28,7 @@ use crate::fields::{BrickValues, FieldKind};
 use crate::measures;
 
 use super::extra::ExtraGrid;
+use super::peers::{check_message, chunk_per_rank, Peers};
 use super::{BakeOptions, Bricks, Cells, Input};
 
 /// Field values larger than this (all fields together) are kept in scratch files while
@@ -198,15 +199,24 @@ enum Store {
         total: usize,
         dir: PathBuf,
     },
+    /// At a rank other than 0 of a shared bake: the values went to rank 0.
+    Elsewhere,
 }
 
 impl DerivedFields {
+    /// The values went to rank 0 of a shared bake (see [`super::peers`]): this rank is done.
+    pub(super) fn elsewhere(&self) -> bool {
+        matches!(self.store, Store::Elsewhere)
+    }
+
     /// The fields' values for the stages after the derivation: in memory, or their
     /// scratch files mapped (the files stay open while mapped; unnamed, they are gone once
     /// the mappings and files are).
     pub(super) fn open(self) -> Result<FieldValues, BakeError> {
         let values = match self.store {
             Store::Memory(values) => Values::Memory(values),
+            // No values here: they went to rank 0, which writes the file.
+            Store::Elsewhere => Values::Memory(Vec::new()),
             Store::Spilled { files, total, dir } => Values::Mapped(
                 files
                     .iter()
@@ -234,6 +244,7 @@ pub(super) fn derive_fields(
     cells: &Cells,
     bricks: &Bricks,
     opts: &BakeOptions,
+    peers: &dyn Peers,
 ) -> Result<DerivedFields, BakeError> {
     match &cells.input {
         Input::Vector(sets, vals, faces) => {
@@ -260,6 +271,7 @@ pub(super) fn derive_fields(
                 &bricks.boxes,
                 names.len(),
                 &opts.spill,
+                peers,
                 &release,
                 |b, out| {
                     let set = &sets[b.set];
@@ -323,11 +335,12 @@ pub(super) fn derive_fields(
                     }
                 },
             )?;
+            let covered = summed(covered.into_iter().map(AtomicU64::into_inner), peers)?;
             let covered = kinds
                 .iter()
                 .zip(covered)
                 .flat_map(|(k, c)| {
-                    let c = matches!(k, FieldKind::Scalar(_)).then(|| c.into_inner());
+                    let c = matches!(k, FieldKind::Scalar(_)).then_some(c);
                     vec![c; k.names().len()]
                 })
                 .collect();
@@ -339,7 +352,7 @@ pub(super) fn derive_fields(
         }
         Input::Scalar(sets, vals, name) => {
             let release = || cells.release_values();
-            let store = per_brick(&bricks.boxes, 1, &opts.spill, &release, |b, out| {
+            let store = per_brick(&bricks.boxes, 1, &opts.spill, peers, &release, |b, out| {
                 let set = &sets[b.set];
                 let v = vals[b.set].view();
                 b.for_each_cell(set, |i, _, slot| {
@@ -355,64 +368,217 @@ pub(super) fn derive_fields(
     }
 }
 
+/// `counts` summed over `peers` (at rank 0; the others' own counts stay theirs, unused).
+fn summed(counts: impl Iterator<Item = u64>, peers: &dyn Peers) -> Result<Vec<u64>, BakeError> {
+    let mine: Vec<u64> = counts.collect();
+    if peers.size() <= 1 {
+        return Ok(mine);
+    }
+    let bytes: Vec<u8> = mine.iter().flat_map(|c| c.to_le_bytes()).collect();
+    let Some(parts) = peers.gather(&bytes) else {
+        return Ok(mine);
+    };
+    let mut sum = vec![0u64; mine.len()];
+    for (rank, part) in parts.iter().enumerate() {
+        if part.len() != bytes.len() {
+            return Err(BakeError::PeerMessage {
+                rank,
+                got: part.len() as u64,
+                want: bytes.len() as u64,
+            });
+        }
+        for (s, b) in sum.iter_mut().zip(part.chunks_exact(8)) {
+            *s += u64::from_le_bytes(b.try_into().unwrap_or_default());
+        }
+    }
+    Ok(sum)
+}
+
 /// Runs `cell_values` on every brick in parallel with the brick's slice of each of the `nf`
 /// field arrays (which it must fill), and returns the arrays: brick after brick, x fastest.
 /// The arrays are allocated fallibly (they are the largest allocations after the cells);
 /// past `spill.above` bytes they are made a chunk of bricks at a time and written to
 /// scratch files (see the module docs), and `release` is called after every chunk, so that
-/// the input's values kept on disk let go of the pages the chunk read.
+/// the input's values kept on disk let go of the pages the chunk read. Shared between
+/// `peers`, each rank derives its chunks and rank 0 gathers them (see [`super::peers`]);
+/// the other ranks get [`Store::Elsewhere`].
 fn per_brick(
     bricks: &[BrickBox],
     nf: usize,
     spill: &Spill,
+    peers: &dyn Peers,
     release: &dyn Fn(),
     cell_values: impl Fn(&BrickBox, &mut [&mut [f32]]) + Sync,
 ) -> Result<Store, BakeError> {
     let total: usize = bricks.iter().map(|b| b.cells() as usize).sum();
-    let arrays = |n: usize| -> Result<Vec<Vec<f32>>, BakeError> {
-        Ok((0..nf)
-            .map(|_| limits::vec_of("the baked field values", n))
-            .collect::<Result<_, _>>()?)
-    };
     let bytes = (total as u64).saturating_mul(4 * nf as u64);
-    if bytes <= spill.above {
-        let mut fields = arrays(total)?;
+    let in_memory = bytes <= spill.above;
+    let shared = peers.size() > 1;
+    if in_memory && !shared {
+        let mut fields = arrays(nf, total)?;
         fill(bricks, &mut fields, &cell_values);
         return Ok(Store::Memory(fields));
     }
-    let dir = spill.dir.clone().unwrap_or_else(std::env::temp_dir);
-    // They stay until the file is written, beside it (the archive holds them again).
-    files::output::check_space_in(
-        "the field values kept on disk until they are written, and the file holding them",
-        &dir,
-        bytes.saturating_mul(2),
-    )?;
-    let scratch = |source| BakeError::Scratch {
-        what: "the baked field values".to_string(),
-        dir: dir.clone(),
-        source,
+    let mut sink = match peers.rank() {
+        0 => Some(Sink::new(nf, total, bytes, in_memory, spill)?),
+        _ => None,
     };
-    let mut files: Vec<File> = (0..nf)
-        .map(|_| tempfile::tempfile_in(&dir))
-        .collect::<Result<_, _>>()
-        .map_err(scratch)?;
+    let chunk = match shared {
+        true => chunk_per_rank(spill.chunk, peers.size(), total as u64),
+        false => spill.chunk,
+    };
+    let chunks = chunks(bricks, chunk);
+    // One chunk's values, every field's after the other's.
+    let derive = |c: &std::ops::Range<usize>| -> Result<Vec<Vec<f32>>, BakeError> {
+        let cells: u64 = bricks[c.clone()].iter().map(BrickBox::cells).sum();
+        let mut values = arrays(nf, cells as usize)?;
+        fill(&bricks[c.clone()], &mut values, &cell_values);
+        release();
+        Ok(values)
+    };
+    if !shared {
+        let sink = sink.as_mut().expect("one process is rank 0");
+        for c in &chunks {
+            sink.take(&as_bytes(&derive(c)?))?;
+        }
+    } else {
+        let n = peers.size();
+        for round in chunks.chunks(n) {
+            let mut mine = Vec::new();
+            if let Some(c) = round.get(peers.rank()) {
+                let values = derive(c)?;
+                mine.reserve_exact(values.iter().map(|v| v.len() * 4).sum());
+                as_bytes(&values)
+                    .iter()
+                    .for_each(|b| mine.extend_from_slice(b));
+            }
+            let Some(parts) = peers.gather(&mine) else {
+                continue;
+            };
+            let sink = sink.as_mut().expect("rank 0 gathers");
+            for (rank, (c, part)) in round.iter().zip(&parts).enumerate() {
+                let cells: u64 = bricks[c.clone()].iter().map(BrickBox::cells).sum();
+                check_message(rank, part, cells, nf)?;
+                let fields: Vec<&[u8]> = match cells {
+                    0 => vec![&[]; nf],
+                    _ => part.chunks_exact(cells as usize * 4).collect(),
+                };
+                sink.take(&fields)?;
+            }
+        }
+    }
+    Ok(match sink {
+        Some(s) => s.into_store(),
+        None => Store::Elsewhere,
+    })
+}
+
+/// Every field's values as bytes.
+fn as_bytes(values: &[Vec<f32>]) -> Vec<&[u8]> {
+    values.iter().map(|v| bytemuck::cast_slice(v)).collect()
+}
+
+/// `nf` arrays of `n` values, allocated fallibly.
+fn arrays(nf: usize, n: usize) -> Result<Vec<Vec<f32>>, BakeError> {
+    Ok((0..nf)
+        .map(|_| limits::vec_of("the baked field values", n))
+        .collect::<Result<_, _>>()?)
+}
+
+/// The bricks (index ranges) of each chunk: at least one brick, then as many as fit in
+/// `chunk` cells.
+fn chunks(bricks: &[BrickBox], chunk: u64) -> Vec<std::ops::Range<usize>> {
+    let mut out = Vec::new();
     let mut start = 0;
     while start < bricks.len() {
-        // At least one brick, then as many as fit in a chunk.
         let (mut end, mut cells) = (start, 0u64);
-        while end < bricks.len() && (end == start || cells + bricks[end].cells() <= spill.chunk) {
+        while end < bricks.len() && (end == start || cells + bricks[end].cells() <= chunk) {
             cells += bricks[end].cells();
             end += 1;
         }
-        let mut chunk = arrays(cells as usize)?;
-        fill(&bricks[start..end], &mut chunk, &cell_values);
-        for (f, values) in files.iter_mut().zip(&chunk) {
-            f.write_all(bytemuck::cast_slice(values)).map_err(scratch)?;
-        }
-        release();
+        out.push(start..end);
         start = end;
     }
-    Ok(Store::Spilled { files, total, dir })
+    out
+}
+
+/// Where rank 0 puts the chunks' values, in file order: arrays in memory, or scratch files.
+enum Sink {
+    Memory {
+        fields: Vec<Vec<f32>>,
+        filled: usize,
+    },
+    Files {
+        files: Vec<File>,
+        total: usize,
+        dir: PathBuf,
+    },
+}
+
+impl Sink {
+    fn new(
+        nf: usize,
+        total: usize,
+        bytes: u64,
+        in_memory: bool,
+        spill: &Spill,
+    ) -> Result<Sink, BakeError> {
+        if in_memory {
+            return Ok(Sink::Memory {
+                fields: arrays(nf, total)?,
+                filled: 0,
+            });
+        }
+        let dir = spill.dir.clone().unwrap_or_else(std::env::temp_dir);
+        // They stay until the file is written, beside it (the archive holds them again).
+        files::output::check_space_in(
+            "the field values kept on disk until they are written, and the file holding them",
+            &dir,
+            bytes.saturating_mul(2),
+        )?;
+        let files = (0..nf)
+            .map(|_| tempfile::tempfile_in(&dir))
+            .collect::<Result<_, _>>()
+            .map_err(|source| scratch_error(&dir, source))?;
+        Ok(Sink::Files { files, total, dir })
+    }
+
+    /// Appends one chunk's values: per field, the bytes of its `f32`s (as a rank sent
+    /// them: copied, not cast, since a message's bytes need not be aligned for `f32`).
+    fn take(&mut self, chunk: &[&[u8]]) -> Result<(), BakeError> {
+        match self {
+            Sink::Memory { fields, filled } => {
+                let n = chunk.first().map_or(0, |b| b.len() / 4);
+                for (f, bytes) in fields.iter_mut().zip(chunk) {
+                    bytemuck::cast_slice_mut::<f32, u8>(&mut f[*filled..*filled + n])
+                        .copy_from_slice(bytes);
+                }
+                *filled += n;
+            }
+            Sink::Files { files, dir, .. } => {
+                for (f, bytes) in files.iter_mut().zip(chunk) {
+                    f.write_all(bytes)
+                        .map_err(|source| scratch_error(dir, source))?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn into_store(self) -> Store {
+        match self {
+            Sink::Memory { fields, .. } => Store::Memory(fields),
+            Sink::Files { files, total, dir } => Store::Spilled { files, total, dir },
+        }
+    }
+}
+
+fn scratch_error(dir: &std::path::Path, source: std::io::Error) -> BakeError {
+    BakeError::Scratch {
+        what: "the baked field values".to_string(),
+        dir: dir.to_path_buf(),
+        source,
+    }
 }
 
 /// Fills `fields` (every field's values of `bricks`, brick after brick) with `cell_values`

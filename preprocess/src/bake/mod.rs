@@ -38,6 +38,8 @@ use grids::{decoded_cells, located_cells};
 /// Memory estimates of a bake (also used by `qbricks-lab`'s `synth` and `accuracy` limits).
 pub mod memory;
 mod overlap;
+pub mod peers;
+pub use peers::{Alone, Peers};
 mod reach;
 mod select;
 mod supports;
@@ -164,15 +166,35 @@ pub fn bake_kept(
     opts: &BakeOptions,
     stage: &(dyn Fn(&str) + Sync),
 ) -> Result<(Baked, BakeSummary), BakeError> {
+    let alone = |grids| {
+        run(grids, opts, stage, &Alone)
+            .map(|baked| baked.expect("a bake in one process is rank 0's"))
+    };
     match opts.threads {
         Some(n) => {
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(n.max(1))
                 .build()
                 .map_err(|e| BakeError::ThreadPool(e.to_string()))?;
-            pool.install(|| run(grids, opts, stage))
+            pool.install(|| alone(grids))
         }
-        None => run(grids, opts, stage),
+        None => alone(grids),
+    }
+}
+
+/// As [`bake_kept`], shared between `peers` (the ranks of an MPI run, see
+/// [`peers`](self::peers)): rank 0 gets the bake, the other ranks `None` once their part
+/// is gathered. Over more than one rank each runs on its own global pool (one rank a
+/// core, as MPI launchers bind them): `opts.threads` is not used.
+pub fn bake_kept_among(
+    grids: Vec<BakeGrid>,
+    opts: &BakeOptions,
+    stage: &(dyn Fn(&str) + Sync),
+    peers: &dyn Peers,
+) -> Result<Option<(Baked, BakeSummary)>, BakeError> {
+    match peers.size() {
+        0 | 1 => bake_kept(grids, opts, stage).map(Some),
+        _ => run(grids, opts, stage, peers),
     }
 }
 
@@ -309,7 +331,8 @@ fn run(
     grids: Vec<BakeGrid>,
     opts: &BakeOptions,
     stage: &(dyn Fn(&str) + Sync),
-) -> Result<(Baked, BakeSummary), BakeError> {
+    peers: &dyn Peers,
+) -> Result<Option<(Baked, BakeSummary)>, BakeError> {
     if opts.max_brick == 0 {
         return Err(BakeError::BadMaxBrick(opts.max_brick));
     }
@@ -350,7 +373,11 @@ fn run(
     let bricks = brick(sets, opts.max_brick);
 
     stage("deriving fields");
-    let derived = derive_fields(&cells, &bricks, opts)?;
+    let derived = derive_fields(&cells, &bricks, opts, peers)?;
+    if derived.elsewhere() {
+        // Another rank's bake: its fields are at rank 0, which makes the rest.
+        return Ok(None);
+    }
     extra_coverage(
         &cells,
         (&derived.names, &derived.covered),
@@ -408,13 +435,13 @@ fn run(
         fields: field_summaries,
         warnings,
     };
-    Ok((
+    Ok(Some((
         Baked {
             file,
             values: fields,
         },
         summary,
-    ))
+    )))
 }
 
 /// What [`select_input`] keeps for the later stages.

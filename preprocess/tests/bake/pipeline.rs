@@ -604,6 +604,167 @@ fn located_grids_with_cells_on_disk_give_the_same_file() {
     assert!(written(baked) == held);
 }
 
+/// The ranks of one bake as threads of this process: what `mpirun` ranks exchange
+/// through MPI, sent through channels (each rank's messages reach rank 0 in order).
+struct ThreadRanks {
+    rank: usize,
+    size: usize,
+    to_root: Option<std::sync::mpsc::Sender<Vec<u8>>>,
+    from: Vec<std::sync::mpsc::Receiver<Vec<u8>>>,
+}
+
+impl ThreadRanks {
+    fn new(size: usize) -> Vec<ThreadRanks> {
+        let (senders, receivers): (Vec<_>, Vec<_>) =
+            (1..size).map(|_| std::sync::mpsc::channel()).unzip();
+        let mut all = vec![ThreadRanks {
+            rank: 0,
+            size,
+            to_root: None,
+            from: receivers,
+        }];
+        for (i, s) in senders.into_iter().enumerate() {
+            all.push(ThreadRanks {
+                rank: i + 1,
+                size,
+                to_root: Some(s),
+                from: Vec::new(),
+            });
+        }
+        all
+    }
+}
+
+impl qbricks_preprocess::bake::Peers for ThreadRanks {
+    fn rank(&self) -> usize {
+        self.rank
+    }
+    fn size(&self) -> usize {
+        self.size
+    }
+    fn gather(&self, bytes: &[u8]) -> Option<Vec<Vec<u8>>> {
+        if let Some(s) = &self.to_root {
+            s.send(bytes.to_vec()).expect("rank 0 listens");
+            return None;
+        }
+        let mut all = vec![bytes.to_vec()];
+        all.extend(self.from.iter().map(|r| r.recv().expect("a rank sends")));
+        Some(all)
+    }
+}
+
+/// One bake shared between 2, 3 and 5 ranks (`bake_kept_among`; threads standing in for
+/// MPI ranks, each reading the VDB file itself as `mpirun` ranks do): rank 0's file is
+/// the one a single process bakes, byte for byte, with the same summary, and the other
+/// ranks end with nothing; on two levels whose boundary runs through blocks, with a
+/// repaired non-finite value, a staggered grid and an extra scalar field (whose coverage
+/// counts are summed over the ranks), with the fields held in memory and kept on disk in
+/// chunks of a few bricks (so that the ranks take several rounds, the last one partly
+/// empty).
+#[test]
+fn a_bake_shared_between_ranks_gives_the_same_file() {
+    use qbricks_preprocess::bake::{bake_kept_among, Spill};
+    use qbricks_preprocess::inputs::{read_inputs, ReadOptions};
+    use qbricks_preprocess::vdb::write::{write_vdb, Compression};
+    use qbricks_preprocess::vdb::VdbFile;
+
+    let mut doubles = two_level(8, &abc);
+    spoil(&mut doubles[1], &[(3, [f64::NAN, 0.0, 0.0])]);
+    let mut grids: Vec<AnyGrid> = doubles
+        .iter()
+        .map(|g| match g {
+            AnyGrid::Vec3d(g) => single_and_double(g).0,
+            _ => unreachable!("two_level makes vec3d grids"),
+        })
+        .collect();
+    let AnyGrid::Vec3s(coarse) = &grids[0] else {
+        unreachable!()
+    };
+    grids.push(AnyGrid::Float(convert(coarse, "density", 0.0f32, |v| v[2])));
+    let dir = tempfile::tempdir().expect("tempdir");
+    let vdb = dir.path().join("two_level.vdb");
+    write_vdb(&vdb, &grids, Compression::Zip).expect("write vdb");
+    let read = ReadOptions {
+        extra: vec!["density".to_string()],
+        ..ReadOptions::default()
+    };
+    let with_density = BakeOptions {
+        fields: Some(vec![
+            FieldKind::Q,
+            FieldKind::Lambda2,
+            FieldKind::Velocity,
+            FieldKind::Scalar("density".to_string()),
+        ]),
+        ..opts(Stencil::CrossLevel)
+    };
+    let cases = [
+        (opts(Stencil::CrossLevel), ReadOptions::default()),
+        (
+            BakeOptions {
+                staggered: vec!["vel".to_string()],
+                ..opts(Stencil::Central)
+            },
+            ReadOptions::default(),
+        ),
+        (with_density, read),
+    ];
+    let on_disk = |o: &BakeOptions| BakeOptions {
+        spill: Spill {
+            dir: Some(dir.path().to_path_buf()),
+            above: 0,
+            chunk: 200,
+            window: 4096,
+        },
+        ..o.clone()
+    };
+    let written = |baked: qbricks_preprocess::bake::Baked, name: &str| {
+        let path = dir.path().join(name);
+        baked.write(&path).expect("write");
+        std::fs::read(&path).expect("read")
+    };
+    for (o, read) in &cases {
+        // Small bricks: dozens to share.
+        let o = &BakeOptions {
+            max_brick: 3,
+            ..o.clone()
+        };
+        let (one, summary) = bake(grids.clone(), o).expect("bake");
+        assert!(
+            summary.bricks > 20,
+            "{}: too few bricks to share",
+            summary.bricks
+        );
+        let one = format::writer::to_bytes(&one).expect("serialise");
+        for o in [o.clone(), on_disk(o)] {
+            for n in [2, 3, 5] {
+                let results: Vec<_> = std::thread::scope(|s| {
+                    let handles: Vec<_> = ThreadRanks::new(n)
+                        .into_iter()
+                        .map(|peers| {
+                            let o = o.clone();
+                            let vdb = vdb.clone();
+                            s.spawn(move || {
+                                let file = VdbFile::open(&vdb).expect("open");
+                                let (grids, _) = read_inputs(&file, read).expect("locate");
+                                bake_kept_among(grids, &o, &|_| {}, &peers).expect("bake")
+                            })
+                        })
+                        .collect();
+                    handles
+                        .into_iter()
+                        .map(|h| h.join().expect("rank"))
+                        .collect()
+                });
+                let mut results = results.into_iter();
+                let (baked, s) = results.next().flatten().expect("rank 0 bakes");
+                assert!(results.all(|r| r.is_none()), "another rank baked");
+                assert_eq!(s, summary, "{n} ranks, {o:?}");
+                assert!(written(baked, "shared.qbk") == one, "{n} ranks, {o:?}");
+            }
+        }
+    }
+}
+
 /// Fields kept on disk (`Spill`), chunk after chunk of bricks, read back as they were
 /// written, in memory or streamed from their scratch files into the written file: the
 /// same file as a bake that holds them, on two levels with five fields, chunks of one

@@ -13,7 +13,8 @@ use qbricks_preprocess::bake::DEFAULT_MAX_BRICK;
 use qbricks_preprocess::derive::Stencil;
 use qbricks_preprocess::inputs::Layout;
 use qbricks_preprocess::progress;
-use qbricks_preprocess::request::{bake_one, summary_json, BakePlan, BakeRequest};
+use qbricks_preprocess::request::{bake_one_among, summary_json, BakePlan, BakeRequest};
+use ranks::Ranks;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -100,15 +101,16 @@ pub fn plan(args: &Args) -> anyhow::Result<Plan> {
     })
 }
 
-/// Bakes one file.
-pub fn run(args: Args, plan: Plan) -> anyhow::Result<()> {
+/// Bakes one file; over the ranks of an MPI run each derives its share of the fields and
+/// rank 0 writes the file and reports (see `preprocess::bake::Peers`).
+pub fn run(args: Args, plan: Plan, ranks: &Ranks) -> anyhow::Result<()> {
     let Plan { start, bake } = plan;
     let input_name = args.input.display().to_string();
 
     // Progress: on a terminal a bar naming the stage, with the share done and the time
     // left (`preprocess::progress`), shown once the bake has taken a second (short bakes
     // stay silent); with --progress elsewhere, plain stage lines.
-    let show = !args.quiet && (args.progress || std::io::stderr().is_terminal());
+    let show = !args.quiet && ranks.is_root() && (args.progress || std::io::stderr().is_terminal());
     let terminal = std::io::stderr().is_terminal();
     let bar: OnceLock<ProgressBar> = OnceLock::new();
     let stage = |name: &str| {
@@ -146,14 +148,19 @@ pub fn run(args: Args, plan: Plan) -> anyhow::Result<()> {
         );
     };
 
-    let (output, summary) = bake_one(
+    let (output, summary) = bake_one_among(
         &args.input,
         args.output.as_deref(),
         "-o",
         &bake,
         &stage,
         &AtomicBool::new(false),
+        ranks,
     )?;
+    // The other ranks' part is done: rank 0 writes and reports.
+    let Some(summary) = summary else {
+        return Ok(());
+    };
     if let Some(b) = bar.get() {
         b.finish_and_clear();
     }
@@ -167,8 +174,14 @@ pub fn run(args: Args, plan: Plan) -> anyhow::Result<()> {
     let mut out = QuietStdout::new();
     if args.json {
         let mut v = summary_json(&summary, seconds, &output)?;
-        if let (Some(peak), Some(map)) = (files::limits::peak_resident(), v.as_object_mut()) {
-            map.insert("peak_memory".to_string(), peak.into());
+        if let Some(map) = v.as_object_mut() {
+            if let Some(peak) = files::limits::peak_resident() {
+                map.insert("peak_memory".to_string(), peak.into());
+            }
+            // Shared over ranks: how many derived the fields (peak_memory is rank 0's).
+            if ranks.is_parallel() {
+                map.insert("ranks".to_string(), ranks.size().into());
+            }
         }
         writeln!(out, "{}", serde_json::to_string_pretty(&v)?)?;
     } else if !args.quiet {

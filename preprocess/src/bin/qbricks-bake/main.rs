@@ -58,13 +58,13 @@ fn main() -> ExitCode {
             .one_process_only("qbricks-bake inspect")
             .and_then(|()| inspect::run(args)),
         // One file, or every frame of a sequence (which bakes each as one file; over the
-        // ranks of an MPI run, each rank its share).
+        // ranks of an MPI run, each rank its share of the frames, or of one file's fields).
         Command::Bake(args) => {
             bake::plan(&args).and_then(|plan| match input_pattern(&args.input)? {
                 Some(pattern) => sequence::run(&args, pattern, &plan.bake, plan.start, &ranks),
-                None => ranks
-                    .one_process_only("a bake of one file")
-                    .and_then(|()| bake::run(args, plan)),
+                // One file over ranks: each derives its share of the fields, rank 0
+                // writes the file.
+                None => bake::run(args, plan, &ranks),
             })
         }
         Command::Synth(_) => return moved("qbricks-bake", "synth"),
