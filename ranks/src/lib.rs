@@ -182,14 +182,28 @@ impl Ranks {
         if let Some(w) = &self.world {
             use mpi::point_to_point::{Destination, Source};
             use mpi::traits::Communicator;
+            // MPI counts are `int`s: the length first, then pieces of at most `piece`.
+            let piece = piece_bytes();
             if self.rank != 0 {
-                w.comm.process_at_rank(0).send(bytes);
+                let to = w.comm.process_at_rank(0);
+                to.send(&(bytes.len() as u64));
+                bytes.chunks(piece).for_each(|p| to.send(p));
                 return None;
             }
             let mut all = vec![bytes.to_vec()];
             for r in 1..self.size {
-                let from = i32::try_from(r).unwrap_or(i32::MAX);
-                let (v, _) = w.comm.process_at_rank(from).receive_vec::<u8>();
+                let from = w.comm.process_at_rank(i32::try_from(r).unwrap_or(i32::MAX));
+                let (len, _) = from.receive::<u64>();
+                // The length comes from a rank of the same run, not from a file.
+                let len = usize::try_from(len).unwrap_or(0);
+                let mut v = Vec::with_capacity(len);
+                while v.len() < len {
+                    let (p, _) = from.receive_vec::<u8>();
+                    if p.is_empty() {
+                        break;
+                    }
+                    v.extend_from_slice(&p);
+                }
                 all.push(v);
             }
             return Some(all);
@@ -211,7 +225,9 @@ impl Ranks {
                 // The length comes from rank 0 of the same run, not from a file.
                 vec![0u8; usize::try_from(len).unwrap_or(0)]
             };
-            root.broadcast_into(&mut buf[..]);
+            for p in buf.chunks_mut(piece_bytes()) {
+                root.broadcast_into(p);
+            }
             return buf;
         }
         bytes
@@ -241,6 +257,19 @@ impl Ranks {
     pub fn abandon(&self, code: i32) -> ! {
         std::process::exit(code)
     }
+}
+
+/// The largest piece of one MPI message, bytes: MPI counts are C `int`s, so larger messages
+/// go in pieces (1 GiB; `QBRICKS_MPI_PIECE=N` sets another size, which the tests use to
+/// send every message in many pieces).
+#[cfg(feature = "mpi")]
+fn piece_bytes() -> usize {
+    std::env::var("QBRICKS_MPI_PIECE")
+        .ok()
+        .and_then(|v| v.parse::<usize>().ok())
+        .filter(|&n| n > 0)
+        .unwrap_or(1 << 30)
+        .min(i32::MAX as usize)
 }
 
 /// The error of a rank that stops because another rank failed (and reports why): nothing

@@ -26,15 +26,24 @@ const DEADLINE: Duration = Duration::from_secs(120);
 /// Runs `args` in `dir` under `mpirun -np ranks` (`ranks` 0: without mpirun), within the
 /// deadline; a run past it is killed and fails the test.
 fn run(dir: &Path, ranks: usize, args: &[&str]) -> Output {
+    run_with(dir, ranks, args, &[])
+}
+
+/// [`run`] with environment variables `env` set for every rank.
+fn run_with(dir: &Path, ranks: usize, args: &[&str], env: &[(&str, &str)]) -> Output {
     let mut cmd = match ranks {
         0 => Command::new(args[0]),
         n => {
             let mut c = Command::new("mpirun");
-            c.args(["-np", &n.to_string(), "--oversubscribe"])
-                .args(&args[..1]);
+            c.args(["-np", &n.to_string(), "--oversubscribe"]);
+            for (k, _) in env {
+                c.args(["-x", k]);
+            }
+            c.args(&args[..1]);
             c
         }
     };
+    cmd.envs(env.iter().copied());
     cmd.args(&args[1..])
         .current_dir(dir)
         // Open MPI refuses to run as root without these (CI containers run as root).
@@ -306,6 +315,15 @@ fn one_file_baked_over_ranks_equals_one_process() {
             "built without the mpi feature? {report}"
         );
     }
+    // Every message in pieces of a few kB (as messages past MPI's 2 GiB go): the same file.
+    let o = run_with(
+        d,
+        3,
+        &[&bake, "bake", &sample, "-o", "pieces.qbk", "--quiet"],
+        &[("QBRICKS_MPI_PIECE", "3000")],
+    );
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(std::fs::read(d.join("pieces.qbk")).unwrap() == want);
     std::fs::write(d.join("broken.vdb"), b"not a vdb").unwrap();
     let o = run(d, 2, &[&bake, "bake", "broken.vdb", "-o", "broken.qbk"]);
     let err = text(&o.stderr);
@@ -370,6 +388,17 @@ fn one_frame_over_ranks_equals_one_process_byte_for_byte() {
                 "{case}: {report}"
             );
         }
+        // Every message (crossings, shadow rays and their answers) in pieces of a few
+        // hundred bytes, as messages past MPI's 2 GiB go: the same PNG.
+        let mut args: Vec<&str> = vec![&view, "render", &sample, "-o", "pieces.png"];
+        args.extend(size);
+        args.extend(extra.iter().copied());
+        let o = run_with(d, 3, &args, &[("QBRICKS_MPI_PIECE", "700")]);
+        assert!(o.status.success(), "{case}, pieces: {}", text(&o.stderr));
+        assert!(
+            std::fs::read(d.join("pieces.png")).unwrap() == want,
+            "{case}: the PNG sent in pieces differs"
+        );
     }
 }
 
