@@ -152,7 +152,13 @@ impl<'s> RayCaster<'s> {
             (jitter(x, y, s, st.seed, 1), jitter(x, y, s, st.seed, 2))
         };
         let ray = self.scene.rays.ray(x as f64 + jx, y as f64 + jy);
-        (ray, jitter(x, y, s, st.seed, 0))
+        // Only the sampled searches offset their first sample: `exact` iso-surfaces take
+        // no jitter, and its hash is a few percent of their rays' set-up.
+        let jit = match self.scene.uses_jitter() {
+            true => jitter(x, y, s, st.seed, 0),
+            false => 0.0,
+        };
+        (ray, jit)
     }
 
     /// Colour of sample `s` of pixel (`x`, `y`).

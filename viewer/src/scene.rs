@@ -14,9 +14,9 @@ use crate::camera::RayGen;
 use crate::fields::UnknownField;
 use crate::mesh::Meshes;
 use crate::planes::HalfSpace;
-use crate::sampling::Params;
+use crate::sampling::{Params, Strategy};
 use crate::shading::Shading;
-use crate::transfer::{PreIntegrated, Transfer};
+use crate::transfer::{Mode, PreIntegrated, Transfer};
 use crate::view_state::ViewState;
 use crate::volume::Volume;
 
@@ -188,6 +188,18 @@ impl<'a> Scene<'a> {
         }
     }
 
+    /// Whether a ray's searches take the jitter that offsets their first sample: dvr and
+    /// the sampled iso strategies do; `exact` iso-surfaces take none, so their camera
+    /// rays skip its hash.
+    pub(crate) fn uses_jitter(&self) -> bool {
+        self.params.tf.mode == Mode::Dvr
+            || self.params.strategy != Strategy::Exact
+            || self
+                .more_surfaces
+                .iter()
+                .any(|s| s.params.strategy != Strategy::Exact)
+    }
+
     /// Whether rays see one opaque iso-surface (or a dvr band) and no slice: the
     /// frame's rays then stop at their first hit.
     pub(crate) fn is_single_opaque(&self) -> bool {
@@ -258,4 +270,48 @@ pub fn resolve(vol: &Volume, state: &ViewState) -> Result<Params, UnknownField> 
         params.preintegrated = PreIntegrated::new(&params.tf, params.delta0);
     }
     Ok(params)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Camera rays skip the jitter's hash only where nothing reads it: `exact` iso-surfaces
+    /// (one or several, with slices); every sampled strategy and dvr take it.
+    #[test]
+    fn only_exact_iso_surfaces_go_without_jitter() {
+        let f = |p: [f64; 3]| p[0] - 8.0;
+        let file = crate::testvol::nested(16, [0.0; 3], &[("q", &f)], 8);
+        let view = crate::testvol::open(&file).expect("open");
+        let vol = Volume::new(&view).expect("volume");
+        let meshes = Meshes::empty();
+        for (mode, strategy, more, jittered) in [
+            (Mode::Iso, Strategy::Exact, false, false),
+            (Mode::Iso, Strategy::Exact, true, false),
+            (Mode::Iso, Strategy::Uniform, false, true),
+            (Mode::Iso, Strategy::Paper, false, true),
+            (Mode::Iso, Strategy::Bisect, true, true),
+            (Mode::Dvr, Strategy::Exact, false, true),
+            (Mode::Dvr, Strategy::Uniform, false, true),
+        ] {
+            let mut state = ViewState::default_for_volume(&vol);
+            state.mode = mode;
+            state.strategy = strategy;
+            state.set_iso(0.5);
+            if more {
+                state.iso_opacity = 0.5;
+                state.more_isos.push(crate::view_state::IsoSurface {
+                    value: 2.0,
+                    opacity: 1.0,
+                    colour: None,
+                });
+            }
+            let scene = Scene::new(&vol, &state, &meshes).expect("scene");
+            assert_eq!(
+                scene.uses_jitter(),
+                jittered,
+                "{mode:?} {strategy:?}, more surfaces: {more}"
+            );
+        }
+    }
 }
