@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::Context;
 
-use crate::bake::{bake_kept_among, Alone, BakeOptions, BakeSummary, Peers, DEFAULT_MAX_BRICK};
+use crate::bake::{bake_kept_among, Alone, BakeOptions, BakeSummary, Exchange, DEFAULT_MAX_BRICK};
 use crate::derive::Stencil;
 use crate::fields::FieldKind;
 use crate::inputs::{read_inputs, Layout, ReadError, ReadOptions};
@@ -138,7 +138,7 @@ pub fn bake_one(
 }
 
 /// As [`bake_one`], shared between `peers` (the ranks of an MPI run, see
-/// [`Peers`]): rank 0 writes the file and gets its summary, the other ranks `None`.
+/// [`crate::bake::peers`]): rank 0 writes the file and gets its summary, the other ranks `None`.
 pub fn bake_one_among(
     input: &Path,
     output: Option<&Path>,
@@ -146,7 +146,7 @@ pub fn bake_one_among(
     plan: &BakePlan,
     stage: &(dyn Fn(&str) + Sync),
     cancel: &AtomicBool,
-    peers: &dyn Peers,
+    peers: &dyn Exchange,
 ) -> anyhow::Result<(PathBuf, Option<BakeSummary>)> {
     let (role, output) = match output {
         Some(o) => (flag, o.to_path_buf()),
@@ -191,7 +191,7 @@ pub fn bake_file_among(
     plan: &BakePlan,
     stage: &(dyn Fn(&str) + Sync),
     cancel: &AtomicBool,
-    peers: &dyn Peers,
+    peers: &dyn Exchange,
 ) -> anyhow::Result<Option<BakeSummary>> {
     let stopped = || -> anyhow::Result<()> {
         match cancel.load(Ordering::Relaxed) {

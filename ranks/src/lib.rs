@@ -10,6 +10,9 @@
 
 use std::path::Path;
 
+mod exchange;
+pub use exchange::{local_ranks, Alone, Exchange, LocalRank};
+
 use serde::de::DeserializeOwned;
 use serde::Serialize;
 

@@ -28,8 +28,9 @@ use crate::fields::{BrickValues, FieldKind};
 use crate::measures;
 
 use super::extra::ExtraGrid;
-use super::peers::{check_message, chunk_per_rank, Peers};
+use super::peers::{check_message, chunk_per_rank};
 use super::{BakeOptions, Bricks, Cells, Input};
+use ranks::Exchange;
 
 /// Field values larger than this (all fields together) are kept in scratch files while
 /// the input's values are held (see the module docs): 256 MiB, two fields of 32 M cells.
@@ -244,7 +245,7 @@ pub(super) fn derive_fields(
     cells: &Cells,
     bricks: &Bricks,
     opts: &BakeOptions,
-    peers: &dyn Peers,
+    peers: &dyn Exchange,
 ) -> Result<DerivedFields, BakeError> {
     match &cells.input {
         Input::Vector(sets, vals, faces) => {
@@ -369,7 +370,7 @@ pub(super) fn derive_fields(
 }
 
 /// `counts` summed over `peers` (at rank 0; the others' own counts stay theirs, unused).
-fn summed(counts: impl Iterator<Item = u64>, peers: &dyn Peers) -> Result<Vec<u64>, BakeError> {
+fn summed(counts: impl Iterator<Item = u64>, peers: &dyn Exchange) -> Result<Vec<u64>, BakeError> {
     let mine: Vec<u64> = counts.collect();
     if peers.size() <= 1 {
         return Ok(mine);
@@ -406,7 +407,7 @@ fn per_brick(
     bricks: &[BrickBox],
     nf: usize,
     spill: &Spill,
-    peers: &dyn Peers,
+    peers: &dyn Exchange,
     release: &dyn Fn(),
     cell_values: impl Fn(&BrickBox, &mut [&mut [f32]]) + Sync,
 ) -> Result<Store, BakeError> {

@@ -39,7 +39,7 @@ use grids::{decoded_cells, located_cells};
 pub mod memory;
 mod overlap;
 pub mod peers;
-pub use peers::{Alone, Peers};
+pub use ranks::{Alone, Exchange};
 mod reach;
 mod select;
 mod supports;
@@ -190,7 +190,7 @@ pub fn bake_kept_among(
     grids: Vec<BakeGrid>,
     opts: &BakeOptions,
     stage: &(dyn Fn(&str) + Sync),
-    peers: &dyn Peers,
+    peers: &dyn Exchange,
 ) -> Result<Option<(Baked, BakeSummary)>, BakeError> {
     match peers.size() {
         0 | 1 => bake_kept(grids, opts, stage).map(Some),
@@ -331,7 +331,7 @@ fn run(
     grids: Vec<BakeGrid>,
     opts: &BakeOptions,
     stage: &(dyn Fn(&str) + Sync),
-    peers: &dyn Peers,
+    peers: &dyn Exchange,
 ) -> Result<Option<(Baked, BakeSummary)>, BakeError> {
     if opts.max_brick == 0 {
         return Err(BakeError::BadMaxBrick(opts.max_brick));

@@ -14,48 +14,13 @@
 //! viewer maps one file and its KD-tree already gives each rank of a render its subtrees
 //! (one frame over ranks), so parts would only move the assembly into every reader.
 //!
+//! The ranks talk through `ranks::Exchange`: MPI's ranks, or threads of one process in
+//! the tests (`ranks::local_ranks`).
+//!
 //! Only the fields scale with the ranks: reading and the cells are every rank's, the
 //! regions and the writing rank 0's (docs/baking.md, *One file over MPI ranks*).
 
 use crate::error::BakeError;
-
-/// The processes a bake is shared between, and the one step they take together.
-pub trait Peers {
-    /// This process's rank, from 0; rank 0 writes the file.
-    fn rank(&self) -> usize;
-    /// How many processes share the bake.
-    fn size(&self) -> usize;
-    /// Every rank's `bytes` at rank 0, in rank order (`None` at the other ranks).
-    /// Collective: every rank calls it at the same step.
-    fn gather(&self, bytes: &[u8]) -> Option<Vec<Vec<u8>>>;
-}
-
-/// A bake in one process.
-pub struct Alone;
-
-impl Peers for Alone {
-    fn rank(&self) -> usize {
-        0
-    }
-    fn size(&self) -> usize {
-        1
-    }
-    fn gather(&self, bytes: &[u8]) -> Option<Vec<Vec<u8>>> {
-        Some(vec![bytes.to_vec()])
-    }
-}
-
-impl Peers for ranks::Ranks {
-    fn rank(&self) -> usize {
-        ranks::Ranks::rank(self)
-    }
-    fn size(&self) -> usize {
-        ranks::Ranks::size(self)
-    }
-    fn gather(&self, bytes: &[u8]) -> Option<Vec<Vec<u8>>> {
-        self.gather_bytes(bytes)
-    }
-}
 
 /// The cells of one chunk per rank and round, for `total` cells over `ranks`: a serial
 /// bake's chunk shared out, so that rank 0 holds one round's chunks at a time, as much as

@@ -507,19 +507,10 @@ fn single_precision_grids_bake_as_their_exact_double_copies() {
     }
 }
 
-/// A bake from a file decodes each grid's leaves a batch at a time, straight into its cells
-/// (`vdb::located`), and keeps the cells' values on disk past `Spill::above` as it does the
-/// fields: the file is the one a bake of the decoded grids held in memory makes, byte for
-/// byte, on two levels whose boundary runs through blocks, with non-finite values
-/// repaired, a staggered grid, an extra scalar field, leaves decoded in the file's order or
-/// in reverse, and on a grid of more than one batch of leaves.
-#[test]
-fn located_grids_with_cells_on_disk_give_the_same_file() {
-    use qbricks_preprocess::bake::{bake_kept, Spill};
-    use qbricks_preprocess::inputs::{read_inputs, ReadOptions};
-    use qbricks_preprocess::vdb::write::{write_vdb, Compression};
-    use qbricks_preprocess::vdb::{AnyLocated, VdbFile};
-
+/// Two levels of single-precision velocity (one value non-finite, repaired by the bake)
+/// and a scalar grid `density` on the coarse level's voxels: the input of the bakes from
+/// a file below.
+fn two_level_with_density() -> Vec<AnyGrid> {
     let mut doubles = two_level(8, &abc);
     spoil(&mut doubles[1], &[(3, [f64::NAN, 0.0, 0.0])]);
     let mut grids: Vec<AnyGrid> = doubles
@@ -533,6 +524,23 @@ fn located_grids_with_cells_on_disk_give_the_same_file() {
         unreachable!()
     };
     grids.push(AnyGrid::Float(convert(coarse, "density", 0.0f32, |v| v[2])));
+    grids
+}
+
+/// A bake from a file decodes each grid's leaves a batch at a time, straight into its cells
+/// (`vdb::located`), and keeps the cells' values on disk past `Spill::above` as it does the
+/// fields: the file is the one a bake of the decoded grids held in memory makes, byte for
+/// byte, on two levels whose boundary runs through blocks, with non-finite values
+/// repaired, a staggered grid, an extra scalar field, leaves decoded in the file's order or
+/// in reverse, and on a grid of more than one batch of leaves.
+#[test]
+fn located_grids_with_cells_on_disk_give_the_same_file() {
+    use qbricks_preprocess::bake::{bake_kept, Spill};
+    use qbricks_preprocess::inputs::{read_inputs, ReadOptions};
+    use qbricks_preprocess::vdb::write::{write_vdb, Compression};
+    use qbricks_preprocess::vdb::{AnyLocated, VdbFile};
+
+    let grids = two_level_with_density();
     let dir = tempfile::tempdir().expect("tempdir");
     let vdb = dir.path().join("two_level.vdb");
     write_vdb(&vdb, &grids, Compression::Zip).expect("write vdb");
@@ -604,55 +612,6 @@ fn located_grids_with_cells_on_disk_give_the_same_file() {
     assert!(written(baked) == held);
 }
 
-/// The ranks of one bake as threads of this process: what `mpirun` ranks exchange
-/// through MPI, sent through channels (each rank's messages reach rank 0 in order).
-struct ThreadRanks {
-    rank: usize,
-    size: usize,
-    to_root: Option<std::sync::mpsc::Sender<Vec<u8>>>,
-    from: Vec<std::sync::mpsc::Receiver<Vec<u8>>>,
-}
-
-impl ThreadRanks {
-    fn new(size: usize) -> Vec<ThreadRanks> {
-        let (senders, receivers): (Vec<_>, Vec<_>) =
-            (1..size).map(|_| std::sync::mpsc::channel()).unzip();
-        let mut all = vec![ThreadRanks {
-            rank: 0,
-            size,
-            to_root: None,
-            from: receivers,
-        }];
-        for (i, s) in senders.into_iter().enumerate() {
-            all.push(ThreadRanks {
-                rank: i + 1,
-                size,
-                to_root: Some(s),
-                from: Vec::new(),
-            });
-        }
-        all
-    }
-}
-
-impl qbricks_preprocess::bake::Peers for ThreadRanks {
-    fn rank(&self) -> usize {
-        self.rank
-    }
-    fn size(&self) -> usize {
-        self.size
-    }
-    fn gather(&self, bytes: &[u8]) -> Option<Vec<Vec<u8>>> {
-        if let Some(s) = &self.to_root {
-            s.send(bytes.to_vec()).expect("rank 0 listens");
-            return None;
-        }
-        let mut all = vec![bytes.to_vec()];
-        all.extend(self.from.iter().map(|r| r.recv().expect("a rank sends")));
-        Some(all)
-    }
-}
-
 /// One bake shared between 2, 3 and 5 ranks (`bake_kept_among`; threads standing in for
 /// MPI ranks, each reading the VDB file itself as `mpirun` ranks do): rank 0's file is
 /// the one a single process bakes, byte for byte, with the same summary, and the other
@@ -668,19 +627,7 @@ fn a_bake_shared_between_ranks_gives_the_same_file() {
     use qbricks_preprocess::vdb::write::{write_vdb, Compression};
     use qbricks_preprocess::vdb::VdbFile;
 
-    let mut doubles = two_level(8, &abc);
-    spoil(&mut doubles[1], &[(3, [f64::NAN, 0.0, 0.0])]);
-    let mut grids: Vec<AnyGrid> = doubles
-        .iter()
-        .map(|g| match g {
-            AnyGrid::Vec3d(g) => single_and_double(g).0,
-            _ => unreachable!("two_level makes vec3d grids"),
-        })
-        .collect();
-    let AnyGrid::Vec3s(coarse) = &grids[0] else {
-        unreachable!()
-    };
-    grids.push(AnyGrid::Float(convert(coarse, "density", 0.0f32, |v| v[2])));
+    let grids = two_level_with_density();
     let dir = tempfile::tempdir().expect("tempdir");
     let vdb = dir.path().join("two_level.vdb");
     write_vdb(&vdb, &grids, Compression::Zip).expect("write vdb");
@@ -738,7 +685,7 @@ fn a_bake_shared_between_ranks_gives_the_same_file() {
         for o in [o.clone(), on_disk(o)] {
             for n in [2, 3, 5] {
                 let results: Vec<_> = std::thread::scope(|s| {
-                    let handles: Vec<_> = ThreadRanks::new(n)
+                    let handles: Vec<_> = ranks::local_ranks(n)
                         .into_iter()
                         .map(|peers| {
                             let o = o.clone();

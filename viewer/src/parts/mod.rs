@@ -1,8 +1,8 @@
 //! One frame over the ranks of an MPI run, sort-last: the file's KD-tree is cut into
 //! subtrees ([`pieces`]), each rank searches its rays only through the regions of its
 //! subtrees, and rank 0 composites what the ranks found ([`frame`]). The ranks talk only
-//! through [`Exchange`]: MPI's ranks (`ranks::Ranks`), or threads of one process
-//! ([`exchange::local_ranks`]) for the tests.
+//! through [`Exchange`] (of the `ranks` crate): MPI's ranks (`ranks::Ranks`), or threads
+//! of one process ([`local_ranks`]) for the tests.
 //!
 //! What is shared out is the iso-surface search: a ray's first crossing is the nearest of
 //! the first crossings each rank finds in its own regions, because `exact` solves every
@@ -13,10 +13,9 @@
 //! the surface crosses it in its own regions, and a ray is blocked where any rank says so.
 //! Meshes are traced by every rank (they bound the search and are small).
 
-pub mod exchange;
 pub mod frame;
 pub mod pieces;
 
-pub use exchange::{local_ranks, Exchange, LocalRank};
 pub use frame::{check, render_part, PartError, RankReport, RanksReport, Unsupported};
 pub use pieces::{owned_regions, Pieces};
+pub use ranks::{local_ranks, Exchange, LocalRank};

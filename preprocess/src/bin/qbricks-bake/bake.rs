@@ -102,7 +102,7 @@ pub fn plan(args: &Args) -> anyhow::Result<Plan> {
 }
 
 /// Bakes one file; over the ranks of an MPI run each derives its share of the fields and
-/// rank 0 writes the file and reports (see `preprocess::bake::Peers`).
+/// rank 0 writes the file and reports (see `preprocess::bake::peers`).
 pub fn run(args: Args, plan: Plan, ranks: &Ranks) -> anyhow::Result<()> {
     let Plan { start, bake } = plan;
     let input_name = args.input.display().to_string();

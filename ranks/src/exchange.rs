@@ -1,11 +1,13 @@
-//! The two collective steps a frame over ranks needs: bring every rank's bytes to rank 0,
-//! and send rank 0's bytes to every rank. MPI's ranks do them with messages; threads of
-//! one process ([`local_ranks`]) with channels, so the compositing is tested without MPI.
+//! The two collective steps the work shared over ranks needs (one frame over ranks, one
+//! file baked over ranks): bring every rank's bytes to rank 0, and send rank 0's bytes to
+//! every rank. MPI's ranks do them with messages; threads of one process
+//! ([`local_ranks`]) with channels, so that what is shared is tested without MPI; one
+//! process alone ([`Alone`]) needs neither.
 
 use std::sync::mpsc::{channel, Receiver, Sender};
 
-/// The ranks one frame is shared between. Every rank must call the steps in the same
-/// order.
+/// The ranks a piece of work is shared between. Every rank must call the steps in the
+/// same order.
 pub trait Exchange {
     fn rank(&self) -> usize;
     fn size(&self) -> usize;
@@ -15,12 +17,12 @@ pub trait Exchange {
     fn broadcast(&self, bytes: Vec<u8>) -> Vec<u8>;
 }
 
-impl Exchange for ranks::Ranks {
+impl Exchange for crate::Ranks {
     fn rank(&self) -> usize {
-        ranks::Ranks::rank(self)
+        crate::Ranks::rank(self)
     }
     fn size(&self) -> usize {
-        ranks::Ranks::size(self)
+        crate::Ranks::size(self)
     }
     fn gather(&self, bytes: &[u8]) -> Option<Vec<Vec<u8>>> {
         self.gather_bytes(bytes)
@@ -30,9 +32,27 @@ impl Exchange for ranks::Ranks {
     }
 }
 
+/// One process on its own: rank 0 of 1 (shareable between threads, unlike [`crate::Ranks`]).
+pub struct Alone;
+
+impl Exchange for Alone {
+    fn rank(&self) -> usize {
+        0
+    }
+    fn size(&self) -> usize {
+        1
+    }
+    fn gather(&self, bytes: &[u8]) -> Option<Vec<Vec<u8>>> {
+        Some(vec![bytes.to_vec()])
+    }
+    fn broadcast(&self, bytes: Vec<u8>) -> Vec<u8> {
+        bytes
+    }
+}
+
 /// One of the ranks [`local_ranks`] makes: threads of this process, joined by channels.
 /// A rank whose peer has gone (its thread ended) receives nothing: empty bytes, which the
-/// frame's decoding refuses.
+/// frame's decoding and the bake's checks refuse.
 pub struct LocalRank {
     rank: usize,
     size: usize,
