@@ -448,16 +448,22 @@ fn per_brick(
             let mut mine = Vec::new();
             if let Some(c) = round.get(peers.rank()) {
                 let values = derive(c)?;
-                mine.reserve_exact(values.iter().map(|v| v.len() * 4).sum());
-                as_bytes(&values)
-                    .iter()
-                    .for_each(|b| mine.extend_from_slice(b));
+                match sink.as_mut() {
+                    // Rank 0's chunk is the round's first: straight into place.
+                    Some(sink) => sink.take(&as_bytes(&values))?,
+                    None => {
+                        mine.reserve_exact(values.iter().map(|v| v.len() * 4).sum());
+                        as_bytes(&values)
+                            .iter()
+                            .for_each(|b| mine.extend_from_slice(b));
+                    }
+                }
             }
             let Some(parts) = peers.gather(&mine) else {
                 continue;
             };
             let sink = sink.as_mut().expect("rank 0 gathers");
-            for (rank, (c, part)) in round.iter().zip(&parts).enumerate() {
+            for (rank, (c, part)) in round.iter().zip(&parts).enumerate().skip(1) {
                 let cells: u64 = bricks[c.clone()].iter().map(BrickBox::cells).sum();
                 check_message(rank, part, cells, nf)?;
                 let fields: Vec<&[u8]> = match cells {
