@@ -87,8 +87,6 @@ pub(crate) struct DatasetAccels {
 }
 
 impl DatasetAccels {
-    /// The cache of `dataset`'s volume: the kept one if it is the same dataset, else a
-    /// new one.
     /// Whether the accelerations held are `dataset`'s.
     pub(crate) fn holds(&self, dataset: &Arc<Dataset>) -> bool {
         self.dataset
@@ -96,6 +94,8 @@ impl DatasetAccels {
             .is_some_and(|d| Arc::ptr_eq(d, dataset))
     }
 
+    /// The cache of `dataset`'s volume: the kept one if it is the same dataset, else a
+    /// new one.
     pub(crate) fn of(&mut self, dataset: &Arc<Dataset>) -> &mut AccelCache {
         if !self.holds(dataset) {
             self.cache.clear();

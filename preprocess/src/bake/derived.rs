@@ -381,13 +381,7 @@ fn summed(counts: impl Iterator<Item = u64>, peers: &dyn Exchange) -> Result<Vec
     };
     let mut sum = vec![0u64; mine.len()];
     for (rank, part) in parts.iter().enumerate() {
-        if part.len() != bytes.len() {
-            return Err(BakeError::PeerMessage {
-                rank,
-                got: part.len() as u64,
-                want: bytes.len() as u64,
-            });
-        }
+        check_message(rank, part, mine.len() as u64, 8)?;
         for (s, b) in sum.iter_mut().zip(part.chunks_exact(8)) {
             *s += u64::from_le_bytes(b.try_into().unwrap_or_default());
         }
@@ -465,7 +459,7 @@ fn per_brick(
             let sink = sink.as_mut().expect("rank 0 gathers");
             for (rank, (c, part)) in round.iter().zip(&parts).enumerate().skip(1) {
                 let cells: u64 = bricks[c.clone()].iter().map(BrickBox::cells).sum();
-                check_message(rank, part, cells, nf)?;
+                check_message(rank, part, cells, 4 * nf as u64)?;
                 let fields: Vec<&[u8]> = match cells {
                     0 => vec![&[]; nf],
                     _ => part.chunks_exact(cells as usize * 4).collect(),

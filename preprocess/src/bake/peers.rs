@@ -37,15 +37,15 @@ pub(super) fn chunk_per_rank(chunk: u64, ranks: usize, total: u64) -> u64 {
 /// The fewest rounds a shared bake's fields take (when its chunk size allows).
 const ROUNDS: u64 = 8;
 
-/// `bytes` from rank `rank` as the values of `cells` cells of `fields` fields, or the error
-/// of a message that does not hold them.
+/// `bytes` from rank `rank` as `items` items of `item_bytes` bytes each (a chunk's cells of
+/// every field, counts), or the error of a message that does not hold them.
 pub(super) fn check_message(
     rank: usize,
     bytes: &[u8],
-    cells: u64,
-    fields: usize,
+    items: u64,
+    item_bytes: u64,
 ) -> Result<(), BakeError> {
-    let want = cells.saturating_mul(4 * fields as u64);
+    let want = items.saturating_mul(item_bytes);
     match bytes.len() as u64 == want {
         true => Ok(()),
         false => Err(BakeError::PeerMessage {
@@ -75,8 +75,8 @@ mod tests {
 
     #[test]
     fn a_message_of_the_wrong_size_is_refused_naming_its_rank() {
-        assert!(check_message(1, &[0; 24], 3, 2).is_ok());
-        let e = check_message(2, &[0; 20], 3, 2).expect_err("short");
+        assert!(check_message(1, &[0; 24], 3, 8).is_ok());
+        let e = check_message(2, &[0; 20], 3, 8).expect_err("short");
         let text = e.to_string();
         assert!(
             text.contains("rank 2") && text.contains("20") && text.contains("24"),
