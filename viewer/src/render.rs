@@ -153,17 +153,24 @@ pub(crate) fn render_tiles(
                 caster.main.group_start(&frustum)
             })
             .collect();
+        let beside = caster.background_beside_surface();
         for y in tile.y0..tile.y1 {
             if !cancel.start_row() {
                 return false;
             }
             for x in tile.x0..tile.x1 {
                 let group = (y - tile.y0) / GROUP * groups_x + (x - tile.x0) / GROUP;
-                caster.main.set_start(starts[group as usize]);
+                let start = starts[group as usize];
+                caster.main.set_start(start);
+                let nothing = beside && start == Start::Nothing;
                 let mut c = [0.0f64; 3];
                 let hits_before = caster.hits;
                 for s in samples.clone() {
-                    let v = caster.sample(x, y, s);
+                    let v = if nothing {
+                        caster.sample_beside_surface(x, y, s)
+                    } else {
+                        caster.sample(x, y, s)
+                    };
                     if s == 0 {
                         first.push(caster.first);
                     }
@@ -821,6 +828,12 @@ mod tests {
         assert_eq!((none, &st.colormap), (None, &before));
     }
 
+    /// A frame whose groups of rays start their walks below the root, or skip them
+    /// ([`Start::Nothing`]: those rays take `sample_beside_surface` where nothing else can
+    /// be met), has the pixels and counters of every ray traced alone from the root: one
+    /// sample and four, from outside and from within the data, and with a sphere and a
+    /// clip plane that rays beside the surface meet (there the walk-less path must not
+    /// be taken).
     #[test]
     fn group_starts_change_no_pixel_and_no_counter() {
         let field =
@@ -828,22 +841,43 @@ mod tests {
         let file = testvol::nested(16, [0.0; 3], &[("q", &field), ("speed", &field)], 8);
         let view = testvol::open(&file).expect("open");
         let vol = Volume::new(&view).expect("volume");
-        let meshes = Meshes::empty();
-        let mut grouped_away = 0;
-        for (eye, spp) in [([50.0, -30.0, 40.0], 1), ([14.0, 15.0, 16.0], 4)] {
+        let none = Meshes::empty();
+        // A sphere above the data ([0, 32]³), seen by rays that pass over it; a clip
+        // plane that keeps x > 20, behind which rays that enter the data's side y = 0
+        // cross all of theirs.
+        let sphere = Meshes::from_meshes(&[crate::mesh::icosphere(
+            glam::DVec3::new(16.0, 16.0, 38.0),
+            4.0,
+            2,
+        )]);
+        let clip = crate::planes::Plane {
+            origin: [20.0, 16.0, 16.0],
+            normal: [1.0, 0.0, 0.0],
+        };
+        let (mut started_below, mut walked_nowhere) = (0, 0);
+        // (The clip's case takes a value held in few places, so that rays beside the
+        // surface cross data.)
+        let cases = [
+            ([50.0, -30.0, 40.0], 1, &none, None, 0.4),
+            ([14.0, 15.0, 16.0], 4, &none, None, 0.4),
+            ([50.0, -30.0, 40.0], 1, &sphere, None, 0.4),
+            ([50.0, -30.0, 40.0], 1, &none, Some(clip), 1.25),
+        ];
+        for (eye, spp, meshes, clip, iso) in cases {
             let mut st = ViewState::default_for_volume(&vol);
             st.width = 37;
             st.height = 29;
-            st.iso = 0.4;
+            st.iso = iso;
             st.spp = spp;
             st.strategy = Strategy::Exact;
+            st.clip = clip.into_iter().collect();
             st.camera = Camera {
                 eye,
                 look_at: [16.0, 16.0, 16.0],
                 up: [0.0, 0.0, 1.0],
                 projection: Projection::Perspective { fov_deg: 50.0 },
             };
-            let scene = Scene::new(&vol, &st, &meshes).expect("scene");
+            let scene = Scene::new(&vol, &st, meshes).expect("scene");
             let frame = render(&scene);
             let mut caster = RayCaster::new(&scene);
             let mut rgb = Vec::new();
@@ -859,24 +893,42 @@ mod tests {
                     rgb.push(c.map(|v| (v / f64::from(spp)) as f32));
                 }
             }
-            assert!(frame.hits > 0 && frame.hits < frame.rays, "eye {eye:?}");
-            assert_eq!(frame.rgb, rgb, "eye {eye:?}");
-            assert_eq!(frame.stats, caster.stats(), "eye {eye:?}");
+            let case = format!("eye {eye:?}, sphere {}, clip {clip:?}", !meshes.is_empty());
+            assert!(frame.hits > 0 && frame.hits < frame.rays, "{case}");
+            assert_eq!(frame.rgb, rgb, "{case}");
+            assert_eq!(frame.depth, caster_depths(&scene), "{case}");
+            assert_eq!(frame.stats, caster.stats(), "{case}");
             assert_eq!((frame.rays, frame.hits), (caster.rays, caster.hits));
-            // The groups did start below the root somewhere.
+            // The groups did start below the root somewhere, and some walked nowhere.
             let tree = scene.accel.active_tree(&vol).expect("tree");
             let f = glam::DVec3::from_array(vol.frame);
             for gy in (0..st.height).step_by(GROUP as usize) {
                 for gx in (0..st.width).step_by(GROUP as usize) {
                     let (x0, y0) = (f64::from(gx), f64::from(gy));
                     let fr = scene.rays.frustum(x0, y0, x0 + 4.0, y0 + 4.0, f);
-                    grouped_away += usize::from(tree.start_in(&fr) != Start::Root);
+                    let start = tree.start_in(&fr);
+                    started_below += usize::from(start != Start::Root);
+                    walked_nowhere += usize::from(start == Start::Nothing);
                 }
             }
         }
         assert!(
-            grouped_away > 20,
-            "only {grouped_away} groups started below the root"
+            started_below > 20 && walked_nowhere > 20,
+            "{started_below} groups started below the root, {walked_nowhere} nowhere"
         );
+    }
+
+    /// The depth of the first thing each pixel's first ray meets, every ray traced alone.
+    fn caster_depths(scene: &Scene) -> Vec<f32> {
+        let st = scene.state;
+        let mut caster = RayCaster::new(scene);
+        let mut depth = Vec::new();
+        for y in 0..st.height {
+            for x in 0..st.width {
+                caster.sample(x, y, 0);
+                depth.push(caster.first.t);
+            }
+        }
+        depth
     }
 }

@@ -75,6 +75,14 @@ impl Tracer<'_> {
         found
     }
 
+    /// What [`Tracer::iso`] does along a ray whose walk starts nowhere: counts the
+    /// ray's stretch through the data (within the active box) as stepped over.
+    pub(crate) fn step_over_all(&mut self, o: [f64; 3], d: [f64; 3], t0: f64, t1: f64) {
+        if let Some((t0, t1)) = self.clip(&o, &d, t0, t1) {
+            Gaps::new(self.vol, &o, &d, t0, t1).finish(self);
+        }
+    }
+
     /// The first root in one region segment whose range holds the iso value; `mask` is
     /// the region's dual-cell mask (see [`crate::dual_mask`]), when it has one.
     #[allow(clippy::too_many_arguments)]
