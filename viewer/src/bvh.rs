@@ -106,7 +106,6 @@ impl Bvh {
     }
 
     /// Bounds of everything in the tree (empty box for an empty tree).
-    #[cfg(test)]
     pub(crate) fn bounds(&self) -> Aabb {
         self.nodes.first().map_or(Aabb::EMPTY, |n| n.bounds)
     }

@@ -76,6 +76,10 @@ pub struct RayCaster<'s> {
     pub rays: u64,
     /// What the last traced ray met first (see [`FirstSurface`]).
     pub(crate) first: FirstSurface,
+    /// Whether camera rays may meet a mesh: false only while the frame loop traces a
+    /// group of pixels whose frustum misses every mesh's bounds
+    /// ([`RayCaster::set_meshes_in_view`]).
+    meshes_in_view: bool,
 }
 
 /// What a camera ray met first: the iso-surface (iso mode) or a mesh. The overlays hide
@@ -128,7 +132,15 @@ impl<'s> RayCaster<'s> {
             hits: 0,
             rays: 0,
             first: FirstSurface::NONE,
+            meshes_in_view: true,
         }
+    }
+
+    /// Tells the caster whether the next camera rays may meet a mesh: `false` for rays
+    /// of a group of pixels whose frustum misses the meshes' bounds (no such ray meets a
+    /// triangle, so they skip the meshes' tree; shadow rays still test it).
+    pub(crate) fn set_meshes_in_view(&mut self, seen: bool) {
+        self.meshes_in_view = seen;
     }
 
     /// Work counters of every ray cast so far (camera and shadow rays).
@@ -169,9 +181,10 @@ impl<'s> RayCaster<'s> {
     }
 
     /// Whether a camera ray whose walk starts nowhere ([`Start::Nothing`]: its group's
-    /// frustum holds no region that can hold the iso value) can meet nothing but the
-    /// background: one opaque `exact` iso-surface and no mesh, clip plane or slice, and
-    /// no `--pixel` log. Such rays take [`RayCaster::sample_beside_surface`].
+    /// frustum holds no region that can hold the iso value) and that meets no mesh (see
+    /// [`RayCaster::set_meshes_in_view`]) can meet nothing but the background: one opaque
+    /// `exact` iso-surface and no clip plane or slice, and no `--pixel` log. Such rays
+    /// take [`RayCaster::sample_beside_surface`].
     ///
     /// [`Start::Nothing`]: crate::active::Start::Nothing
     pub(crate) fn background_beside_surface(&self) -> bool {
@@ -179,7 +192,6 @@ impl<'s> RayCaster<'s> {
         scene.params.tf.mode == Mode::Iso
             && scene.params.strategy == Strategy::Exact
             && scene.is_single_opaque()
-            && scene.meshes.is_empty()
             && scene.cuts.clips.is_empty()
             && self.main.log.is_none()
     }
@@ -268,7 +280,7 @@ impl<'s> RayCaster<'s> {
             });
             kept?
         };
-        let mesh = if scene.meshes.is_empty() {
+        let mesh = if scene.meshes.is_empty() || !self.meshes_in_view {
             None
         } else {
             scene.meshes.intersect(ray, t_lo, t_hi)

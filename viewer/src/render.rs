@@ -135,7 +135,8 @@ pub(crate) fn render_tiles(
         // at any sub-pixel offset, is a ray through its rectangle).
         let frame = glam::DVec3::from_array(scene.vol.frame);
         let groups_x = (tile.x1 - tile.x0).div_ceil(GROUP);
-        let starts: Vec<Start> = (tile.y0..tile.y1)
+        let mesh_bounds = scene.meshes.bounds();
+        let starts: Vec<(Start, bool)> = (tile.y0..tile.y1)
             .step_by(GROUP as usize)
             .flat_map(|gy| {
                 (tile.x0..tile.x1)
@@ -143,14 +144,22 @@ pub(crate) fn render_tiles(
                     .map(move |gx| (gx, gy))
             })
             .map(|(gx, gy)| {
-                let frustum = scene.rays.frustum(
+                let rect = (
                     f64::from(gx),
                     f64::from(gy),
                     f64::from((gx + GROUP).min(tile.x1)),
                     f64::from((gy + GROUP).min(tile.y1)),
-                    frame,
                 );
-                caster.main.group_start(&frustum)
+                let frustum = scene.rays.frustum(rect.0, rect.1, rect.2, rect.3, frame);
+                // The meshes are placed in world coordinates.
+                let meshes_seen = mesh_bounds.is_some_and(|b| {
+                    let world =
+                        scene
+                            .rays
+                            .frustum(rect.0, rect.1, rect.2, rect.3, glam::DVec3::ZERO);
+                    world.may_meet(&b.min, &b.max)
+                });
+                (caster.main.group_start(&frustum), meshes_seen)
             })
             .collect();
         let beside = caster.background_beside_surface();
@@ -160,9 +169,10 @@ pub(crate) fn render_tiles(
             }
             for x in tile.x0..tile.x1 {
                 let group = (y - tile.y0) / GROUP * groups_x + (x - tile.x0) / GROUP;
-                let start = starts[group as usize];
+                let (start, meshes_seen) = starts[group as usize];
                 caster.main.set_start(start);
-                let nothing = beside && start == Start::Nothing;
+                caster.set_meshes_in_view(meshes_seen);
+                let nothing = beside && start == Start::Nothing && !meshes_seen;
                 let mut c = [0.0f64; 3];
                 let hits_before = caster.hits;
                 for s in samples.clone() {
@@ -830,10 +840,10 @@ mod tests {
 
     /// A frame whose groups of rays start their walks below the root, or skip them
     /// ([`Start::Nothing`]: those rays take `sample_beside_surface` where nothing else can
-    /// be met), has the pixels and counters of every ray traced alone from the root: one
-    /// sample and four, from outside and from within the data, and with a sphere and a
-    /// clip plane that rays beside the surface meet (there the walk-less path must not
-    /// be taken).
+    /// be met), and skip the meshes where their frustum misses them, has the pixels and
+    /// counters of every ray traced alone from the root: one sample and four, from outside
+    /// and from within the data, and with a sphere and a clip plane that rays beside the
+    /// surface meet (there the walk-less path must not be taken).
     #[test]
     fn group_starts_change_no_pixel_and_no_counter() {
         let field =
@@ -855,6 +865,7 @@ mod tests {
             normal: [1.0, 0.0, 0.0],
         };
         let (mut started_below, mut walked_nowhere) = (0, 0);
+        let (mut sphere_seen, mut sphere_missed) = (0, 0);
         // (The clip's case takes a value held in few places, so that rays beside the
         // surface cross data.)
         let cases = [
@@ -909,12 +920,27 @@ mod tests {
                     let start = tree.start_in(&fr);
                     started_below += usize::from(start != Start::Root);
                     walked_nowhere += usize::from(start == Start::Nothing);
+                    if let Some(b) = meshes.bounds() {
+                        let world =
+                            scene
+                                .rays
+                                .frustum(x0, y0, x0 + 4.0, y0 + 4.0, glam::DVec3::ZERO);
+                        match world.may_meet(&b.min, &b.max) {
+                            true => sphere_seen += 1,
+                            false => sphere_missed += 1,
+                        }
+                    }
                 }
             }
         }
         assert!(
             started_below > 20 && walked_nowhere > 20,
             "{started_below} groups started below the root, {walked_nowhere} nowhere"
+        );
+        // Groups that skipped the sphere's tree, and groups that tested it.
+        assert!(
+            sphere_seen > 5 && sphere_missed > 20,
+            "{sphere_seen} groups may see the sphere, {sphere_missed} may not"
         );
     }
 

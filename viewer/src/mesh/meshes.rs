@@ -112,8 +112,8 @@ impl Meshes {
         self.tris.len()
     }
 
-    /// Bounds of all triangles, `None` without triangles.
-    #[cfg(test)]
+    /// Bounds of all triangles (world frame, the vertices' own extremes), `None` without
+    /// triangles.
     pub(crate) fn bounds(&self) -> Option<Aabb> {
         let b = self.bvh.bounds();
         (!b.is_empty()).then_some(b)
