@@ -34,6 +34,17 @@ pub use crate::tiles::{tiles, Tile, TileResult};
 /// thin surface see none of it, large enough that finding the start costs little per ray.
 const GROUP: u32 = 4;
 
+/// What the rays of one group of pixels may meet, from the group's frustum.
+#[derive(Debug, Clone, Copy)]
+struct Group {
+    /// Where their walks start in the active tree.
+    start: Start,
+    /// Whether they may meet a mesh (the frustum meets the meshes' bounds).
+    meshes_seen: bool,
+    /// Whether they may cross the data (the frustum meets its bounds).
+    data_seen: bool,
+}
+
 /// A rendered image (linear RGB in 0..=1 per pixel, row-major from the top-left).
 #[derive(Debug, Clone)]
 pub struct Frame {
@@ -136,7 +147,8 @@ pub(crate) fn render_tiles(
         let frame = glam::DVec3::from_array(scene.vol.frame);
         let groups_x = (tile.x1 - tile.x0).div_ceil(GROUP);
         let mesh_bounds = scene.meshes.bounds();
-        let starts: Vec<(Start, bool)> = (tile.y0..tile.y1)
+        let vol = scene.vol;
+        let groups: Vec<Group> = (tile.y0..tile.y1)
             .step_by(GROUP as usize)
             .flat_map(|gy| {
                 (tile.x0..tile.x1)
@@ -159,7 +171,11 @@ pub(crate) fn render_tiles(
                             .frustum(rect.0, rect.1, rect.2, rect.3, glam::DVec3::ZERO);
                     world.may_meet(&b.min, &b.max)
                 });
-                (caster.main.group_start(&frustum), meshes_seen)
+                Group {
+                    start: caster.main.group_start(&frustum),
+                    meshes_seen,
+                    data_seen: frustum.may_meet(&vol.bounds_min, &vol.bounds_max),
+                }
             })
             .collect();
         let beside = caster.background_beside_surface();
@@ -169,15 +185,15 @@ pub(crate) fn render_tiles(
             }
             for x in tile.x0..tile.x1 {
                 let group = (y - tile.y0) / GROUP * groups_x + (x - tile.x0) / GROUP;
-                let (start, meshes_seen) = starts[group as usize];
-                caster.main.set_start(start);
-                caster.set_meshes_in_view(meshes_seen);
-                let nothing = beside && start == Start::Nothing && !meshes_seen;
+                let g = groups[group as usize];
+                caster.main.set_start(g.start);
+                caster.set_meshes_in_view(g.meshes_seen);
+                let nothing = beside && g.start == Start::Nothing && !g.meshes_seen;
                 let mut c = [0.0f64; 3];
                 let hits_before = caster.hits;
                 for s in samples.clone() {
                     let v = if nothing {
-                        caster.sample_beside_surface(x, y, s)
+                        caster.sample_beside_surface(x, y, s, g.data_seen)
                     } else {
                         caster.sample(x, y, s)
                     };
@@ -866,13 +882,14 @@ mod tests {
         };
         let (mut started_below, mut walked_nowhere) = (0, 0);
         let (mut sphere_seen, mut sphere_missed) = (0, 0);
-        // (The clip's case takes a value held in few places, so that rays beside the
-        // surface cross data.)
+        // (The last two take a value held in few places, so that rays beside the surface
+        // cross data.)
         let cases = [
             ([50.0, -30.0, 40.0], 1, &none, None, 0.4),
             ([14.0, 15.0, 16.0], 4, &none, None, 0.4),
             ([50.0, -30.0, 40.0], 1, &sphere, None, 0.4),
             ([50.0, -30.0, 40.0], 1, &none, Some(clip), 1.25),
+            ([50.0, -30.0, 40.0], 1, &none, None, 1.25),
         ];
         for (eye, spp, meshes, clip, iso) in cases {
             let mut st = ViewState::default_for_volume(&vol);
