@@ -183,14 +183,15 @@ impl<'s> RayCaster<'s> {
     /// Whether a camera ray whose walk starts nowhere ([`Start::Nothing`]: its group's
     /// frustum holds no region that can hold the iso value) and that meets no mesh (see
     /// [`RayCaster::set_meshes_in_view`]) can meet nothing but the background: one opaque
-    /// `exact` iso-surface and no clip plane or slice, and no `--pixel` log. Such rays
-    /// take [`RayCaster::sample_beside_surface`].
+    /// iso-surface (whichever strategy searches it: all of them search only the active
+    /// tree's leaves when it has one, and a walk that starts nowhere finds nothing) and
+    /// no clip plane or slice, and no `--pixel` log. Such rays take
+    /// [`RayCaster::sample_beside_surface`].
     ///
     /// [`Start::Nothing`]: crate::active::Start::Nothing
     pub(crate) fn background_beside_surface(&self) -> bool {
         let scene = self.scene;
         scene.params.tf.mode == Mode::Iso
-            && scene.params.strategy == Strategy::Exact
             && scene.is_single_opaque()
             && scene.cuts.clips.is_empty()
             && self.main.log.is_none()

@@ -882,22 +882,25 @@ mod tests {
         };
         let (mut started_below, mut walked_nowhere) = (0, 0);
         let (mut sphere_seen, mut sphere_missed) = (0, 0);
-        // (The last two take a value held in few places, so that rays beside the surface
+        // (The last four take a value held in few places, so that rays beside the surface
         // cross data.)
+        let (out, exact) = ([50.0, -30.0, 40.0], Strategy::Exact);
         let cases = [
-            ([50.0, -30.0, 40.0], 1, &none, None, 0.4),
-            ([14.0, 15.0, 16.0], 4, &none, None, 0.4),
-            ([50.0, -30.0, 40.0], 1, &sphere, None, 0.4),
-            ([50.0, -30.0, 40.0], 1, &none, Some(clip), 1.25),
-            ([50.0, -30.0, 40.0], 1, &none, None, 1.25),
+            (out, 1, &none, None, 0.4, exact),
+            ([14.0, 15.0, 16.0], 4, &none, None, 0.4, exact),
+            (out, 1, &sphere, None, 0.4, exact),
+            (out, 1, &none, Some(clip), 1.25, exact),
+            (out, 1, &none, None, 1.25, exact),
+            (out, 1, &none, None, 1.25, Strategy::Uniform),
+            (out, 2, &sphere, None, 1.25, Strategy::Bisect),
         ];
-        for (eye, spp, meshes, clip, iso) in cases {
+        for (eye, spp, meshes, clip, iso, strategy) in cases {
             let mut st = ViewState::default_for_volume(&vol);
             st.width = 37;
             st.height = 29;
             st.iso = iso;
             st.spp = spp;
-            st.strategy = Strategy::Exact;
+            st.strategy = strategy;
             st.clip = clip.into_iter().collect();
             st.camera = Camera {
                 eye,
@@ -921,7 +924,10 @@ mod tests {
                     rgb.push(c.map(|v| (v / f64::from(spp)) as f32));
                 }
             }
-            let case = format!("eye {eye:?}, sphere {}, clip {clip:?}", !meshes.is_empty());
+            let case = format!(
+                "eye {eye:?}, sphere {}, clip {clip:?}, iso {iso}, {strategy:?}",
+                !meshes.is_empty()
+            );
             assert!(frame.hits > 0 && frame.hits < frame.rays, "{case}");
             assert_eq!(frame.rgb, rgb, "{case}");
             assert_eq!(frame.depth, caster_depths(&scene), "{case}");
