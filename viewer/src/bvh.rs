@@ -106,6 +106,7 @@ impl Bvh {
     }
 
     /// Bounds of everything in the tree (empty box for an empty tree).
+    #[cfg(test)]
     pub(crate) fn bounds(&self) -> Aabb {
         self.nodes.first().map_or(Aabb::EMPTY, |n| n.bounds)
     }
@@ -210,10 +211,58 @@ impl Bvh {
         me
     }
 
+    /// Where the searches of a group of rays can start: the deepest node above every
+    /// primitive whose box `may_meet` lets through, found by descending while only one
+    /// child's box may meet the group (the root when both may); `None` when no box may.
+    /// `may_meet` must never refuse a box one of the rays meets (a frustum around them):
+    /// then every node the search from the root would open lies under the start, and
+    /// [`Bvh::nearest_from`] the start finds what [`Bvh::nearest`] finds.
+    pub(crate) fn start_in(&self, may_meet: impl Fn(&Aabb) -> bool) -> Option<u32> {
+        let mut idx = 0u32;
+        if !may_meet(&self.nodes.first()?.bounds) {
+            return None;
+        }
+        // A descent is no longer than the tree is deep; the count only guards a
+        // malformed tree.
+        for _ in 0..=MAX_DEPTH {
+            let node = self.nodes.get(idx as usize)?;
+            if node.count > 0 {
+                return Some(idx);
+            }
+            let meets = |n: u32| {
+                self.nodes
+                    .get(n as usize)
+                    .is_some_and(|c| may_meet(&c.bounds))
+            };
+            idx = match (meets(idx + 1), meets(node.offset)) {
+                (true, true) => return Some(idx),
+                (true, false) => idx + 1,
+                (false, true) => node.offset,
+                (false, false) => return None,
+            };
+        }
+        Some(0)
+    }
+
     /// Nearest primitive hit: `hit(prim, t_min, t_max)` returns the primitive's hit
     /// distance in `(t_min, t_max)`, if any. Returns the primitive and distance.
+    #[cfg(test)]
     pub(crate) fn nearest(
         &self,
+        ray: &Ray,
+        t_min: f64,
+        t_max: f64,
+        hit: impl FnMut(u32, f64, f64) -> Option<f64>,
+    ) -> Option<(u32, f64)> {
+        self.nearest_from(0, ray, t_min, t_max, hit)
+    }
+
+    /// The nearest primitive hit among the primitives under node `start` (the root: 0;
+    /// see [`Bvh::start_in`]): `hit(prim, t_min, t_max)` returns the primitive's hit
+    /// distance in `(t_min, t_max)`, if any. Returns the primitive and distance.
+    pub(crate) fn nearest_from(
+        &self,
+        start: u32,
         ray: &Ray,
         t_min: f64,
         t_max: f64,
@@ -224,9 +273,9 @@ impl Bvh {
         let mut far = t_max;
         // (node, entry distance): a node is only opened if it starts before the best hit.
         let mut stack = [(0u32, 0.0f64); MAX_DEPTH + 2];
-        let root = self.nodes.first()?;
+        let root = self.nodes.get(start as usize)?;
         let (entry, _) = clip(&root.bounds, ray.origin, inv, t_min, far)?;
-        stack[0] = (0, entry);
+        stack[0] = (start, entry);
         let mut sp = 1usize;
         while sp > 0 {
             sp -= 1;

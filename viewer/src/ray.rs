@@ -76,10 +76,10 @@ pub struct RayCaster<'s> {
     pub rays: u64,
     /// What the last traced ray met first (see [`FirstSurface`]).
     pub(crate) first: FirstSurface,
-    /// Whether camera rays may meet a mesh: false only while the frame loop traces a
-    /// group of pixels whose frustum misses every mesh's bounds
-    /// ([`RayCaster::set_meshes_in_view`]).
-    meshes_in_view: bool,
+    /// Where camera rays search the meshes' tree: the root, except while the frame loop
+    /// traces a group of pixels, whose frustum gives a start below it, or none when it
+    /// misses every triangle's box ([`RayCaster::set_mesh_start`]).
+    mesh_start: Option<u32>,
 }
 
 /// What a camera ray met first: the iso-surface (iso mode) or a mesh. The overlays hide
@@ -132,15 +132,16 @@ impl<'s> RayCaster<'s> {
             hits: 0,
             rays: 0,
             first: FirstSurface::NONE,
-            meshes_in_view: true,
+            mesh_start: Some(0),
         }
     }
 
-    /// Tells the caster whether the next camera rays may meet a mesh: `false` for rays
-    /// of a group of pixels whose frustum misses the meshes' bounds (no such ray meets a
-    /// triangle, so they skip the meshes' tree; shadow rays still test it).
-    pub(crate) fn set_meshes_in_view(&mut self, seen: bool) {
-        self.meshes_in_view = seen;
+    /// Tells the caster where the next camera rays search the meshes' tree: a
+    /// [`Meshes::start_in`](crate::mesh::Meshes::start_in) of a frustum around them, so
+    /// `None` where no triangle's box lies in it (they skip the tree; shadow rays still
+    /// search it from the root).
+    pub(crate) fn set_mesh_start(&mut self, start: Option<u32>) {
+        self.mesh_start = start;
     }
 
     /// Work counters of every ray cast so far (camera and shadow rays).
@@ -182,7 +183,7 @@ impl<'s> RayCaster<'s> {
 
     /// Whether a camera ray whose walk starts nowhere ([`Start::Nothing`]: its group's
     /// frustum holds no region that can hold the iso value) and that meets no mesh (see
-    /// [`RayCaster::set_meshes_in_view`]) can meet nothing but the background: one opaque
+    /// [`RayCaster::set_mesh_start`]) can meet nothing but the background: one opaque
     /// iso-surface (whichever strategy searches it: all of them search only the active
     /// tree's leaves when it has one, and a walk that starts nowhere finds nothing) and
     /// no clip plane or slice, and no `--pixel` log. Such rays take
@@ -291,10 +292,11 @@ impl<'s> RayCaster<'s> {
             });
             kept?
         };
-        let mesh = if scene.meshes.is_empty() || !self.meshes_in_view {
-            None
-        } else {
-            scene.meshes.intersect(ray, t_lo, t_hi)
+        let mesh = match self.mesh_start {
+            Some(start) if !scene.meshes.is_empty() => {
+                scene.meshes.intersect_from(start, ray, t_lo, t_hi)
+            }
+            _ => None,
         };
         Some(RayBounds {
             t_lo,

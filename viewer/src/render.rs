@@ -12,6 +12,7 @@ use std::ops::Range;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
+use glam::DVec3;
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -39,8 +40,9 @@ const GROUP: u32 = 4;
 struct Group {
     /// Where their walks start in the active tree.
     start: Start,
-    /// Whether they may meet a mesh (the frustum meets the meshes' bounds).
-    meshes_seen: bool,
+    /// Where they search the meshes' tree (`None`: the frustum misses every triangle's
+    /// box).
+    mesh_start: Option<u32>,
     /// Whether they may cross the data (the frustum meets its bounds).
     data_seen: bool,
 }
@@ -144,9 +146,8 @@ pub(crate) fn render_tiles(
         let mut first = Vec::with_capacity(if first_wave { n } else { 0 });
         // Where the walks of each group of pixels start (every sample of a group's pixels,
         // at any sub-pixel offset, is a ray through its rectangle).
-        let frame = glam::DVec3::from_array(scene.vol.frame);
+        let frame = DVec3::from_array(scene.vol.frame);
         let groups_x = (tile.x1 - tile.x0).div_ceil(GROUP);
-        let mesh_bounds = scene.meshes.bounds();
         let vol = scene.vol;
         let groups: Vec<Group> = (tile.y0..tile.y1)
             .step_by(GROUP as usize)
@@ -164,16 +165,17 @@ pub(crate) fn render_tiles(
                 );
                 let frustum = scene.rays.frustum(rect.0, rect.1, rect.2, rect.3, frame);
                 // The meshes are placed in world coordinates.
-                let meshes_seen = mesh_bounds.is_some_and(|b| {
-                    let world =
-                        scene
-                            .rays
-                            .frustum(rect.0, rect.1, rect.2, rect.3, glam::DVec3::ZERO);
-                    world.may_meet(&b.min, &b.max)
-                });
+                let mesh_start = if scene.meshes.is_empty() {
+                    None
+                } else {
+                    let world = scene
+                        .rays
+                        .frustum(rect.0, rect.1, rect.2, rect.3, DVec3::ZERO);
+                    scene.meshes.start_in(&world)
+                };
                 Group {
                     start: caster.main.group_start(&frustum),
-                    meshes_seen,
+                    mesh_start,
                     data_seen: frustum.may_meet(&vol.bounds_min, &vol.bounds_max),
                 }
             })
@@ -187,8 +189,8 @@ pub(crate) fn render_tiles(
                 let group = (y - tile.y0) / GROUP * groups_x + (x - tile.x0) / GROUP;
                 let g = groups[group as usize];
                 caster.main.set_start(g.start);
-                caster.set_meshes_in_view(g.meshes_seen);
-                let nothing = beside && g.start == Start::Nothing && !g.meshes_seen;
+                caster.set_mesh_start(g.mesh_start);
+                let nothing = beside && g.start == Start::Nothing && g.mesh_start.is_none();
                 let mut c = [0.0f64; 3];
                 let hits_before = caster.hits;
                 for s in samples.clone() {

@@ -114,24 +114,45 @@ impl Meshes {
 
     /// Bounds of all triangles (world frame, the vertices' own extremes), `None` without
     /// triangles.
+    #[cfg(test)]
     pub(crate) fn bounds(&self) -> Option<Aabb> {
         let b = self.bvh.bounds();
         (!b.is_empty()).then_some(b)
     }
 
+    /// Where the searches of the rays inside `frustum` (world frame) can start in the
+    /// meshes' tree ([`Bvh::start_in`]); `None` when no triangle's box lies in it.
+    pub(crate) fn start_in(&self, frustum: &crate::camera::Frustum) -> Option<u32> {
+        self.bvh.start_in(|b| frustum.may_meet(&b.min, &b.max))
+    }
+
     /// Nearest hit with `t` in `(t_min, t_max)`.
     pub fn intersect(&self, ray: &Ray, t_min: f64, t_max: f64) -> Option<MeshHit> {
+        self.intersect_from(0, ray, t_min, t_max)
+    }
+
+    /// [`Meshes::intersect`] searching from node `start` of the meshes' tree, which must
+    /// be a [`Meshes::start_in`] of a frustum around the ray.
+    pub(crate) fn intersect_from(
+        &self,
+        start: u32,
+        ray: &Ray,
+        t_min: f64,
+        t_max: f64,
+    ) -> Option<MeshHit> {
         if self.tris.is_empty() {
             return None;
         }
         let sh = RayShear::new(ray);
         let mut bary = [0.0; 3];
-        let (prim, t) = self.bvh.nearest(ray, t_min, t_max, |p, lo, hi| {
-            let tri = self.tris.get(p as usize)?;
-            let h = intersect_triangle(&sh, tri.v[0], tri.v[1], tri.v[2], lo, hi)?;
-            bary = h.bary;
-            Some(h.t)
-        })?;
+        let (prim, t) = self
+            .bvh
+            .nearest_from(start, ray, t_min, t_max, |p, lo, hi| {
+                let tri = self.tris.get(p as usize)?;
+                let h = intersect_triangle(&sh, tri.v[0], tri.v[1], tri.v[2], lo, hi)?;
+                bary = h.bary;
+                Some(h.t)
+            })?;
         // `bary` belongs to the last accepted hit, which is the nearest one.
         let tri = self.tris.get(prim as usize)?;
         let n = bary[0] * tri.n[0] + bary[1] * tri.n[1] + bary[2] * tri.n[2];
@@ -199,6 +220,91 @@ mod tests {
         assert!(Meshes::empty()
             .intersect(&down, 0.0, f64::INFINITY)
             .is_none());
+    }
+
+    /// Every camera ray of a group of pixels (at the group's corners and edges and at
+    /// random sub-pixel offsets) finds from the group's start in the meshes' tree
+    /// ([`Meshes::start_in`] of the group's frustum) the hit it finds from the root, bit
+    /// for bit, or none where the group has no start: three spheres, cameras outside
+    /// them, between them, looking along an axis through vertices, far away, and
+    /// orthographic, the scene at the origin and at 1e6. Starts below the root and
+    /// groups without one both occur.
+    #[test]
+    fn a_group_of_camera_rays_finds_the_same_hits_from_its_start() {
+        use crate::camera::{Camera, Projection};
+        let bits =
+            |h: Option<MeshHit>| h.map(|h| (h.t.to_bits(), h.normal.to_array().map(f64::to_bits)));
+        let mut seed = 5u64;
+        let mut lcg = move || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (mut below_root, mut none, mut hits) = (0, 0, 0);
+        for shift in [0.0, 1e6] {
+            let at = |x: f64, y: f64, z: f64| DVec3::new(x, y, z) + DVec3::splat(shift);
+            let meshes = Meshes::from_meshes(&[
+                icosphere(at(0.0, 0.0, 0.0), 1.0, 3),
+                icosphere(at(3.0, 0.5, 0.0), 0.7, 2),
+                icosphere(at(-2.0, 2.0, 1.0), 0.5, 1),
+            ]);
+            let p = |v: DVec3| v.to_array();
+            let persp = |fov_deg| Projection::Perspective { fov_deg };
+            let cameras = [
+                (at(6.0, -8.0, 4.0), at(0.5, 0.5, 0.0), persp(40.0)),
+                (at(1.5, 0.2, 0.1), at(3.0, 0.5, 0.0), persp(80.0)),
+                (at(0.0, 0.0, 9.0), at(0.0, 0.0, 0.0), persp(25.0)),
+                (at(4e3, -3e3, 2e3), at(0.0, 0.0, 0.0), persp(0.1)),
+                (
+                    at(0.0, -9.0, 0.0),
+                    at(0.0, 0.0, 0.0),
+                    Projection::Orthographic { width: 7.0 },
+                ),
+            ];
+            for (eye, look_at, projection) in cameras {
+                let cam = Camera {
+                    eye: p(eye),
+                    look_at: p(look_at),
+                    up: [0.0, 0.0, 1.0],
+                    projection,
+                };
+                let (w, h) = (30u32, 22u32);
+                let rays = cam.ray_generator(w, h);
+                for gy in (0..h).step_by(4) {
+                    for gx in (0..w).step_by(4) {
+                        let (x0, y0) = (f64::from(gx), f64::from(gy));
+                        let (x1, y1) = (f64::from((gx + 4).min(w)), f64::from((gy + 4).min(h)));
+                        let start = meshes.start_in(&rays.frustum(x0, y0, x1, y1, DVec3::ZERO));
+                        match start {
+                            None => none += 1,
+                            Some(n) if n > 0 => below_root += 1,
+                            Some(_) => {}
+                        }
+                        let mut points = vec![(x0, y0), (x1, y0), (x0, y1), (x1, y1)];
+                        for _ in 0..12 {
+                            points.push((x0 + (x1 - x0) * lcg(), y0 + (y1 - y0) * lcg()));
+                        }
+                        for (x, y) in points {
+                            let ray = rays.ray(x, y);
+                            let want = meshes.intersect(&ray, 0.0, f64::INFINITY);
+                            let got = start
+                                .and_then(|n| meshes.intersect_from(n, &ray, 0.0, f64::INFINITY));
+                            assert_eq!(
+                                bits(got),
+                                bits(want),
+                                "camera {cam:?}, pixel ({x}, {y}), start {start:?}"
+                            );
+                            hits += usize::from(want.is_some());
+                        }
+                    }
+                }
+            }
+        }
+        assert!(
+            below_root > 40 && none > 40 && hits > 500,
+            "{below_root} starts below the root, {none} groups without one, {hits} hits"
+        );
     }
 
     #[test]
