@@ -202,22 +202,27 @@ impl<'s> RayCaster<'s> {
     /// [`RayCaster::background_beside_surface`] holds: the background, and the counters
     /// the walk keeps (the ray, and the one stretch of data it steps over), without the
     /// search's set-up. Three quarters of a frame's pixels beside a thin surface are such.
-    /// `may_cross_data`: false when the ray's group cannot meet the data's bounds, so
-    /// that there is no stretch to count and the ray need not be made.
+    /// `crossing`: whether the rays of the ray's group cross the data's bounds; only
+    /// where some may and some may not is the ray made, to tell.
     pub(crate) fn sample_beside_surface(
         &mut self,
         x: u32,
         y: u32,
         s: u32,
-        may_cross_data: bool,
+        crossing: crate::render::Crossing,
     ) -> [f64; 3] {
+        use crate::render::Crossing;
         self.rays += 1;
         self.first = FirstSurface::NONE;
-        if may_cross_data {
-            let (ray, _) = self.camera_ray(x, y, s);
-            let o = self.scene.vol.to_local(ray.origin.to_array());
-            self.main
-                .step_over_all(o, ray.dir.to_array(), 0.0, f64::INFINITY);
+        match crossing {
+            Crossing::None => {}
+            Crossing::All => self.main.step_over_data(),
+            Crossing::Some => {
+                let (ray, _) = self.camera_ray(x, y, s);
+                let o = self.scene.vol.to_local(ray.origin.to_array());
+                self.main
+                    .step_over_all(o, ray.dir.to_array(), 0.0, f64::INFINITY);
+            }
         }
         self.scene.state.background.map(f64::from)
     }

@@ -43,8 +43,97 @@ struct Group {
     /// Where they search the meshes' tree (`None`: the frustum misses every triangle's
     /// box).
     mesh_start: Option<u32>,
-    /// Whether they may cross the data (the frustum meets its bounds).
-    data_seen: bool,
+    /// Whether they cross the data's bounds (what the rays of a group beside the surface
+    /// count, see [`Crossing::of`]).
+    crossing: Crossing,
+}
+
+/// Whether the rays of a group of pixels cross the data's bounds (within the active box),
+/// each stepping over one stretch of data where its walk starts nowhere.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Crossing {
+    /// None of them: the frustum misses the bounds.
+    None,
+    /// Every one of them.
+    All,
+    /// Some may: each ray is tested.
+    Some,
+}
+
+/// The part of the data's size by which its bounds are shrunk for [`Crossing::All`].
+const CROSSING_MARGIN: f64 = 1e-6;
+
+impl Crossing {
+    /// How the rays through the pixels `x0..x1` × `y0..y1` of `scene`'s view, inside
+    /// `frustum` (local frame), cross the data's bounds within the view's active box.
+    ///
+    /// All of them do when the rays through the rectangle's four corners cross the
+    /// box both bound shrunk by a millionth of its size: the rays of a rectangle that meet a
+    /// convex box form a convex set (the directions from one eye, or the origins on one
+    /// image plane, are affine in the pixel position), and one through a point of the
+    /// shrunk box meets the whole box for a length of at least twice the margin, far
+    /// more than the rounding of the box test along it (checked: the data lies within
+    /// 1e8 margins of the rays' origins). Anything else is tested ray by ray.
+    pub(crate) fn of(
+        scene: &Scene,
+        frustum: &crate::camera::Frustum,
+        (x0, y0, x1, y1): (f64, f64, f64, f64),
+    ) -> Crossing {
+        let vol = scene.vol;
+        // A ray's stretch is where it crosses both the data's bounds and the active box
+        // (`Tracer::step_over_all`); an empty active box keeps nothing.
+        let (mut lo, mut hi) = (vol.bounds_min, vol.bounds_max);
+        if let Some((clo, chi)) = scene.params.clip {
+            if (0..3).any(|a| clo[a] > chi[a]) {
+                return Crossing::None;
+            }
+            for a in 0..3 {
+                lo[a] = lo[a].max(clo[a]);
+                hi[a] = hi[a].min(chi[a]);
+            }
+        }
+        if (0..3).any(|a| lo[a] > hi[a]) || !frustum.may_meet(&lo, &hi) {
+            return Crossing::None;
+        }
+        let size = (0..3).map(|a| hi[a] - lo[a]).fold(0.0f64, f64::max);
+        let margin = CROSSING_MARGIN * size;
+        let inner_lo: [f64; 3] = std::array::from_fn(|a| lo[a] + margin);
+        let inner_hi: [f64; 3] = std::array::from_fn(|a| hi[a] - margin);
+        if !(margin > 0.0 && margin.is_finite()) || (0..3).any(|a| inner_lo[a] >= inner_hi[a]) {
+            return Crossing::Some;
+        }
+        let all = [(x0, y0), (x1, y0), (x0, y1), (x1, y1)]
+            .into_iter()
+            .all(|(x, y)| {
+                let ray = scene.rays.ray(x, y);
+                let o = vol.to_local(ray.origin.to_array());
+                let d = ray.dir.to_array();
+                // The farthest point of the data from this origin bounds every `t` the box
+                // test meets (the other rays' origins lie between the corners').
+                let reach = (0..8)
+                    .map(|c| {
+                        let p: [f64; 3] =
+                            std::array::from_fn(|a| if c >> a & 1 == 1 { hi[a] } else { lo[a] });
+                        (0..3).map(|a| (p[a] - o[a]).abs()).sum::<f64>()
+                    })
+                    .fold(0.0f64, f64::max);
+                reach < 1e8 * margin
+                    && crate::traverse::ray_box(
+                        &inner_lo,
+                        &inner_hi,
+                        &o,
+                        &crate::traverse::inverse(&d),
+                        0.0,
+                        f64::INFINITY,
+                    )
+                    .is_some_and(|(a, b)| b > a)
+            });
+        if all {
+            Crossing::All
+        } else {
+            Crossing::Some
+        }
+    }
 }
 
 /// A rendered image (linear RGB in 0..=1 per pixel, row-major from the top-left).
@@ -148,7 +237,6 @@ pub(crate) fn render_tiles(
         // at any sub-pixel offset, is a ray through its rectangle).
         let frame = DVec3::from_array(scene.vol.frame);
         let groups_x = (tile.x1 - tile.x0).div_ceil(GROUP);
-        let vol = scene.vol;
         let groups: Vec<Group> = (tile.y0..tile.y1)
             .step_by(GROUP as usize)
             .flat_map(|gy| {
@@ -176,7 +264,7 @@ pub(crate) fn render_tiles(
                 Group {
                     start: caster.main.group_start(&frustum),
                     mesh_start,
-                    data_seen: frustum.may_meet(&vol.bounds_min, &vol.bounds_max),
+                    crossing: Crossing::of(scene, &frustum, rect),
                 }
             })
             .collect();
@@ -195,7 +283,7 @@ pub(crate) fn render_tiles(
                 let hits_before = caster.hits;
                 for s in samples.clone() {
                     let v = if nothing {
-                        caster.sample_beside_surface(x, y, s, g.data_seen)
+                        caster.sample_beside_surface(x, y, s, g.crossing)
                     } else {
                         caster.sample(x, y, s)
                     };
@@ -884,7 +972,9 @@ mod tests {
         };
         let (mut started_below, mut walked_nowhere) = (0, 0);
         let (mut sphere_seen, mut sphere_missed) = (0, 0);
-        // (The last four take a value held in few places, so that rays beside the surface
+        // Groups that start nowhere whose rays cross no data, all cross it, some may.
+        let mut crossings = [0; 3];
+        // (The last five take a value held in few places, so that rays beside the surface
         // cross data.)
         let (out, exact) = ([50.0, -30.0, 40.0], Strategy::Exact);
         let cases = [
@@ -895,6 +985,7 @@ mod tests {
             (out, 1, &none, None, 1.25, exact),
             (out, 1, &none, None, 1.25, Strategy::Uniform),
             (out, 2, &sphere, None, 1.25, Strategy::Bisect),
+            ([14.0, 15.0, 16.0], 1, &none, None, 1.25, exact),
         ];
         for (eye, spp, meshes, clip, iso, strategy) in cases {
             let mut st = ViewState::default_for_volume(&vol);
@@ -945,6 +1036,10 @@ mod tests {
                     let start = tree.start_in(&fr);
                     started_below += usize::from(start != Start::Root);
                     walked_nowhere += usize::from(start == Start::Nothing);
+                    if start == Start::Nothing {
+                        let rect = (x0, y0, x0 + 4.0, y0 + 4.0);
+                        crossings[Crossing::of(&scene, &fr, rect) as usize] += 1;
+                    }
                     if let Some(b) = meshes.bounds() {
                         let world =
                             scene
@@ -961,6 +1056,10 @@ mod tests {
         assert!(
             started_below > 20 && walked_nowhere > 20,
             "{started_below} groups started below the root, {walked_nowhere} nowhere"
+        );
+        assert!(
+            crossings.iter().all(|&n| n > 10),
+            "groups beside the surface crossing no data, all, some: {crossings:?}"
         );
         // Groups that skipped the sphere's tree, and groups that tested it.
         assert!(

@@ -83,6 +83,14 @@ impl Tracer<'_> {
         }
     }
 
+    /// [`Tracer::step_over_all`] of a ray known to cross the data within the active box:
+    /// its one stretch, counted without a log (the bounds would only be logged, and
+    /// callers trace no `--pixel`).
+    pub(crate) fn step_over_data(&mut self) {
+        debug_assert!(self.log.is_none());
+        self.enter_gap(f64::NAN, f64::NAN);
+    }
+
     /// The first root in one region segment whose range holds the iso value; `mask` is
     /// the region's dual-cell mask (see [`crate::dual_mask`]), when it has one.
     #[allow(clippy::too_many_arguments)]
