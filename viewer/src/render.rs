@@ -946,10 +946,12 @@ mod tests {
 
     /// A frame whose groups of rays start their walks below the root, or skip them
     /// ([`Start::Nothing`]: those rays take `sample_beside_surface` where nothing else can
-    /// be met), and skip the meshes where their frustum misses them, has the pixels and
-    /// counters of every ray traced alone from the root: one sample and four, from outside
-    /// and from within the data, and with a sphere and a clip plane that rays beside the
-    /// surface meet (there the walk-less path must not be taken).
+    /// be met), and search the meshes from where their frustum allows, has the pixels,
+    /// depths and counters of every ray traced alone from the root: one, two and four
+    /// samples, `exact`, `uniform` and `bisect`, from outside and from within the data,
+    /// with a sphere and a clip plane that rays beside the surface meet (there the
+    /// walk-less path must not be taken), and groups beside the surface whose rays cross
+    /// no data, all cross it, or some do ([`Crossing`]).
     #[test]
     fn group_starts_change_no_pixel_and_no_counter() {
         let field =
