@@ -43,9 +43,11 @@ struct Group {
     /// Where they search the meshes' tree (`None`: the frustum misses every triangle's
     /// box).
     mesh_start: Option<u32>,
-    /// Whether they cross the data's bounds (what the rays of a group beside the surface
-    /// count, see [`Crossing::of`]).
-    crossing: Crossing,
+    /// For a group whose pixels take the background without a search (it sees no region
+    /// that can hold the value and no mesh, in a view where nothing else can be met, see
+    /// [`RayCaster::background_beside_surface`]): how its rays cross the data, which
+    /// they count.
+    beside: Option<Crossing>,
 }
 
 /// Whether the rays of a group of pixels cross the data's bounds (within the active box),
@@ -67,8 +69,8 @@ impl Crossing {
     /// How the rays through the pixels `x0..x1` × `y0..y1` of `scene`'s view, inside
     /// `frustum` (local frame), cross the data's bounds within the view's active box.
     ///
-    /// All of them do when the rays through the rectangle's four corners cross the
-    /// box both bound shrunk by a millionth of its size: the rays of a rectangle that meet a
+    /// All of them do when the rays through the rectangle's four corners cross that box
+    /// shrunk by a millionth of its size: the rays of a rectangle that meet a
     /// convex box form a convex set (the directions from one eye, or the origins on one
     /// image plane, are affine in the pixel position), and one through a point of the
     /// shrunk box meets the whole box for a length of at least twice the margin, far
@@ -237,6 +239,7 @@ pub(crate) fn render_tiles(
         // at any sub-pixel offset, is a ray through its rectangle).
         let frame = DVec3::from_array(scene.vol.frame);
         let groups_x = (tile.x1 - tile.x0).div_ceil(GROUP);
+        let beside = caster.background_beside_surface();
         let groups: Vec<Group> = (tile.y0..tile.y1)
             .step_by(GROUP as usize)
             .flat_map(|gy| {
@@ -261,14 +264,15 @@ pub(crate) fn render_tiles(
                         .frustum(rect.0, rect.1, rect.2, rect.3, DVec3::ZERO);
                     scene.meshes.start_in(&world)
                 };
+                let start = caster.main.group_start(&frustum);
+                let walkless = beside && start == Start::Nothing && mesh_start.is_none();
                 Group {
-                    start: caster.main.group_start(&frustum),
+                    start,
                     mesh_start,
-                    crossing: Crossing::of(scene, &frustum, rect),
+                    beside: walkless.then(|| Crossing::of(scene, &frustum, rect)),
                 }
             })
             .collect();
-        let beside = caster.background_beside_surface();
         for y in tile.y0..tile.y1 {
             if !cancel.start_row() {
                 return false;
@@ -278,14 +282,12 @@ pub(crate) fn render_tiles(
                 let g = groups[group as usize];
                 caster.main.set_start(g.start);
                 caster.set_mesh_start(g.mesh_start);
-                let nothing = beside && g.start == Start::Nothing && g.mesh_start.is_none();
                 let mut c = [0.0f64; 3];
                 let hits_before = caster.hits;
                 for s in samples.clone() {
-                    let v = if nothing {
-                        caster.sample_beside_surface(x, y, s, g.crossing)
-                    } else {
-                        caster.sample(x, y, s)
+                    let v = match g.beside {
+                        Some(crossing) => caster.sample_beside_surface(x, y, s, crossing),
+                        None => caster.sample(x, y, s),
                     };
                     if s == 0 {
                         first.push(caster.first);
