@@ -240,20 +240,9 @@ pub(crate) fn render_tiles(
         let frame = DVec3::from_array(scene.vol.frame);
         let groups_x = (tile.x1 - tile.x0).div_ceil(GROUP);
         let beside = caster.background_beside_surface();
-        let groups: Vec<Group> = (tile.y0..tile.y1)
-            .step_by(GROUP as usize)
-            .flat_map(|gy| {
-                (tile.x0..tile.x1)
-                    .step_by(GROUP as usize)
-                    .map(move |gx| (gx, gy))
-            })
-            .map(|(gx, gy)| {
-                let rect = (
-                    f64::from(gx),
-                    f64::from(gy),
-                    f64::from((gx + GROUP).min(tile.x1)),
-                    f64::from((gy + GROUP).min(tile.y1)),
-                );
+        let groups: Vec<Group> = tile
+            .groups(GROUP)
+            .map(|rect| {
                 let frustum = scene.rays.frustum(rect.0, rect.1, rect.2, rect.3, frame);
                 // The meshes are placed in world coordinates.
                 let mesh_start = if scene.meshes.is_empty() {
@@ -1033,26 +1022,20 @@ mod tests {
             // The groups did start below the root somewhere, and some walked nowhere.
             let tree = scene.accel.active_tree(&vol).expect("tree");
             let f = glam::DVec3::from_array(vol.frame);
-            for gy in (0..st.height).step_by(GROUP as usize) {
-                for gx in (0..st.width).step_by(GROUP as usize) {
-                    let (x0, y0) = (f64::from(gx), f64::from(gy));
-                    let fr = scene.rays.frustum(x0, y0, x0 + 4.0, y0 + 4.0, f);
-                    let start = tree.start_in(&fr);
-                    started_below += usize::from(start != Start::Root);
-                    walked_nowhere += usize::from(start == Start::Nothing);
-                    if start == Start::Nothing {
-                        let rect = (x0, y0, x0 + 4.0, y0 + 4.0);
-                        crossings[Crossing::of(&scene, &fr, rect) as usize] += 1;
-                    }
-                    if let Some(b) = meshes.bounds() {
-                        let world =
-                            scene
-                                .rays
-                                .frustum(x0, y0, x0 + 4.0, y0 + 4.0, glam::DVec3::ZERO);
-                        match world.may_meet(&b.min, &b.max) {
-                            true => sphere_seen += 1,
-                            false => sphere_missed += 1,
-                        }
+            for rect in crate::tiles::Tile::image(st.width, st.height).groups(GROUP) {
+                let (x0, y0, x1, y1) = rect;
+                let fr = scene.rays.frustum(x0, y0, x1, y1, f);
+                let start = tree.start_in(&fr);
+                started_below += usize::from(start != Start::Root);
+                walked_nowhere += usize::from(start == Start::Nothing);
+                if start == Start::Nothing {
+                    crossings[Crossing::of(&scene, &fr, rect) as usize] += 1;
+                }
+                if let Some(b) = meshes.bounds() {
+                    let world = scene.rays.frustum(x0, y0, x1, y1, glam::DVec3::ZERO);
+                    match world.may_meet(&b.min, &b.max) {
+                        true => sphere_seen += 1,
+                        false => sphere_missed += 1,
                     }
                 }
             }

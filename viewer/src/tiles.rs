@@ -19,6 +19,33 @@ pub struct Tile {
     pub y1: u32,
 }
 
+impl Tile {
+    /// The `edge`×`edge` groups of the tile's pixels, row by row from its top left, the
+    /// last of each row and column cut at the tile's edge, as rectangles `(x0, y0, x1,
+    /// y1)` in pixels: the groups of camera rays that share a frustum.
+    pub(crate) fn groups(&self, edge: u32) -> impl Iterator<Item = (f64, f64, f64, f64)> {
+        let Tile { x0, y0, x1, y1 } = *self;
+        let edge = edge.max(1);
+        (y0..y1).step_by(edge as usize).flat_map(move |gy| {
+            (x0..x1).step_by(edge as usize).map(move |gx| {
+                let (gx1, gy1) = ((gx + edge).min(x1), (gy + edge).min(y1));
+                (f64::from(gx), f64::from(gy), f64::from(gx1), f64::from(gy1))
+            })
+        })
+    }
+
+    /// The whole `width`×`height` image as one tile.
+    #[cfg(test)]
+    pub(crate) fn image(width: u32, height: u32) -> Tile {
+        Tile {
+            x0: 0,
+            y0: 0,
+            x1: width,
+            y1: height,
+        }
+    }
+}
+
 /// The [`TILE`]-sized tiles of a `width`×`height` image, row by row from the top left.
 pub fn tiles(width: u32, height: u32) -> Vec<Tile> {
     let (tx, ty) = (width.div_ceil(TILE), height.div_ceil(TILE));

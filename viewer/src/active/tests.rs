@@ -252,43 +252,38 @@ fn a_group_of_camera_rays_gets_the_same_segments_from_its_start_as_from_the_root
                 };
                 let (w, h) = (22u32, 19u32);
                 let rays = cam.ray_generator(w, h);
-                for gy in (0..h).step_by(4) {
-                    for gx in (0..w).step_by(4) {
-                        let (x1, y1) = ((gx + 4).min(w), (gy + 4).min(h));
-                        let (x0, y0) = (f64::from(gx), f64::from(gy));
-                        let (x1, y1) = (f64::from(x1), f64::from(y1));
-                        let start = tree.start_in(&rays.frustum(x0, y0, x1, y1, frame));
-                        match start {
-                            Start::Nothing => nothing += 1,
-                            Start::At(r) if Some(r) != tree.walk.root => below_root += 1,
-                            _ => {}
-                        }
-                        let mut points = vec![
-                            (x0, y0),
-                            (x1, y0),
-                            (x0, y1),
-                            (x1, y1),
-                            (0.5 * (x0 + x1), y0),
-                            (x0, 0.5 * (y0 + y1)),
-                        ];
-                        for _ in 0..12 {
-                            points.push((
-                                x0 + (x1 - x0) * lcg(&mut seed),
-                                y0 + (y1 - y0) * lcg(&mut seed),
-                            ));
-                        }
-                        for (x, y) in points {
-                            let ray = rays.ray(x, y);
-                            let o = vol.to_local(ray.origin.to_array());
-                            let d = ray.dir.to_array();
-                            let want = from(&vol, &tree, Start::Root, o, d);
-                            let got = from(&vol, &tree, start, o, d);
-                            assert_eq!(
-                                got, want,
-                                "camera {cam:?}, iso {iso}, pixel ({x}, {y}), start {start:?}"
-                            );
-                            rays_met += usize::from(!want.is_empty());
-                        }
+                for (x0, y0, x1, y1) in crate::tiles::Tile::image(w, h).groups(4) {
+                    let start = tree.start_in(&rays.frustum(x0, y0, x1, y1, frame));
+                    match start {
+                        Start::Nothing => nothing += 1,
+                        Start::At(r) if Some(r) != tree.walk.root => below_root += 1,
+                        _ => {}
+                    }
+                    let mut points = vec![
+                        (x0, y0),
+                        (x1, y0),
+                        (x0, y1),
+                        (x1, y1),
+                        (0.5 * (x0 + x1), y0),
+                        (x0, 0.5 * (y0 + y1)),
+                    ];
+                    for _ in 0..12 {
+                        points.push((
+                            x0 + (x1 - x0) * lcg(&mut seed),
+                            y0 + (y1 - y0) * lcg(&mut seed),
+                        ));
+                    }
+                    for (x, y) in points {
+                        let ray = rays.ray(x, y);
+                        let o = vol.to_local(ray.origin.to_array());
+                        let d = ray.dir.to_array();
+                        let want = from(&vol, &tree, Start::Root, o, d);
+                        let got = from(&vol, &tree, start, o, d);
+                        assert_eq!(
+                            got, want,
+                            "camera {cam:?}, iso {iso}, pixel ({x}, {y}), start {start:?}"
+                        );
+                        rays_met += usize::from(!want.is_empty());
                     }
                 }
             }

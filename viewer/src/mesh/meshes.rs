@@ -271,32 +271,28 @@ mod tests {
                 };
                 let (w, h) = (30u32, 22u32);
                 let rays = cam.ray_generator(w, h);
-                for gy in (0..h).step_by(4) {
-                    for gx in (0..w).step_by(4) {
-                        let (x0, y0) = (f64::from(gx), f64::from(gy));
-                        let (x1, y1) = (f64::from((gx + 4).min(w)), f64::from((gy + 4).min(h)));
-                        let start = meshes.start_in(&rays.frustum(x0, y0, x1, y1, DVec3::ZERO));
-                        match start {
-                            None => none += 1,
-                            Some(n) if n > 0 => below_root += 1,
-                            Some(_) => {}
-                        }
-                        let mut points = vec![(x0, y0), (x1, y0), (x0, y1), (x1, y1)];
-                        for _ in 0..12 {
-                            points.push((x0 + (x1 - x0) * lcg(), y0 + (y1 - y0) * lcg()));
-                        }
-                        for (x, y) in points {
-                            let ray = rays.ray(x, y);
-                            let want = meshes.intersect(&ray, 0.0, f64::INFINITY);
-                            let got = start
-                                .and_then(|n| meshes.intersect_from(n, &ray, 0.0, f64::INFINITY));
-                            assert_eq!(
-                                bits(got),
-                                bits(want),
-                                "camera {cam:?}, pixel ({x}, {y}), start {start:?}"
-                            );
-                            hits += usize::from(want.is_some());
-                        }
+                for (x0, y0, x1, y1) in crate::tiles::Tile::image(w, h).groups(4) {
+                    let start = meshes.start_in(&rays.frustum(x0, y0, x1, y1, DVec3::ZERO));
+                    match start {
+                        None => none += 1,
+                        Some(n) if n > 0 => below_root += 1,
+                        Some(_) => {}
+                    }
+                    let mut points = vec![(x0, y0), (x1, y0), (x0, y1), (x1, y1)];
+                    for _ in 0..12 {
+                        points.push((x0 + (x1 - x0) * lcg(), y0 + (y1 - y0) * lcg()));
+                    }
+                    for (x, y) in points {
+                        let ray = rays.ray(x, y);
+                        let want = meshes.intersect(&ray, 0.0, f64::INFINITY);
+                        let got =
+                            start.and_then(|n| meshes.intersect_from(n, &ray, 0.0, f64::INFINITY));
+                        assert_eq!(
+                            bits(got),
+                            bits(want),
+                            "camera {cam:?}, pixel ({x}, {y}), start {start:?}"
+                        );
+                        hits += usize::from(want.is_some());
                     }
                 }
             }
