@@ -304,6 +304,20 @@ fn a_bake_within_a_memory_budget_stays_under_it_and_writes_the_same_file() {
     // at budgets of 16 to 24 MiB, run to run.
     assert!(peak <= budget + (16 << 20), "{} MiB", peak >> 20);
 
+    // An uncompressed grid of 49 MB, whose pages the reader maps: locating its leaves walks
+    // every buffer, so the pages walked must go behind the walk well within a small budget
+    // (64 MiB of them were held before they went: 42 MiB peaks at a budget of 24M).
+    let raw = dir.path().join("raw.vdb");
+    let grid = abc_grid("vel", std::f64::consts::TAU / 160.0, 0, 160);
+    write_vdb(&raw, &[AnyGrid::Vec3s(grid)], Compression::None).expect("write");
+    let small = 20u64 << 20;
+    let raw_peak = bake_peak(&raw, &dir.path().join("raw.qbk"), &["--memory", "20M"]);
+    eprintln!(
+        "peak {} MiB within --memory 20M, 49 MB uncompressed",
+        raw_peak >> 20
+    );
+    assert!(raw_peak <= small + (16 << 20), "{} MiB", raw_peak >> 20);
+
     // A budget below what the structure of 16.8 M cells needs (eight active 128³ tiles: a
     // file of a few kilobytes) is refused before anything is decoded, naming the least.
     let tile = dir.path().join("tile.vdb");

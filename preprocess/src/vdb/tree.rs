@@ -217,8 +217,10 @@ pub(crate) fn decode_leaves<V: VdbValue>(
         .collect()
 }
 
-/// Bytes of leaf buffers [`locate_tree`] walks before it lets their pages go.
-const LOCATE_RELEASE_BYTES: usize = 64 << 20;
+/// Bytes of leaf buffers [`locate_tree`] walks before it lets their pages go: well under
+/// the 16 MiB of fixed overhead a `--memory` budget allows, since the walk runs before the
+/// budget's windows apply (a madvise call per 4 MiB costs nothing beside the walk).
+const LOCATE_RELEASE_BYTES: usize = 4 << 20;
 
 /// Reads a tree's topology and finds its leaf buffers (each one checked to be whole and
 /// well-formed as far as that can be told without decoding it), starting at the buffer
