@@ -69,6 +69,7 @@ impl BakePlan {
     pub fn per_job(&self, jobs: usize) -> BakePlan {
         let mut plan = self.clone();
         plan.opts.memory = self.opts.memory.map(|m| m / jobs.max(1) as u64);
+        plan.opts.memory_shared = self.opts.memory.filter(|_| jobs > 1).map(|m| (m, jobs));
         plan
     }
 }

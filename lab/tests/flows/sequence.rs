@@ -151,3 +151,77 @@ fn sequence_pattern_errors_exit_2_and_default_outputs_go_next_to_the_inputs() {
     assert!(o.status.success(), "{o:?}");
     assert!(dir.join("f_01.qbk").exists() && dir.join("f_sequence.json").exists());
 }
+
+/// A sequence bakes `--jobs` frames at once, each within its share of `--memory`: a share
+/// too small for a frame is refused in the budget the user gave (the whole of it, how many
+/// share it) and the least that would do is that share times the jobs. The advice works.
+#[test]
+fn a_share_of_the_memory_budget_too_small_names_the_whole_budget() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    // Two frames whose bakes need about 9 MiB each even with every value on disk.
+    let o = qbricks_lab()
+        .current_dir(dir)
+        .args([
+            "synth",
+            "wake",
+            "--n0",
+            "96",
+            "--frames",
+            "2",
+            "-o",
+            "w_####.vdb",
+        ])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{o:?}");
+    let o = run(
+        &[
+            "bake",
+            "w_####.vdb",
+            "-o",
+            "a_####.qbk",
+            "--jobs",
+            "2",
+            "--memory",
+            "16M",
+        ],
+        dir,
+    );
+    assert_eq!(o.status.code(), Some(2), "{o:?}");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("more than its share of the --memory budget: 8 MiB of 16 MiB, shared by 2 frames baked at once"),
+        "{err}"
+    );
+    let least: u64 = err
+        .split("give --memory ")
+        .nth(1)
+        .and_then(|s| s.split('M').next())
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| panic!("no advice in {err}"));
+    assert!(least > 16 && least % 2 == 0, "{err}");
+    assert!(err.contains("or fewer --jobs"), "{err}");
+    let advised = format!("{least}M");
+    let o = run(
+        &[
+            "bake",
+            "w_####.vdb",
+            "-o",
+            "b_####.qbk",
+            "--jobs",
+            "2",
+            "--memory",
+            &advised,
+        ],
+        dir,
+    );
+    assert!(o.status.success(), "{o:?}");
+    assert!(dir.join("b_0001.qbk").exists() && dir.join("b_0002.qbk").exists());
+    // Alone, a frame gets the whole budget: 16M does.
+    let o = run(
+        &["bake", "w_0001.vdb", "-o", "c.qbk", "--memory", "16M"],
+        dir,
+    );
+    assert!(o.status.success(), "{o:?}");
+}

@@ -357,6 +357,7 @@ pub(super) fn check_bake_memory(
                     what,
                     budget,
                     least,
+                    shared: opts.memory_shared,
                 })
             }
         },

@@ -92,6 +92,11 @@ pub struct BakeOptions {
     /// when its estimate is over it even so. Not recorded.
     #[serde(skip)]
     pub memory: Option<u64>,
+    /// When `memory` is a share of a budget several bakes run at once share (a
+    /// sequence's `--jobs`): the whole budget and how many share it, so that a refusal
+    /// names what the user gave and what would do. Not recorded.
+    #[serde(skip)]
+    pub memory_shared: Option<(u64, usize)>,
 }
 
 impl Default for BakeOptions {
@@ -107,6 +112,7 @@ impl Default for BakeOptions {
             threads: None,
             spill: Spill::default(),
             memory: None,
+            memory_shared: None,
         }
     }
 }
