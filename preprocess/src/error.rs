@@ -239,6 +239,29 @@ pub enum BakeError {
     ThreadPool(String),
 }
 
+/// The message of [`BakeError::OverBudget`]: the least budget that would do, as the user
+/// gives it (for a shared budget, the whole of it: every bake run at once gets that share).
+fn over_budget(what: &str, budget: u64, least: u64, shared: Option<(u64, usize)>) -> String {
+    let mib = |b: u64| b.div_ceil(1 << 20);
+    let needs = format!(
+        "{what} needs about {} MiB even with every value kept on disk (the cells' masks, the bricks and the regions)",
+        mib(least)
+    );
+    match shared {
+        Some((total, jobs)) if jobs > 1 => format!(
+            "{needs}, more than its share of the --memory budget: {} MiB of {} MiB, shared by {jobs} frames baked at once: give --memory {}M or more, or fewer --jobs",
+            budget >> 20,
+            total >> 20,
+            mib(least).saturating_mul(jobs as u64)
+        ),
+        _ => format!(
+            "{needs}, more than the --memory budget of {} MiB: give --memory {}M or more",
+            budget >> 20,
+            mib(least)
+        ),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -303,28 +326,5 @@ mod tests {
             "3 non-finite values: 2 in grid \"a\" (first at voxel [1, 1, 1]), 1 in grid \"b\" \
              (first at voxel [0, 0, 0]); refused because of --strict"
         );
-    }
-}
-
-/// The message of [`BakeError::OverBudget`]: the least budget that would do, as the user
-/// gives it (for a shared budget, the whole of it: every bake run at once gets that share).
-fn over_budget(what: &str, budget: u64, least: u64, shared: Option<(u64, usize)>) -> String {
-    let mib = |b: u64| b.div_ceil(1 << 20);
-    let needs = format!(
-        "{what} needs about {} MiB even with every value kept on disk (the cells' masks, the bricks and the regions)",
-        mib(least)
-    );
-    match shared {
-        Some((total, jobs)) if jobs > 1 => format!(
-            "{needs}, more than its share of the --memory budget: {} MiB of {} MiB, shared by {jobs} frames baked at once: give --memory {}M or more, or fewer --jobs",
-            budget >> 20,
-            total >> 20,
-            mib(least).saturating_mul(jobs as u64)
-        ),
-        _ => format!(
-            "{needs}, more than the --memory budget of {} MiB: give --memory {}M or more",
-            budget >> 20,
-            mib(least)
-        ),
     }
 }
