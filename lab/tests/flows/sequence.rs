@@ -200,7 +200,7 @@ fn a_share_of_the_memory_budget_too_small_names_the_whole_budget() {
         .and_then(|s| s.split('M').next())
         .and_then(|s| s.parse().ok())
         .unwrap_or_else(|| panic!("no advice in {err}"));
-    assert!(least > 16 && least % 2 == 0, "{err}");
+    assert!(least > 16 && least.is_multiple_of(2), "{err}");
     assert!(err.contains("or fewer --jobs"), "{err}");
     let advised = format!("{least}M");
     let o = run(
