@@ -220,16 +220,42 @@ pub struct Brick {
 /// where many small supports cross, the baker merges their regions (see
 /// `preprocess::regions`), and a listed brick may then add nothing in part of the box. Its
 /// finest level (the local sampling unit) is the finest of its bricks' levels.
-#[derive(Archive, Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
+// Plain data (`repr(C)`, no padding), so a bake may keep millions of them in a scratch
+// file and read them back as a slice ([`crate::streamed::Structure`]).
+#[derive(
+    Archive,
+    Serialize,
+    Deserialize,
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    bytemuck::Pod,
+    bytemuck::Zeroable,
+)]
 #[rkyv(derive(Debug))]
+#[repr(C)]
 pub struct Region {
     pub bricks_start: u32,
     pub bricks_len: u32,
 }
 
 /// Inclusive value range.
-#[derive(Archive, Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
+// Plain data (`repr(C)`, no padding), so a bake may keep millions of them in a scratch
+// file and read them back as a slice ([`crate::streamed::Structure`]).
+#[derive(
+    Archive,
+    Serialize,
+    Deserialize,
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    bytemuck::Pod,
+    bytemuck::Zeroable,
+)]
 #[rkyv(derive(Debug))]
+#[repr(C)]
 pub struct ValueRange {
     pub min: f32,
     pub max: f32,
@@ -238,8 +264,21 @@ pub struct ValueRange {
 /// Inner KD-tree node (16 bytes). Points with coordinate `< split` on the node's axis
 /// (`kd_axes`) go to `left`. The children are references: an inner node's index, or
 /// [`crate::kd::LEAF`] `| region`, or [`crate::kd::EMPTY`] for empty space.
-#[derive(Archive, Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
+// Plain data (`repr(C)`, no padding), so a bake may keep millions of them in a scratch
+// file and read them back as a slice ([`crate::streamed::Structure`]).
+#[derive(
+    Archive,
+    Serialize,
+    Deserialize,
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    bytemuck::Pod,
+    bytemuck::Zeroable,
+)]
 #[rkyv(derive(Debug))]
+#[repr(C)]
 pub struct KdNode {
     pub split: f64,
     pub left: u32,

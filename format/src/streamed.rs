@@ -14,7 +14,9 @@ use rkyv::ser::{Allocator, Writer, WriterExt};
 use rkyv::vec::{ArchivedVec, VecResolver};
 use rkyv::{Archive, Place, Serialize};
 
-use crate::schema::{Aabb, ArchivedBrickFile, ArchivedField, BrickFile, Provenance};
+use crate::schema::{
+    Aabb, ArchivedBrickFile, ArchivedField, BrickFile, KdNode, Provenance, Region, ValueRange,
+};
 
 /// Values written per chunk (16 MiB); `release` hears each chunk's range once written.
 const CHUNK_VALUES: usize = 4 << 20;
@@ -23,12 +25,29 @@ const CHUNK_VALUES: usize = 4 << 20;
 /// written (a caller holding them mapped lets those pages go).
 pub type Release<'a> = &'a (dyn Fn(usize, std::ops::Range<usize>) + Sync);
 
+/// The regions and KD-tree of a file, held apart from it (a bake of a billion cells keeps
+/// their hundreds of megabytes in scratch files and hands them over mapped): they are
+/// written in place of the file's own `regions`, `region_bricks`, `region_ranges`,
+/// `kd_nodes` and `kd_axes`, a chunk at a time, and `release(part, range)` hears each
+/// chunk once written (`part` counts the arrays in that order, 0 to 4).
+#[derive(Clone, Copy)]
+pub struct Structure<'a> {
+    pub regions: &'a [Region],
+    pub region_bricks: &'a [u32],
+    pub region_ranges: &'a [ValueRange],
+    pub kd_nodes: &'a [KdNode],
+    pub kd_axes: &'a [u8],
+    pub release: Release<'a>,
+}
+
 /// A [`BrickFile`] with the values of field `f` in `values[f]` (its own `values` are not
-/// read, and are empty in practice). Archived by hand as `ArchivedBrickFile`: each part is
-/// serialised as the derived `BrickFile` serialises it, in the schema's field order.
+/// read, and are empty in practice), and its structure from a [`Structure`] when one is
+/// given. Archived by hand as `ArchivedBrickFile`: each part is serialised as the derived
+/// `BrickFile` serialises it, in the schema's field order.
 pub(crate) struct Streamed<'a> {
     file: &'a BrickFile,
     fields: Vec<StreamedField<'a>>,
+    structure: Option<Structure<'a>>,
 }
 
 /// One field, archived as `ArchivedField`.
@@ -67,12 +86,37 @@ impl Archive for Streamed<'_> {
         f.levels.resolve(r.levels, levels);
         ArchivedVec::resolve_from_len(self.fields.len(), r.fields, fields);
         f.bricks.resolve(r.bricks, bricks);
-        f.regions.resolve(r.regions, regions);
-        f.region_bricks.resolve(r.region_bricks, region_bricks);
-        f.region_ranges.resolve(r.region_ranges, region_ranges);
+        match &self.structure {
+            Some(s) => {
+                ArchivedVec::resolve_from_len(s.regions.len(), r.regions, regions);
+                ArchivedVec::resolve_from_len(
+                    s.region_bricks.len(),
+                    r.region_bricks,
+                    region_bricks,
+                );
+                ArchivedVec::resolve_from_len(
+                    s.region_ranges.len(),
+                    r.region_ranges,
+                    region_ranges,
+                );
+            }
+            None => {
+                f.regions.resolve(r.regions, regions);
+                f.region_bricks.resolve(r.region_bricks, region_bricks);
+                f.region_ranges.resolve(r.region_ranges, region_ranges);
+            }
+        }
         f.kd_root.resolve((), kd_root);
-        f.kd_nodes.resolve(r.kd_nodes, kd_nodes);
-        f.kd_axes.resolve(r.kd_axes, kd_axes);
+        match &self.structure {
+            Some(s) => {
+                ArchivedVec::resolve_from_len(s.kd_nodes.len(), r.kd_nodes, kd_nodes);
+                ArchivedVec::resolve_from_len(s.kd_axes.len(), r.kd_axes, kd_axes);
+            }
+            None => {
+                f.kd_nodes.resolve(r.kd_nodes, kd_nodes);
+                f.kd_axes.resolve(r.kd_axes, kd_axes);
+            }
+        }
     }
 }
 
@@ -83,17 +127,36 @@ where
 {
     fn serialize(&self, s: &mut S) -> Result<Self::Resolver, S::Error> {
         let f = self.file;
+        let provenance = f.provenance.serialize(s)?;
+        let bounds = f.bounds.serialize(s)?;
+        let levels = f.levels.serialize(s)?;
+        let fields = ArchivedVec::<ArchivedField>::serialize_from_slice(&self.fields, s)?;
+        let bricks = f.bricks.serialize(s)?;
+        let Some(st) = &self.structure else {
+            return Ok(StreamedResolver {
+                provenance,
+                bounds,
+                levels,
+                fields,
+                bricks,
+                regions: f.regions.serialize(s)?,
+                region_bricks: f.region_bricks.serialize(s)?,
+                region_ranges: f.region_ranges.serialize(s)?,
+                kd_nodes: f.kd_nodes.serialize(s)?,
+                kd_axes: f.kd_axes.serialize(s)?,
+            });
+        };
         Ok(StreamedResolver {
-            provenance: f.provenance.serialize(s)?,
-            bounds: f.bounds.serialize(s)?,
-            levels: f.levels.serialize(s)?,
-            fields: ArchivedVec::<ArchivedField>::serialize_from_slice(&self.fields, s)?,
-            bricks: f.bricks.serialize(s)?,
-            regions: f.regions.serialize(s)?,
-            region_bricks: f.region_bricks.serialize(s)?,
-            region_ranges: f.region_ranges.serialize(s)?,
-            kd_nodes: f.kd_nodes.serialize(s)?,
-            kd_axes: f.kd_axes.serialize(s)?,
+            provenance,
+            bounds,
+            levels,
+            fields,
+            bricks,
+            regions: plain_array(st.regions, 0, st.release, s)?,
+            region_bricks: plain_array(st.region_bricks, 1, st.release, s)?,
+            region_ranges: plain_array(st.region_ranges, 2, st.release, s)?,
+            kd_nodes: plain_array(st.kd_nodes, 3, st.release, s)?,
+            kd_axes: plain_array(st.kd_axes, 4, st.release, s)?,
         })
     }
 }
@@ -174,7 +237,91 @@ where
     }
 }
 
+/// Plain values whose archived form is their little-endian bytes, field after field (the
+/// schema's `repr(C)` structs of `u32`, `f32` and `f64` have no padding): what rkyv writes
+/// for each element of a `Vec` of them. The tests compare the bytes with rkyv's own.
+trait PlainLe: Archive + Copy {
+    const SIZE: usize;
+    fn put_le(&self, out: &mut Vec<u8>);
+}
+
+impl PlainLe for u8 {
+    const SIZE: usize = 1;
+    fn put_le(&self, out: &mut Vec<u8>) {
+        out.push(*self);
+    }
+}
+
+impl PlainLe for u32 {
+    const SIZE: usize = 4;
+    fn put_le(&self, out: &mut Vec<u8>) {
+        out.extend_from_slice(&self.to_le_bytes());
+    }
+}
+
+impl PlainLe for Region {
+    const SIZE: usize = 8;
+    fn put_le(&self, out: &mut Vec<u8>) {
+        out.extend_from_slice(&self.bricks_start.to_le_bytes());
+        out.extend_from_slice(&self.bricks_len.to_le_bytes());
+    }
+}
+
+impl PlainLe for ValueRange {
+    const SIZE: usize = 8;
+    fn put_le(&self, out: &mut Vec<u8>) {
+        out.extend_from_slice(&self.min.to_le_bytes());
+        out.extend_from_slice(&self.max.to_le_bytes());
+    }
+}
+
+impl PlainLe for KdNode {
+    const SIZE: usize = 16;
+    fn put_le(&self, out: &mut Vec<u8>) {
+        out.extend_from_slice(&self.split.to_le_bytes());
+        out.extend_from_slice(&self.left.to_le_bytes());
+        out.extend_from_slice(&self.right.to_le_bytes());
+    }
+}
+
+/// Bytes of plain values written per chunk.
+const CHUNK_BYTES: usize = 4 << 20;
+
+/// `values` archived as the `Vec` they stand for, a chunk at a time, `release(part, range)`
+/// called on each chunk once written.
+fn plain_array<T: PlainLe, S>(
+    values: &[T],
+    part: usize,
+    release: Release<'_>,
+    s: &mut S,
+) -> Result<VecResolver, S::Error>
+where
+    S: Fallible + Writer + ?Sized,
+    S::Error: Source,
+{
+    let pos = s.align_for::<T::Archived>()?;
+    let per_chunk = (CHUNK_BYTES / T::SIZE).max(1);
+    let mut bytes = Vec::with_capacity(per_chunk.min(values.len()) * T::SIZE);
+    let mut start = 0;
+    for chunk in values.chunks(per_chunk) {
+        bytes.clear();
+        for v in chunk {
+            v.put_le(&mut bytes);
+        }
+        s.write(&bytes)?;
+        release(part, start..start + chunk.len());
+        start += chunk.len();
+    }
+    Ok(VecResolver::from_pos(pos))
+}
+
 impl<'a> Streamed<'a> {
+    /// `file` with its structure taken from `structure` (see [`Streamed::new`]).
+    pub(crate) fn with_structure(mut self, structure: Option<Structure<'a>>) -> Streamed<'a> {
+        self.structure = structure;
+        self
+    }
+
     /// `file` with the values of field `f` taken from `values[f]`, `release` called on
     /// them as they are written; `None` when the counts differ.
     pub(crate) fn new(
@@ -201,6 +348,7 @@ impl<'a> Streamed<'a> {
                     },
                 })
                 .collect(),
+            structure: None,
         })
     }
 }

@@ -15,7 +15,7 @@ use rkyv::rancor;
 use crate::error::{one_line, FormatError, FormatErrorKind};
 use crate::header::{Header, FLAGS, FORMAT_VERSION, HEADER_LEN};
 use crate::schema::BrickFile;
-use crate::streamed::{Release, Streamed};
+use crate::streamed::{Release, Streamed, Structure};
 
 /// Bytes of a complete `.qbk` file (header + archive) for `file`.
 pub fn to_bytes(file: &BrickFile) -> Result<Vec<u8>, FormatErrorKind> {
@@ -44,6 +44,19 @@ pub fn write_streamed(
     values: &[&[f32]],
     release: Release<'_>,
 ) -> Result<u64, FormatError> {
+    write_streamed_with(path, file, values, release, None)
+}
+
+/// As [`write_streamed`], with the regions and KD-tree taken from `structure` too when it
+/// is given (the file's own are then ignored): the same bytes as [`write`] of the file
+/// holding them.
+pub fn write_streamed_with(
+    path: &Path,
+    file: &BrickFile,
+    values: &[&[f32]],
+    release: Release<'_>,
+    structure: Option<Structure<'_>>,
+) -> Result<u64, FormatError> {
     let streamed = Streamed::new(file, values, release).ok_or_else(|| {
         FormatError::new(
             path,
@@ -54,6 +67,7 @@ pub fn write_streamed(
             )),
         )
     })?;
+    let streamed = streamed.with_structure(structure);
     write_atomically(path, |out| {
         stream_archive(out, |w| archive_into(w, &streamed))
     })

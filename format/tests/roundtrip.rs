@@ -59,6 +59,82 @@ fn streamed_values_of_several_chunks_and_a_wrong_count() {
     assert!(!path.exists());
 }
 
+/// The regions and KD-tree handed over as slices (as a bake keeps them in scratch files)
+/// give the bytes of the file holding them, for files of random structure and one whose
+/// arrays take several chunks; each array is released whole, in order.
+#[test]
+fn streamed_structure_gives_the_same_bytes() {
+    use qbricks_format::streamed::Structure;
+    use qbricks_format::{KdNode, Region, ValueRange};
+    use std::sync::Mutex;
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut large = common::random_file(11);
+    let n = (1 << 20) + 5;
+    large.regions = (0..n as u32)
+        .map(|i| Region {
+            bricks_start: i,
+            bricks_len: i % 3,
+        })
+        .collect();
+    large.region_bricks = (0..2 * n as u32).map(|i| i.wrapping_mul(7)).collect();
+    large.region_ranges = (0..n)
+        .map(|i| ValueRange {
+            min: -(i as f32),
+            max: i as f32 * 0.5,
+        })
+        .collect();
+    large.kd_nodes = (0..n as u32)
+        .map(|i| KdNode {
+            split: f64::from(i) * 0.125 - 3.0,
+            left: i,
+            right: !i,
+        })
+        .collect();
+    large.kd_axes = (0..n).map(|i| (i % 3) as u8).collect();
+    for (k, file) in [common::random_file(3), common::random_file(5), large]
+        .into_iter()
+        .enumerate()
+    {
+        let expected = writer::to_bytes(&file).expect("to_bytes");
+        let mut hollow = file.clone();
+        hollow.regions.clear();
+        hollow.region_bricks.clear();
+        hollow.region_ranges.clear();
+        hollow.kd_nodes.clear();
+        hollow.kd_axes.clear();
+        let released: Mutex<Vec<(usize, std::ops::Range<usize>)>> = Mutex::new(Vec::new());
+        let release = |p: usize, r: std::ops::Range<usize>| {
+            released.lock().expect("lock").push((p, r));
+        };
+        let structure = Structure {
+            regions: &file.regions,
+            region_bricks: &file.region_bricks,
+            region_ranges: &file.region_ranges,
+            kd_nodes: &file.kd_nodes,
+            kd_axes: &file.kd_axes,
+            release: &release,
+        };
+        let values: Vec<&[f32]> = file.fields.iter().map(|f| f.values.as_slice()).collect();
+        let path = dir.path().join(format!("s{k}.qbk"));
+        writer::write_streamed_with(&path, &hollow, &values, &|_, _| {}, Some(structure))
+            .expect("write");
+        assert!(std::fs::read(&path).expect("read") == expected, "file {k}");
+        let lens = [
+            file.regions.len(),
+            file.region_bricks.len(),
+            file.region_ranges.len(),
+            file.kd_nodes.len(),
+            file.kd_axes.len(),
+        ];
+        let mut at = [0usize; 5];
+        for (p, r) in released.lock().expect("lock").iter() {
+            assert_eq!(r.start, at[*p], "part {p}");
+            at[*p] = r.end;
+        }
+        assert_eq!(at, lens, "file {k}");
+    }
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(48))]
 
