@@ -114,6 +114,163 @@ impl<T: bytemuck::Pod> ScratchValues<T> {
     }
 }
 
+/// A growable array of plain values in a scratch file, mapped shared: what a bake builds
+/// when the array may be larger than its memory budget allows (the regions and KD-tree of
+/// a billion cells are a gigabyte). Values are written through the mapping, and every
+/// `window` bytes written the pages behind are let go (their contents stay the file's), so
+/// building it keeps about a window resident; a read faults pages in again, and
+/// [`ScratchVec::release`] lets a pass over it drop them. The file grows by doubling, its
+/// blocks allocated first ([`reserve`]: a full disk is an error, not `SIGBUS`).
+pub struct ScratchVec<T> {
+    file: File,
+    map: Option<memmap2::MmapMut>,
+    cap: usize,
+    len: usize,
+    window: usize,
+    since_release: usize,
+    kind: PhantomData<T>,
+}
+
+impl<T> std::fmt::Debug for ScratchVec<T> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ScratchVec")
+            .field("len", &self.len)
+            .field("cap", &self.cap)
+            .finish()
+    }
+}
+
+impl<T: bytemuck::Pod> ScratchVec<T> {
+    const SIZE: usize = std::mem::size_of::<T>();
+
+    /// An empty array kept in `file` (the caller's scratch file, which nothing else
+    /// writes), letting go of its pages every `window` bytes written.
+    pub fn new(file: File, window: usize) -> ScratchVec<T> {
+        ScratchVec {
+            file,
+            map: None,
+            cap: 0,
+            len: 0,
+            window: window.max(1),
+            since_release: 0,
+            kind: PhantomData,
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    pub fn as_slice(&self) -> &[T] {
+        match &self.map {
+            // A mapping is page-aligned, so aligned for any plain value.
+            Some(m) => bytemuck::cast_slice(&m[..self.len * Self::SIZE]),
+            None => &[],
+        }
+    }
+
+    pub fn as_mut_slice(&mut self) -> &mut [T] {
+        let bytes = self.len * Self::SIZE;
+        match &mut self.map {
+            Some(m) => bytemuck::cast_slice_mut(&mut m[..bytes]),
+            None => &mut [],
+        }
+    }
+
+    /// Room for `additional` more values: the file made larger (doubling) and mapped
+    /// again, which also lets every page go.
+    #[allow(unsafe_code)]
+    pub fn reserve(&mut self, additional: usize) -> std::io::Result<()> {
+        let need = self
+            .len
+            .checked_add(additional)
+            .ok_or_else(|| std::io::Error::other("scratch array past the address space"))?;
+        if need <= self.cap {
+            return Ok(());
+        }
+        let least = (1usize << 20) / Self::SIZE.max(1);
+        let cap = need.max(self.cap.saturating_mul(2)).max(least);
+        let bytes = cap
+            .checked_mul(Self::SIZE)
+            .ok_or_else(|| std::io::Error::other("scratch array past the address space"))?;
+        reserve(&self.file, bytes as u64)?;
+        self.map = None;
+        // SAFETY: `MmapMut::map_mut` is unsafe because another mapping or process may change
+        // or truncate the file under us. The file is this process's own unnamed scratch
+        // file, which nothing else can open; it only grows, and only here, after the
+        // mapping before was dropped.
+        let map = unsafe { memmap2::MmapOptions::new().len(bytes).map_mut(&self.file)? };
+        self.map = Some(map);
+        self.cap = cap;
+        self.since_release = 0;
+        Ok(())
+    }
+
+    pub fn push(&mut self, value: T) -> std::io::Result<()> {
+        self.extend_from_slice(std::slice::from_ref(&value))
+    }
+
+    pub fn extend_from_slice(&mut self, values: &[T]) -> std::io::Result<()> {
+        self.reserve(values.len())?;
+        let (at, n) = (self.len, values.len());
+        self.len += n;
+        self.as_mut_slice()[at..at + n].copy_from_slice(values);
+        self.wrote(n);
+        Ok(())
+    }
+
+    /// `n` values long: cut, or filled with `value`.
+    pub fn resize(&mut self, n: usize, value: T) -> std::io::Result<()> {
+        if n <= self.len {
+            self.truncate(n);
+            return Ok(());
+        }
+        self.reserve(n - self.len)?;
+        let at = self.len;
+        self.len = n;
+        self.as_mut_slice()[at..].fill(value);
+        self.wrote(n - at);
+        Ok(())
+    }
+
+    pub fn truncate(&mut self, n: usize) {
+        self.len = self.len.min(n);
+    }
+
+    fn wrote(&mut self, values: usize) {
+        self.since_release = self.since_release.saturating_add(values * Self::SIZE);
+        if self.since_release >= self.window {
+            self.release(0..self.len);
+            self.since_release = 0;
+        }
+    }
+
+    /// Lets the pages wholly inside the values `range` go, as [`ScratchValues::release`].
+    #[allow(unsafe_code)]
+    pub fn release(&self, range: Range<usize>) {
+        let Some(map) = &self.map else {
+            return;
+        };
+        let size = Self::SIZE;
+        let bytes = range.start.saturating_mul(size)..range.end.min(self.len).saturating_mul(size);
+        if let Some(pages) = crate::input::whole_pages(bytes, map.len()) {
+            // SAFETY: as in `ScratchValues::release`: a shared mapping of its file, whose
+            // contents stay the file's when its pages are unmapped.
+            let _ = unsafe {
+                map.unchecked_advise_range(
+                    memmap2::UncheckedAdvice::DontNeed,
+                    pages.start,
+                    pages.len(),
+                )
+            };
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -142,6 +299,40 @@ mod tests {
         assert!(ScratchValues::<f32>::map(&file, n + 1).is_err());
         let empty = ScratchValues::<f32>::map(&file, 0).expect("empty");
         assert!(empty.is_empty() && empty.as_slice().is_empty());
+    }
+
+    /// A scratch array reads back what was pushed, extended, resized, cut and changed
+    /// through its slice, across growths and the releases behind its writes.
+    #[test]
+    fn a_scratch_array_keeps_what_was_written() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let file = tempfile::tempfile_in(dir.path()).expect("scratch");
+        let mut a = ScratchVec::<[u32; 3]>::new(file, 4096);
+        let mut b: Vec<[u32; 3]> = Vec::new();
+        assert!(a.is_empty() && a.as_slice().is_empty());
+        for i in 0..300_000u32 {
+            let v = [i, i.wrapping_mul(7), !i];
+            a.push(v).expect("push");
+            b.push(v);
+            if i % 50_000 == 7 {
+                a.truncate(a.len() - 3);
+                b.truncate(b.len() - 3);
+                let more = [[1, 2, 3], [4, 5, 6]];
+                a.extend_from_slice(&more).expect("extend");
+                b.extend_from_slice(&more);
+                let k = b.len() / 2;
+                a.as_mut_slice()[k] = [i; 3];
+                b[k] = [i; 3];
+            }
+        }
+        a.resize(b.len() + 1000, [9; 3]).expect("resize");
+        b.resize(b.len() + 1000, [9; 3]);
+        assert_eq!(a.len(), b.len());
+        assert!(a.as_slice() == &b[..]);
+        a.release(0..a.len());
+        assert!(a.as_slice() == &b[..]);
+        a.resize(10, [0; 3]).expect("cut");
+        assert_eq!(a.as_slice(), &b[..10]);
     }
 
     /// Values wider than a byte count the file in their own size: a velocity per value.

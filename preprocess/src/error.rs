@@ -244,7 +244,7 @@ pub enum BakeError {
 fn over_budget(what: &str, budget: u64, least: u64, shared: Option<(u64, usize)>) -> String {
     let mib = |b: u64| b.div_ceil(1 << 20);
     let needs = format!(
-        "{what} needs about {} MiB even with every value kept on disk (the cells' masks, the bricks and the regions)",
+        "{what} needs about {} MiB even with every value kept on disk (what is left: the cells' masks and the bricks)",
         mib(least)
     );
     match shared {

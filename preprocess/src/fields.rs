@@ -6,7 +6,10 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::bricks::BrickBox;
+use std::sync::Arc;
+
 use crate::kdtree::Regions;
+use crate::spilled::{SpillTo, Store};
 
 /// Bins of every field's histogram.
 pub(crate) const HISTOGRAM_BINS: usize = 64;
@@ -158,14 +161,19 @@ pub(crate) enum BrickValues<'a> {
 /// maps the pages around it too, so reading them in place would make most of the arrays
 /// resident for every batch. Copied out, only the batch's bricks are held, and let go
 /// behind every `window` values.
+///
+/// The ranges are kept as `store.0` says (in memory, or in a scratch file past a size), and
+/// `store.1` is called behind every batch (to let the pages of the regions and tree go,
+/// when they are kept on disk).
 pub(crate) fn region_ranges(
     input: &RangeInput,
     regions: &Regions,
     boxes: impl Iterator<Item = Aabb>,
     values: &BrickValues,
     window: usize,
-) -> Vec<[f32; 2]> {
-    ranges_in_batches(input, regions, boxes, values, REGION_BATCH, window)
+    store: (Option<Arc<SpillTo>>, &dyn Fn()),
+) -> Store<[f32; 2]> {
+    ranges_in_batches(input, regions, boxes, values, REGION_BATCH, window, store)
 }
 
 /// [`region_ranges`], at most `batch` regions at a time.
@@ -176,14 +184,16 @@ fn ranges_in_batches(
     values: &BrickValues,
     batch_regions: usize,
     window: usize,
-) -> Vec<[f32; 2]> {
+    (to, behind_batch): (Option<Arc<SpillTo>>, &dyn Fn()),
+) -> Store<[f32; 2]> {
     let batch_regions = batch_regions.max(1);
     let nf = match values {
         BrickValues::Resident(v) | BrickValues::Mapped { values: v, .. } => v.len(),
     };
     // Region-major, as the file stores them; written in place (no list per region).
-    let mut ranges = vec![[f32::INFINITY, f32::NEG_INFINITY]; regions.len() * nf];
-    if nf == 0 {
+    let mut ranges = Store::new(to);
+    ranges.resize(regions.len() * nf, [f32::INFINITY, f32::NEG_INFINITY]);
+    if nf == 0 || ranges.failed().is_some() {
         return ranges;
     }
     let cells = |b: usize| input.bricks[b].cells() as usize;
@@ -214,11 +224,9 @@ fn ranges_in_batches(
         batches.push(start..end);
         start = end;
     }
-    let mut rest = ranges.as_mut_slice();
     for regs in batches {
-        let (batch, tail) = std::mem::take(&mut rest).split_at_mut(regs.len() * nf);
-        rest = tail;
         let first = regs.start;
+        let batch = &mut ranges[first * nf..regs.end * nf];
         let batch_boxes: Vec<Aabb> = boxes.by_ref().take(regs.len()).collect();
         match values {
             BrickValues::Resident(v) => {
@@ -268,6 +276,8 @@ fn ranges_in_batches(
                 }
             }
         }
+        ranges.release(first * nf..regs.end * nf);
+        behind_batch();
     }
     ranges
 }
@@ -410,7 +420,9 @@ mod tests {
             boxes.iter().copied(),
             &BrickValues::Resident(&slices),
             1 << 20,
+            (None, &|| {}),
         );
+        assert!(!in_place.on_disk());
         assert_eq!(in_place.len(), 9 * 2);
         assert!(in_place.iter().all(|r| r[0].is_finite() && r[0] <= r[1]));
         for batch in [1, 2, 4, 9, 100] {
@@ -424,13 +436,44 @@ mod tests {
             };
             let in_batches = |window: usize| {
                 let boxes = boxes.iter().copied();
-                ranges_in_batches(&input, &regions, boxes, &mapped, batch, window)
+                ranges_in_batches(
+                    &input,
+                    &regions,
+                    boxes,
+                    &mapped,
+                    batch,
+                    window,
+                    (None, &|| {}),
+                )
             };
             let ranges = in_batches(usize::MAX);
             let bits = |v: &[[f32; 2]]| -> Vec<[u32; 2]> {
                 v.iter().map(|r| r.map(f32::to_bits)).collect()
             };
             assert_eq!(bits(&ranges), bits(&in_place), "batch {batch}");
+            // Kept in a scratch file, with a call behind every batch: the same ranges.
+            let dir = tempfile::tempdir().expect("tempdir");
+            let to = Arc::new(SpillTo {
+                dir: dir.path().to_path_buf(),
+                above: 0,
+                window: 64,
+            });
+            let calls = std::sync::atomic::AtomicUsize::new(0);
+            let behind = || {
+                calls.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            };
+            let on_disk = ranges_in_batches(
+                &input,
+                &regions,
+                boxes.iter().copied(),
+                &BrickValues::Resident(&slices),
+                batch,
+                usize::MAX,
+                (Some(to), &behind),
+            );
+            assert!(on_disk.on_disk());
+            assert_eq!(bits(&on_disk), bits(&in_place), "batch {batch} on disk");
+            assert_eq!(calls.into_inner(), 9usize.div_ceil(batch), "batch {batch}");
             let whole = released
                 .lock()
                 .expect("lock")

@@ -10,8 +10,16 @@
 //! about 350 bytes a region while the tree stood whole, against the 55 bytes or so the
 //! file's arrays and the value ranges take.
 
+use std::sync::Arc;
+
 use format::kd::{self, EMPTY, LEAF, MAX_REGION};
 use format::{Aabb, KdNode, Region};
+
+use crate::spilled::{SpillTo, Store};
+
+/// The stored tree: root reference, inner nodes, their axes (the file's `kd_root`,
+/// `kd_nodes`, `kd_axes`), in memory or in scratch files ([`Store`]).
+pub(crate) type Tree = (u32, Store<KdNode>, Store<u8>);
 
 /// Regions as the tree numbers them, laid out as the file stores them: region `r`'s sorted
 /// brick ids are the run `runs[r]` of `bricks`. Flat, so that a bake's millions of regions
@@ -19,15 +27,21 @@ use format::{Aabb, KdNode, Region};
 /// leaf's cell, which [`leaf_boxes`] derives in region order when it is needed (the file
 /// does not store it, and at 48 bytes a region it was the largest part of the structure
 /// a bake held).
-#[derive(Debug, Default, Clone, PartialEq)]
+#[derive(Debug, Default, PartialEq)]
 pub(crate) struct Regions {
-    pub runs: Vec<Region>,
-    pub bricks: Vec<u32>,
+    pub runs: Store<Region>,
+    pub bricks: Store<u32>,
 }
 
 impl Regions {
     pub(crate) fn len(&self) -> usize {
         self.runs.len()
+    }
+
+    /// Lets the pages of arrays kept on disk go (see [`Store::release_all`]).
+    pub(crate) fn release_all(&self) {
+        self.runs.release_all();
+        self.bricks.release_all();
     }
 
     /// The sorted brick ids of region `r`.
@@ -39,11 +53,13 @@ impl Regions {
 }
 
 /// Why a tree cannot be stored: more regions (or inner nodes) than a child reference can
-/// name, counted whole, or more brick references than a region's `u32` run can reach.
+/// name, counted whole, or more brick references than a region's `u32` run can reach; or
+/// the scratch file holding it failed (a full disk).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum TooLarge {
     Regions(u64),
     BrickRefs(u64),
+    Scratch(std::io::ErrorKind),
 }
 
 /// How many regions, inner nodes and brick references a stored tree may hold.
@@ -81,25 +97,41 @@ pub(crate) struct Mark {
 #[derive(Debug)]
 pub(crate) struct Part {
     limits: Limits,
-    nodes: Vec<KdNode>,
-    axes: Vec<u8>,
+    to: Option<Arc<SpillTo>>,
+    nodes: Store<KdNode>,
+    axes: Store<u8>,
     regions: Regions,
     count: Mark,
 }
 
 impl Part {
-    pub(crate) fn new(limits: Limits) -> Self {
+    /// An empty part, its arrays kept in memory unless `to` says where to move them.
+    pub(crate) fn new(limits: Limits, to: Option<Arc<SpillTo>>) -> Self {
         Part {
             limits,
-            nodes: Vec::new(),
-            axes: Vec::new(),
-            regions: Regions::default(),
+            nodes: Store::new(to.clone()),
+            axes: Store::new(to.clone()),
+            regions: Regions {
+                runs: Store::new(to.clone()),
+                bricks: Store::new(to.clone()),
+            },
+            to,
             count: Mark::default(),
         }
     }
 
-    pub(crate) fn limits(&self) -> Limits {
-        self.limits
+    /// An empty part with this one's limits and storage, for another thread.
+    pub(crate) fn another(&self) -> Part {
+        Part::new(self.limits, self.to.clone())
+    }
+
+    /// The first failure of a scratch file holding one of the part's arrays.
+    fn failed(&self) -> Option<std::io::ErrorKind> {
+        self.nodes
+            .failed()
+            .or(self.axes.failed())
+            .or(self.regions.runs.failed())
+            .or(self.regions.bricks.failed())
     }
 
     fn fits(&self) -> bool {
@@ -180,24 +212,45 @@ impl Part {
             r if r & LEAF != 0 => LEAF | ((r & !LEAF) + at.regions as u32),
             r => r + at.nodes as u32,
         };
-        self.nodes.extend(other.nodes.iter().map(|n| KdNode {
-            split: n.split,
-            left: shift(n.left),
-            right: shift(n.right),
-        }));
-        self.axes.extend_from_slice(&other.axes);
+        // A chunk at a time, letting the other part's pages go behind (when on disk).
+        const CHUNK: usize = 1 << 16;
+        for (k, chunk) in other.nodes.chunks(CHUNK).enumerate() {
+            self.nodes.extend(chunk.iter().map(|n| KdNode {
+                split: n.split,
+                left: shift(n.left),
+                right: shift(n.right),
+            }));
+            other.nodes.release(k * CHUNK..(k + 1) * CHUNK);
+        }
+        for (k, chunk) in other.axes.chunks(CHUNK).enumerate() {
+            self.axes.extend_from_slice(chunk);
+            other.axes.release(k * CHUNK..(k + 1) * CHUNK);
+        }
+        if let Some(e) = other.failed() {
+            // The other part's arrays stopped short: this one cannot be whole either.
+            self.nodes.fail(e);
+        }
         let rs = &mut self.regions;
-        rs.runs.extend(other.regions.runs.iter().map(|r| Region {
-            bricks_start: r.bricks_start + at.refs as u32,
-            bricks_len: r.bricks_len,
-        }));
-        rs.bricks.extend_from_slice(&other.regions.bricks);
+        for (k, chunk) in other.regions.runs.chunks(CHUNK).enumerate() {
+            rs.runs.extend(chunk.iter().map(|r| Region {
+                bricks_start: r.bricks_start + at.refs as u32,
+                bricks_len: r.bricks_len,
+            }));
+            other.regions.runs.release(k * CHUNK..(k + 1) * CHUNK);
+        }
+        for (k, chunk) in other.regions.bricks.chunks(CHUNK).enumerate() {
+            rs.bricks.extend_from_slice(chunk);
+            other.regions.bricks.release(k * CHUNK..(k + 1) * CHUNK);
+        }
         shift(root)
     }
 
     /// The stored tree with root reference `root`, and its regions; or what is too large
     /// to store.
-    pub(crate) fn finish(self, root: u32) -> Result<(kd::Packed, Regions), TooLarge> {
+    pub(crate) fn finish(self, root: u32) -> Result<(Tree, Regions), TooLarge> {
+        if let Some(e) = self.failed() {
+            return Err(TooLarge::Scratch(e));
+        }
         let (c, l) = (self.count, self.limits);
         if c.regions > l.regions || c.nodes > l.nodes {
             return Err(TooLarge::Regions(c.regions));
@@ -213,24 +266,24 @@ impl Part {
 /// depth-first and left-first from `root` (the box of the whole tree), cut at each inner
 /// node's split as the build cut them, so each is bit for bit the box the region was made
 /// for ([`format::kd::LeafCells`], the walk the viewer derives its region table with).
-pub(crate) fn leaf_boxes(tree: &kd::Packed, root: Aabb) -> impl Iterator<Item = Aabb> + '_ {
+pub(crate) fn leaf_boxes(tree: &Tree, root: Aabb) -> impl Iterator<Item = Aabb> + '_ {
     kd::LeafCells::new(stored(tree), root.min, root.max, [0.0; 3])
         .map(|(_, min, max)| Aabb { min, max })
 }
 
 /// The packed tree as the file's walks read it.
-pub(crate) fn stored(tree: &kd::Packed) -> kd::Stored<'_, KdNode> {
+pub(crate) fn stored(tree: &Tree) -> kd::Stored<'_, KdNode> {
     let (root, nodes, axes) = tree;
     kd::Stored {
         root: *root,
-        nodes,
-        axes,
+        nodes: nodes.as_slice(),
+        axes: axes.as_slice(),
     }
 }
 
 /// Region containing `p` by descending the tree (for tests and the baker's self-check):
 /// the file's own descent, [`format::kd::locate`].
 #[cfg(test)]
-pub(crate) fn locate(tree: &kd::Packed, p: [f64; 3]) -> Option<u32> {
+pub(crate) fn locate(tree: &Tree, p: [f64; 3]) -> Option<u32> {
     format::kd::locate(&stored(tree), p, [0.0; 3])
 }

@@ -20,4 +20,5 @@ pub mod reconstruct;
 pub mod regions;
 pub mod request;
 pub mod sequence;
+pub mod spilled;
 pub mod vdb;

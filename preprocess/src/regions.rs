@@ -29,10 +29,13 @@
 //! and every brick's lattice is among the region's, so `exact` still cuts every plane
 //! where the reconstruction stops being one cubic.
 
-use format::kd::{self, EMPTY};
+use std::sync::Arc;
+
+use format::kd::EMPTY;
 use format::Aabb;
 
-use crate::kdtree::{Limits, Part, Regions, TooLarge};
+use crate::kdtree::{Limits, Part, Regions, TooLarge, Tree};
+use crate::spilled::SpillTo;
 
 /// A region's walk and segment cost as a length of path through one brick's samples, in
 /// finest cell widths (`s` of the module docs over the finest width). Measured on issue
@@ -45,19 +48,25 @@ pub(crate) const SEGMENT_COST_CELLS: f64 = 0.5;
 pub(crate) struct Built {
     /// The union box of all supports (None when there are none).
     pub bounds: Option<Aabb>,
-    pub tree: kd::Packed,
+    pub tree: Tree,
     pub regions: Regions,
 }
 
 /// Builds the regions over `supports` (indexed by brick id), merging subtrees where a
 /// region costs `segment` (a length) per crossing (see the module docs; 0 keeps one region
-/// per overlap), straight into the file's layout ([`crate::kdtree`]).
-pub(crate) fn build(supports: &[Aabb], segment: f64) -> Result<Built, TooLarge> {
+/// per overlap), straight into the file's layout ([`crate::kdtree`]); its arrays move to
+/// scratch files where `to` says.
+pub(crate) fn build(
+    supports: &[Aabb],
+    segment: f64,
+    to: Option<Arc<SpillTo>>,
+) -> Result<Built, TooLarge> {
     build_within(
         supports,
         segment,
         Limits::FILE,
         parallel_min(supports.len()),
+        to,
     )
 }
 
@@ -76,8 +85,9 @@ fn build_within(
     segment: f64,
     limits: Limits,
     parallel_min: usize,
+    to: Option<Arc<SpillTo>>,
 ) -> Result<Built, TooLarge> {
-    let mut part = Part::new(limits);
+    let mut part = Part::new(limits, to);
     let Some(first) = supports.first() else {
         let (tree, regions) = part.finish(EMPTY)?;
         return Ok(Built {
@@ -181,11 +191,10 @@ impl Splitter<'_> {
         let mut rb = b;
         rb.min[a] = split;
         let (left, right) = if left_ids.len() + right_ids.len() >= self.parallel_min {
-            let limits = part.limits();
+            let mut own = part.another();
             let (left, (right, right_part)) = rayon::join(
                 || self.node(lb, left_ids, part),
                 || {
-                    let mut own = Part::new(limits);
                     let right = self.node(rb, right_ids, &mut own);
                     (right, own)
                 },
@@ -387,7 +396,7 @@ mod tests {
             pts in prop::collection::vec((0.0f64..1.0, 0.0f64..1.0, 0.0f64..1.0), 32),
             segment in prop_oneof![Just(0.0), Just(0.5), Just(4.0)],
         ) {
-            let built = build(&sup, segment).expect("few regions");
+            let built = build(&sup, segment, None).expect("few regions");
             let bounds = built.bounds.expect("non-empty");
             let regs = leaves(&built);
             // The walk cut into subtrees (how the viewer derives its region table on all
@@ -458,8 +467,8 @@ mod tests {
                 if r == EMPTY {
                     continue;
                 }
-                if r & kd::LEAF != 0 {
-                    seen.push(r & !kd::LEAF);
+                if r & format::kd::LEAF != 0 {
+                    seen.push(r & !format::kd::LEAF);
                     continue;
                 }
                 prop_assert!(parent.is_none_or(|p| r > p));
@@ -470,7 +479,18 @@ mod tests {
             prop_assert_eq!(seen, (0..flat.len() as u32).collect::<Vec<_>>());
             // Handing halves to other threads (at every node, or none) builds the same.
             for every in [1, usize::MAX] {
-                let other = build_within(&sup, segment, Limits::FILE, every).expect("few regions");
+                let other = build_within(&sup, segment, Limits::FILE, every, None).expect("few regions");
+                prop_assert_eq!(&other.tree, &built.tree);
+                prop_assert_eq!(&other.regions, &built.regions);
+            }
+            // Kept in scratch files (every array of every part, or past a few values):
+            // the same tree and regions.
+            let dir = tempfile::tempdir().expect("tempdir");
+            for (every, above) in [(1, 0), (usize::MAX, 0), (1, 40)] {
+                let to = Arc::new(SpillTo { dir: dir.path().to_path_buf(), above, window: 64 });
+                let other = build_within(&sup, segment, Limits::FILE, every, Some(to))
+                    .expect("few regions");
+                prop_assert!(above > 0 || other.tree.1.is_empty() || other.tree.1.on_disk());
                 prop_assert_eq!(&other.tree, &built.tree);
                 prop_assert_eq!(&other.regions, &built.regions);
             }
@@ -482,9 +502,9 @@ mod tests {
                 refs: flat.bricks.len() as u64,
             };
             for every in [1, usize::MAX] {
-                let at = build_within(&sup, segment, size, every).expect("at the limits");
+                let at = build_within(&sup, segment, size, every, None).expect("at the limits");
                 prop_assert_eq!(&at.regions, &built.regions);
-                let fewer = |l: Limits| build_within(&sup, segment, l, every).map(|b| b.regions);
+                let fewer = |l: Limits| build_within(&sup, segment, l, every, None).map(|b| b.regions);
                 let regions = size.regions;
                 prop_assert_eq!(
                     fewer(Limits { regions: regions - 1, ..size }),
@@ -521,8 +541,8 @@ mod tests {
                 });
             }
         }
-        let exact = build(&sup, 0.0).expect("few regions");
-        let merged = build(&sup, 0.5).expect("few regions");
+        let exact = build(&sup, 0.0, None).expect("few regions");
+        let merged = build(&sup, 0.5, None).expect("few regions");
         let bounds = merged.bounds;
         let (exact, merged) = (leaves(&exact), leaves(&merged));
         assert!(
@@ -548,16 +568,18 @@ mod tests {
             min: [0.0; 3],
             max: [1.0, 2.0, 3.0],
         };
-        let built = build(&[s], 0.5).expect("one region");
-        assert_eq!(built.tree, (kd::LEAF, vec![], vec![]));
+        let built = build(&[s], 0.5, None).expect("one region");
+        assert_eq!(built.tree.0, format::kd::LEAF);
+        assert!(built.tree.1.is_empty() && built.tree.2.is_empty());
         assert_eq!(leaves(&built), vec![(s, &[0u32][..])]);
     }
 
     #[test]
     fn no_support_is_an_empty_tree() {
-        let built = build(&[], 0.5).expect("nothing");
+        let built = build(&[], 0.5, None).expect("nothing");
         assert_eq!(built.bounds, None);
-        assert_eq!(built.tree, (EMPTY, vec![], vec![]));
+        assert_eq!(built.tree.0, EMPTY);
+        assert!(built.tree.1.is_empty() && built.tree.2.is_empty());
         assert_eq!(built.regions.len(), 0);
     }
 }

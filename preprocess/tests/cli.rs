@@ -303,6 +303,15 @@ fn a_bake_within_a_memory_budget_stays_under_it_and_writes_the_same_file() {
     // stacks, the pages the kernel maps around faults): 45-53 MiB measured, and 25-32 MiB
     // at budgets of 16 to 24 MiB, run to run.
     assert!(peak <= budget + (16 << 20), "{} MiB", peak >> 20);
+    // The least budget: every value and the regions and KD-tree in scratch files.
+    let (least_peak, least) = bake("least.qbk", &["--memory", "16M"]);
+    eprintln!("peak {} MiB within --memory 16M", least_peak >> 20);
+    assert!(least == free, "the bake within 16M wrote another file");
+    assert!(
+        least_peak <= (16 << 20) + (16 << 20),
+        "{} MiB",
+        least_peak >> 20
+    );
 
     // An uncompressed grid of 49 MB, whose pages the reader maps: locating its leaves walks
     // every buffer, so the pages walked must go behind the walk well within a small budget

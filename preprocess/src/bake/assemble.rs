@@ -41,7 +41,9 @@ pub(super) fn check_archive(leaf_cells: u64, fields: u64, bytes: u64) -> Result<
 
 /// Assembly stage: the [`BrickFile`] (fields with their ranges and histograms, levels,
 /// bricks, regions, KD-tree, provenance) ready to be written, its fields' values left
-/// where `fields` keeps them, and the field ranges for the summary.
+/// where `fields` keeps them, and the field ranges for the summary. The regions and
+/// KD-tree are moved into the file when they are in memory; kept in scratch files, they
+/// stay there and are returned beside it (the writer streams them).
 pub(super) fn assemble(
     opts: &BakeOptions,
     source_grids: Vec<SourceGrid>,
@@ -50,7 +52,7 @@ pub(super) fn assemble(
     fields: &FieldValues,
     kd: Kd,
     bounds: Option<Aabb>,
-) -> (BrickFile, Vec<FieldSummary>) {
+) -> (BrickFile, Vec<FieldSummary>, Option<Kd>) {
     let mut file_fields = Vec::with_capacity(fields.names.len());
     let mut field_summaries = Vec::with_capacity(fields.names.len());
     for (f, (name, vals)) in fields.names.iter().zip(fields.slices()).enumerate() {
@@ -104,8 +106,7 @@ pub(super) fn assemble(
         min: [0.0; 3],
         max: [0.0; 3],
     });
-    let (kd_root, kd_nodes, kd_axes) = kd.tree;
-    let file = BrickFile {
+    let mut file = BrickFile {
         provenance: Provenance {
             source: opts.source.clone(),
             grids: source_grids,
@@ -116,16 +117,34 @@ pub(super) fn assemble(
         levels: file_levels,
         fields: file_fields,
         bricks: file_bricks,
-        regions: kd.regions.runs,
-        region_bricks: kd.regions.bricks,
-        region_ranges: kd
-            .ranges
-            .into_iter()
-            .map(|[min, max]| ValueRange { min, max })
-            .collect(),
-        kd_root,
-        kd_nodes,
-        kd_axes,
+        regions: Vec::new(),
+        region_bricks: Vec::new(),
+        region_ranges: Vec::new(),
+        kd_root: kd.tree.0,
+        kd_nodes: Vec::new(),
+        kd_axes: Vec::new(),
     };
-    (file, field_summaries)
+    if kd.on_disk() {
+        return (file, field_summaries, Some(kd));
+    }
+    structure_into(&mut file, kd);
+    (file, field_summaries, None)
+}
+
+/// Puts the regions and KD-tree of `kd` into `file` (read from disk if they are there).
+pub(super) fn structure_into(file: &mut BrickFile, kd: Kd) {
+    let Kd {
+        tree: (root, nodes, axes),
+        regions,
+        ranges,
+    } = kd;
+    file.regions = regions.runs.into_vec();
+    file.region_bricks = regions.bricks.into_vec();
+    file.region_ranges = ranges
+        .iter()
+        .map(|&[min, max]| ValueRange { min, max })
+        .collect();
+    file.kd_root = root;
+    file.kd_nodes = nodes.into_vec();
+    file.kd_axes = axes.into_vec();
 }

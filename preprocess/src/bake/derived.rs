@@ -53,6 +53,10 @@ pub struct Spill {
     pub chunk: u64,
     /// Bytes of values kept on disk a pass reads before it lets their pages go.
     pub window: u64,
+    /// Bytes each array of the structure (regions, their brick lists and value ranges,
+    /// the KD-tree) may take in memory before it moves to a scratch file
+    /// ([`crate::spilled`]); `u64::MAX`: never.
+    pub structure: u64,
 }
 
 impl Default for Spill {
@@ -62,6 +66,7 @@ impl Default for Spill {
             above: SPILL_BYTES,
             chunk: CHUNK_CELLS,
             window: WINDOW_BYTES,
+            structure: u64::MAX,
         }
     }
 }
@@ -80,7 +85,28 @@ impl Spill {
             above: budget / 8,
             chunk: d.chunk.min(budget / 64 / 4).max(1),
             window: d.window.min(budget / 8).max(1 << 20),
+            structure: u64::MAX,
         }
+    }
+
+    /// These settings with the structure's arrays moved to disk past
+    /// [`STRUCTURE_HELD_BYTES`] each.
+    pub fn with_structure_on_disk(self) -> Spill {
+        Spill {
+            structure: STRUCTURE_HELD_BYTES,
+            ..self
+        }
+    }
+
+    /// Where the structure's arrays go past [`Spill::structure`] bytes, if they may.
+    pub(crate) fn structure_to(&self) -> Option<std::sync::Arc<crate::spilled::SpillTo>> {
+        (self.structure != u64::MAX).then(|| {
+            std::sync::Arc::new(crate::spilled::SpillTo {
+                dir: self.dir.clone().unwrap_or_else(std::env::temp_dir),
+                above: usize::try_from(self.structure).unwrap_or(usize::MAX),
+                window: STRUCTURE_WINDOW_BYTES,
+            })
+        })
     }
 
     /// The settings that hold the least: every value on disk, passes of a megabyte.
@@ -90,6 +116,7 @@ impl Spill {
             above: 0,
             chunk: 1,
             window: 1 << 20,
+            structure: 0,
         }
     }
 
@@ -101,6 +128,12 @@ impl Spill {
 
 /// Bytes a pass over values on disk reads before it lets their pages go, by default.
 pub const WINDOW_BYTES: u64 = 64 << 20;
+/// Bytes of each structure array a bake within a budget holds in memory before the array
+/// moves to disk: the arrays of small parts of the region split never do.
+pub const STRUCTURE_HELD_BYTES: u64 = 64 << 10;
+/// Bytes written to a structure array on disk before the pages behind are let go: the
+/// split writes several arrays at once on every thread.
+pub const STRUCTURE_WINDOW_BYTES: usize = 256 << 10;
 
 /// Baked fields: names, and the values of each (brick after brick, x fastest), in memory
 /// or, when they were derived into scratch files, read through a mapping of those files

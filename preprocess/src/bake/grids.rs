@@ -94,6 +94,20 @@ impl BakeGrid {
         matches!(self, BakeGrid::Located(_))
     }
 
+    /// Bytes of the file its leaves' buffers take, for a grid located in a file.
+    pub fn located_bytes(&self) -> Option<u64> {
+        let sum = |leaves: &[crate::vdb::tree::LocatedLeaf]| {
+            leaves.iter().map(|l| l.bytes.len() as u64).sum::<u64>()
+        };
+        match self {
+            BakeGrid::Decoded(_) => None,
+            BakeGrid::Located(AnyLocated::Float(g)) => Some(sum(&g.grid.leaves)),
+            BakeGrid::Located(AnyLocated::Double(g)) => Some(sum(&g.grid.leaves)),
+            BakeGrid::Located(AnyLocated::Vec3s(g)) => Some(sum(&g.grid.leaves)),
+            BakeGrid::Located(AnyLocated::Vec3d(g)) => Some(sum(&g.grid.leaves)),
+        }
+    }
+
     /// The grid with every leaf decoded.
     pub fn decode(self) -> Result<AnyGrid, VdbError> {
         match self {

@@ -42,6 +42,15 @@ use super::{BakeOptions, Spill};
 /// their boxes are derived when needed, not stored) with headroom for layouts with more
 /// regions per cell (the independent layout has 1.5 times the 512³ tile's).
 pub const CELL_BYTES: u64 = 3;
+/// [`CELL_BYTES`] with the regions, their brick lists and value ranges and the KD-tree in
+/// scratch files ([`Spill::structure`]): what is left is the bricks and their supports and
+/// the lists of support ids the region split holds along its recursion (about 140 bytes a
+/// brick of up to 512 cells), with headroom for small bricks.
+pub const CELL_BYTES_STRUCTURE_ON_DISK: u64 = 1;
+/// Bytes the structure's arrays on disk hold resident at most: the pages written behind
+/// the last window of each array of every part of the split being built at once, and the
+/// arrays of parts still in memory (a few dozen parts of five arrays).
+const STRUCTURE_ON_DISK_HELD: u64 = 16 << 20;
 /// Bytes per active cell of the bricks while the fields are derived: about 80 bytes a
 /// brick of up to 512 cells, with headroom for small bricks.
 const BRICK_BYTES_PER_CELL: u64 = 1;
@@ -91,6 +100,10 @@ pub struct GridFootprint {
     /// Bytes per slot of values the bake makes beside the stored ones
     /// ([`made_slot_bytes`]), kept like them.
     pub made: u64,
+    /// For a grid decoded a batch at a time from a mapped file: the file's bytes per 1024
+    /// bytes of decoded leaves (about 1024 uncompressed, far less zipped), since a batch is
+    /// held beside the file's pages it came from.
+    pub file_per_1024: u64,
 }
 
 impl GridFootprint {
@@ -100,6 +113,8 @@ impl GridFootprint {
         let mut f = with_topology!(grid, g => Self::of_grid(g));
         if grid.is_located() {
             let batch = (LEAF_BATCH as u64).saturating_mul(grid.value_bytes() * LEAF_VOXELS as u64);
+            let file = grid.located_bytes().unwrap_or(0);
+            f.file_per_1024 = file.saturating_mul(1024) / f.decoded.max(1);
             f.decoded = f.decoded.min(batch);
             f.batched = true;
         }
@@ -135,6 +150,7 @@ impl GridFootprint {
             cells: g.active_voxel_count(),
             batched: false,
             made: 0,
+            file_per_1024: 0,
         }
     }
 
@@ -146,6 +162,7 @@ impl GridFootprint {
             cells,
             batched: false,
             made: 0,
+            file_per_1024: 0,
         }
     }
 }
@@ -184,8 +201,13 @@ pub fn bake_bytes(
     let mapped = mapped_values(grids, extras, spill).min(spill.window.saturating_mul(2));
     // The velocity (or scalar) grids become cells, the extra fields' grids still decoded
     // (a batch of leaves, for grids decoded as they become cells).
+    // A batch of leaves decoded from a mapped file is held beside the file's pages it
+    // came from until the batch is done (as many bytes again for an uncompressed file).
     let decoded = |(f, _): &(GridFootprint, u64)| match f.batched {
-        true => f.decoded.min(spill.window),
+        true => {
+            let batch = f.decoded.min(spill.window);
+            batch.saturating_add(batch.saturating_mul(f.file_per_1024) / 1024)
+        }
         false => f.decoded,
     };
     let converting = sum(grids, &|g| {
@@ -203,7 +225,11 @@ pub fn bake_bytes(
     // a chunk of them beside the cells, then the bricks and regions with a chunk of the
     // fields (they stay on disk, read a part at a time, see `derived::FieldValues`).
     let field_bytes = fields.saturating_mul(FIELD_BYTES);
-    let per_cell = field_bytes.saturating_add(CELL_BYTES);
+    let (structure_per_cell, structure_held) = match spill.structure {
+        u64::MAX => (CELL_BYTES, 0),
+        _ => (CELL_BYTES_STRUCTURE_ON_DISK, STRUCTURE_ON_DISK_HELD),
+    };
+    let per_cell = field_bytes.saturating_add(structure_per_cell);
     let cells = sum(grids, &|g| g.0.cells);
     let held = sum(grids, &|g| values(g).saturating_add(masks(g)))
         .saturating_add(sum(extras, &|e| values(e).saturating_add(masks(e))))
@@ -215,9 +241,10 @@ pub fn bake_bytes(
             .saturating_add(cells.saturating_mul(BRICK_BYTES_PER_CELL))
             .saturating_add(chunk);
         let after = sum(grids, &|g| {
-            masks(g).saturating_add(g.0.cells.saturating_mul(CELL_BYTES))
+            masks(g).saturating_add(g.0.cells.saturating_mul(structure_per_cell))
         })
-        .saturating_add(chunk.max(spill.window));
+        .saturating_add(chunk.max(spill.window))
+        .saturating_add(structure_held);
         deriving.max(after)
     } else {
         held.saturating_add(cells.saturating_mul(per_cell))
@@ -276,27 +303,56 @@ pub fn spill_within(
     fields: u64,
     budget: u64,
 ) -> Result<(Spill, u64), u64> {
-    let all_on_disk = |b: u64| Spill {
+    // Everything on disk: passes over values hold a sixteenth of the budget each (the
+    // grids become cells two at once, each holding a batch of decoded leaves, the file's
+    // pages they came from and a window of its cells), so that what is left of a small
+    // budget is not spent on windows.
+    let all_on_disk = |b: u64| {
+        let within = Spill::within(b);
+        Spill {
+            above: 0,
+            window: within.window.min(b / 16).max(1 << 20),
+            ..within
+        }
+        .with_structure_on_disk()
+    };
+    let values_on_disk = |b: u64| Spill {
         above: 0,
         ..Spill::within(b)
     };
-    for spill in [Spill::within(budget), all_on_disk(budget)] {
+    for spill in [
+        Spill::within(budget),
+        values_on_disk(budget),
+        all_on_disk(budget),
+    ] {
         let need = bake_bytes(grids, extras, fields, &spill);
         if need <= budget {
             return Ok((spill, need));
         }
     }
     // The windows grow with the budget, slower than it: from what the structure alone
-    // needs, a few steps up reach a budget the estimate fits in.
-    let mut least = bake_bytes(grids, extras, fields, &Spill::least());
-    for _ in 0..64 {
-        let need = bake_bytes(grids, extras, fields, &all_on_disk(least));
-        if need <= least {
-            break;
+    // needs, a few steps up reach a budget the estimate fits in; the structure kept in
+    // memory or on disk, whichever asks less (small bakes hold less than the fixed
+    // resident share of arrays on disk).
+    let least_with = |settings: &dyn Fn(u64) -> Spill, least: Spill| {
+        let mut least = bake_bytes(grids, extras, fields, &least);
+        for _ in 0..64 {
+            let need = bake_bytes(grids, extras, fields, &settings(least));
+            if need <= least {
+                break;
+            }
+            least = need;
         }
-        least = need;
-    }
-    Err(least)
+        least
+    };
+    let held = Spill {
+        structure: u64::MAX,
+        ..Spill::least()
+    };
+    Err(least_with(&values_on_disk, held).min(least_with(
+        &all_on_disk,
+        Spill::least().with_structure_on_disk(),
+    )))
 }
 
 /// Refuses, before any cell is made, a bake of `grids` (and of the scalar grids `extras`
@@ -418,5 +474,35 @@ mod tests {
         // One active voxel still takes a whole block of slots.
         assert_eq!((f.blocks, f.cells), (1, 1));
         assert!(bake_bytes(&[(f, VELOCITY_SLOT_BYTES)], &[], 2, &no_spill) > 512 * 24);
+    }
+
+    /// A billion cells (a 1024³ grid of single-precision velocity read from a file) fit a
+    /// budget of 1.5 GiB only with the structure on disk too: its least with the structure
+    /// in memory is over 3 GiB, with it on disk under 1.5 GiB, and a budget between is
+    /// kept with every value and the structure on disk.
+    #[test]
+    fn a_billion_cells_bake_within_a_budget_with_the_structure_on_disk() {
+        let leaves = 1u64 << 21;
+        let f = GridFootprint {
+            batched: true,
+            decoded: (LEAF_BATCH as u64) * leaf_bytes::<[f32; 3]>(),
+            file_per_1024: 1024,
+            ..GridFootprint::leaves::<[f32; 3]>(leaves, leaves * 512)
+        };
+        let grids = [(f, SINGLE_VELOCITY_SLOT_BYTES)];
+        let held = Spill {
+            structure: u64::MAX,
+            ..Spill::least()
+        };
+        assert!(bake_bytes(&grids, &[], 2, &held) > 3 << 30);
+        let least = spill_within(&grids, &[], 2, 16 << 20).expect_err("16 MiB is too little");
+        assert!(least < 3 << 29, "{least}");
+        let (spill, need) = spill_within(&grids, &[], 2, least).expect("the least does");
+        assert!(need <= least);
+        assert_eq!(spill.above, 0);
+        assert_ne!(spill.structure, u64::MAX);
+        // With room for the structure in memory, it stays there (faster, no scratch files).
+        let (spill, _) = spill_within(&grids, &[], 2, 8 << 30).expect("8 GiB does");
+        assert_eq!(spill.structure, u64::MAX);
     }
 }

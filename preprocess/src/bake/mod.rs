@@ -18,10 +18,11 @@ use crate::derive::{centre_from_faces, Stencil};
 use crate::error::{field_grid_not_found, grid_labels, GridCount, GridCounts};
 use crate::fields::{region_ranges, FieldKind, RangeInput};
 use crate::grid::{AnyGrid, Transform};
-use crate::kdtree::{Regions, TooLarge};
+use crate::kdtree::{Regions, TooLarge, Tree};
 use crate::levels::assign_levels;
 use crate::nonfinite::{self, CellValue};
 use crate::regions;
+use crate::spilled::Store;
 use crate::vdb::AnyLocated;
 
 /// Re-exported from [`crate::error`], where it lives since [`crate::levels`] returns it too.
@@ -206,17 +207,28 @@ pub fn bake_kept_among(
 
 /// A baked file whose fields' values are kept apart from it (see [`bake_kept`]).
 pub struct Baked {
-    /// Everything but the fields' values (their `values` are empty).
+    /// Everything but the fields' values (their `values` are empty), and but the regions
+    /// and KD-tree when `structure` holds them.
     file: BrickFile,
     values: FieldValues,
+    /// The regions and KD-tree when they were kept in scratch files (see
+    /// [`crate::spilled`]); `None`: they are in `file`.
+    structure: Option<Kd>,
 }
 
 impl Baked {
     /// The file with its values in it.
     pub fn into_file(self) -> Result<BrickFile, BakeError> {
-        let Baked { mut file, values } = self;
+        let Baked {
+            mut file,
+            values,
+            structure,
+        } = self;
         for (f, v) in file.fields.iter_mut().zip(values.into_vecs()?) {
             f.values = v;
+        }
+        if let Some(kd) = structure {
+            assemble::structure_into(&mut file, kd);
         }
         Ok(file)
     }
@@ -225,7 +237,26 @@ impl Baked {
     /// values are read where they are kept, a chunk at a time, and let go once written.
     pub fn write(&self, path: &std::path::Path) -> Result<u64, format::FormatError> {
         let release = |f: usize, r: std::ops::Range<usize>| self.values.release(f, r);
-        format::writer::write_streamed(path, &self.file, &self.values.slices(), &release)
+        let slices = self.values.slices();
+        let Some(kd) = &self.structure else {
+            return format::writer::write_streamed(path, &self.file, &slices, &release);
+        };
+        let let_go = |part: usize, r: std::ops::Range<usize>| match part {
+            0 => kd.regions.runs.release(r),
+            1 => kd.regions.bricks.release(r),
+            2 => kd.ranges.release(r),
+            3 => kd.tree.1.release(r),
+            _ => kd.tree.2.release(r),
+        };
+        let structure = format::streamed::Structure {
+            regions: &kd.regions.runs,
+            region_bricks: &kd.regions.bricks,
+            region_ranges: bytemuck::cast_slice(&kd.ranges),
+            kd_nodes: &kd.tree.1,
+            kd_axes: &kd.tree.2,
+            release: &let_go,
+        };
+        format::writer::write_streamed_with(path, &self.file, &slices, &release, Some(structure))
     }
 }
 
@@ -414,13 +445,14 @@ fn run(
     )?;
 
     stage("building regions");
-    let built = build_regions(&sets, &bricks, selection.widths[0])?;
+    let built = build_regions(&sets, &bricks, selection.widths[0], &opts.spill)?;
     let bounds = built.bounds;
-    let kd = kd_tree(built, &bricks, &fields, &opts.spill);
+    let kd = kd_tree(built, &bricks, &fields, &opts.spill)?;
 
     stage("assembling");
     check_archive(leaf_cells, nfields, archive_bytes(&bricks, &fields, &kd))?;
-    let (file, field_summaries) = assemble(
+    let (regions, kd_nodes) = (kd.regions.len() as u64, kd.tree.1.len() as u64);
+    let (file, field_summaries, structure) = assemble(
         opts,
         selection.source_grids,
         &selection.widths,
@@ -434,8 +466,8 @@ fn run(
         leaf_cells,
         dropped_cells: selection.input_cells - leaf_cells,
         bricks: bricks.boxes.len() as u64,
-        regions: file.regions.len() as u64,
-        kd_nodes: file.kd_nodes.len() as u64,
+        regions,
+        kd_nodes,
         nonfinite,
         nonfinite_derived,
         fields: field_summaries,
@@ -445,6 +477,7 @@ fn run(
         Baked {
             file,
             values: fields,
+            structure,
         },
         summary,
     )))
@@ -777,9 +810,12 @@ fn build_regions(
     sets: &[CellSet],
     bricks: &Bricks,
     finest: f64,
+    spill: &Spill,
 ) -> Result<regions::Built, BakeError> {
     let supports = snapped_supports(sets, &bricks.boxes, finest);
-    regions::build(&supports, regions::SEGMENT_COST_CELLS * finest).map_err(|e| match e {
+    let to = spill.structure_to();
+    let segment = regions::SEGMENT_COST_CELLS * finest;
+    regions::build(&supports, segment, to.clone()).map_err(|e| match e {
         TooLarge::Regions(regions) => BakeError::TooManyRegions {
             regions,
             limit: u64::from(format::kd::MAX_REGION) + 1,
@@ -788,22 +824,51 @@ fn build_regions(
             refs,
             limit: u64::from(u32::MAX),
         },
+        TooLarge::Scratch(kind) => structure_scratch_error(to.as_deref(), kind),
     })
+}
+
+/// The error of a scratch file of the structure that failed with `kind`.
+fn structure_scratch_error(
+    to: Option<&crate::spilled::SpillTo>,
+    kind: std::io::ErrorKind,
+) -> BakeError {
+    BakeError::Scratch {
+        what: "the regions and the KD-tree".to_string(),
+        dir: to.map(|t| t.dir.clone()).unwrap_or_else(std::env::temp_dir),
+        source: kind.into(),
+    }
 }
 
 /// The region tree as the file stores it.
 struct Kd {
     /// Root reference, inner nodes, their axes.
-    tree: format::kd::Packed,
+    tree: Tree,
     /// Bounds and brick ids of each region, in the order the nodes number them.
     regions: Regions,
     /// `(min, max)` of each field over each region (see [`region_ranges`]).
-    ranges: Vec<[f32; 2]>,
+    ranges: Store<[f32; 2]>,
+}
+
+impl Kd {
+    /// Whether an array of it is kept in a scratch file.
+    fn on_disk(&self) -> bool {
+        self.tree.1.on_disk()
+            || self.tree.2.on_disk()
+            || self.regions.runs.on_disk()
+            || self.regions.bricks.on_disk()
+            || self.ranges.on_disk()
+    }
 }
 
 /// KD-tree stage: each region's value range per field, which lets the viewer skip regions
 /// an iso-value cannot cross.
-fn kd_tree(built: regions::Built, bricks: &Bricks, fields: &FieldValues, spill: &Spill) -> Kd {
+fn kd_tree(
+    built: regions::Built,
+    bricks: &Bricks,
+    fields: &FieldValues,
+    spill: &Spill,
+) -> Result<Kd, BakeError> {
     let regions::Built {
         bounds,
         tree: packed,
@@ -815,6 +880,13 @@ fn kd_tree(built: regions::Built, bricks: &Bricks, fields: &FieldValues, spill: 
         .flatten();
     let slices = fields.slices();
     let release = |f: usize, r: std::ops::Range<usize>| fields.release(f, r);
+    let to = spill.structure_to();
+    // Behind every batch, the pages of the structure kept on disk go.
+    let let_go = || {
+        regions.release_all();
+        packed.1.release_all();
+        packed.2.release_all();
+    };
     let ranges = region_ranges(
         &RangeInput {
             bricks: &bricks.boxes,
@@ -826,12 +898,16 @@ fn kd_tree(built: regions::Built, bricks: &Bricks, fields: &FieldValues, spill: 
         boxes,
         &fields.brick_values(&slices, &release),
         spill.window_values(4),
+        (to.clone(), &let_go),
     );
-    Kd {
+    if let Some(kind) = ranges.failed() {
+        return Err(structure_scratch_error(to.as_deref(), kind));
+    }
+    Ok(Kd {
         tree: packed,
         regions,
         ranges,
-    }
+    })
 }
 
 /// Names of the fields a bake of `input` makes.

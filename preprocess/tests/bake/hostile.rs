@@ -286,6 +286,7 @@ fn non_finite_values_in_two_grids_name_both() {
             above: 0,
             chunk: 100,
             window: 4096,
+            structure: 0,
         },
         ..BakeOptions::default()
     };

@@ -550,6 +550,7 @@ fn located_grids_with_cells_on_disk_give_the_same_file() {
             above: 0,
             chunk: 700,
             window: 4096,
+            structure: 0,
         },
         ..o.clone()
     };
@@ -661,6 +662,7 @@ fn a_bake_shared_between_ranks_gives_the_same_file() {
             above: 0,
             chunk: 200,
             window: 4096,
+            structure: 0,
         },
         ..o.clone()
     };
@@ -739,6 +741,7 @@ fn fields_kept_on_disk_give_the_same_file() {
                 above: 0,
                 chunk,
                 window: 4096,
+                structure: 0,
             },
             ..o.clone()
         };
@@ -774,6 +777,7 @@ fn fields_kept_on_disk_give_the_same_file() {
                 above: 0,
                 chunk: 1,
                 window: 4096,
+                structure: 0,
             },
             ..o
         },
