@@ -574,6 +574,32 @@ mod tests {
         assert_eq!(leaves(&built), vec![(s, &[0u32][..])]);
     }
 
+    /// Scratch files that cannot be made (a directory that does not exist, as a full disk
+    /// would fail them) stop the build with the failure, whichever thread's part met it.
+    #[test]
+    fn regions_whose_scratch_files_fail_are_refused() {
+        let sup: Vec<Aabb> = (0..300)
+            .map(|k| {
+                let o = [(k % 10) as f64, ((k / 10) % 10) as f64, (k / 100) as f64];
+                Aabb {
+                    min: o,
+                    max: o.map(|v| v + 1.5),
+                }
+            })
+            .collect();
+        let to = Arc::new(SpillTo {
+            dir: std::path::PathBuf::from("/nonexistent/qbricks-scratch"),
+            above: 0,
+            window: 64,
+        });
+        for every in [1, usize::MAX] {
+            let e = build_within(&sup, 0.5, Limits::FILE, every, Some(to.clone()))
+                .expect_err("no scratch file");
+            assert!(matches!(e, TooLarge::Scratch(_)), "{e:?}");
+        }
+        assert!(build(&sup, 0.5, None).is_ok());
+    }
+
     #[test]
     fn no_support_is_an_empty_tree() {
         let built = build(&[], 0.5, None).expect("nothing");
