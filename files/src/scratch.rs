@@ -41,7 +41,6 @@ impl<T: bytemuck::Pod> ScratchValues<T> {
     const SIZE: usize = std::mem::size_of::<T>();
 
     /// Maps the first `len` values of `file`, which must hold at least that many bytes.
-    #[allow(unsafe_code)]
     pub fn map(file: &File, len: usize) -> std::io::Result<ScratchValues<T>> {
         let bytes = len
             .checked_mul(Self::SIZE)
@@ -61,12 +60,8 @@ impl<T: bytemuck::Pod> ScratchValues<T> {
                 kind: PhantomData,
             });
         }
-        // SAFETY: `MmapMut::map_mut` is unsafe because another mapping or process may change
-        // or truncate the file under us. The file is this process's own unnamed scratch
-        // file, which nothing else can open, and it is not resized while mapped.
-        let map = unsafe { memmap2::MmapOptions::new().len(bytes).map_mut(file)? };
         Ok(ScratchValues {
-            map,
+            map: map_shared(file, bytes)?,
             len,
             kind: PhantomData,
         })
@@ -94,23 +89,36 @@ impl<T: bytemuck::Pod> ScratchValues<T> {
     /// inside it leave this process's resident memory. What was written to them is kept
     /// (the mapping is shared: it is the file's, in the page cache until written back), and
     /// a later read of them faults them in again with the same values.
-    #[allow(unsafe_code)]
     pub fn release(&self, range: Range<usize>) {
-        let size = Self::SIZE;
-        let bytes = range.start.saturating_mul(size)..range.end.min(self.len).saturating_mul(size);
-        if let Some(pages) = crate::input::whole_pages(bytes, self.len * size) {
-            // SAFETY: `MADV_DONTNEED` discards private and anonymous pages' contents; this
-            // mapping is shared and backed by its file, so the pages are only unmapped and
-            // their contents (with every write made through the mapping) stay the file's.
-            // Advice the kernel refuses changes nothing, so its error is ignored.
-            let _ = unsafe {
-                self.map.unchecked_advise_range(
-                    memmap2::UncheckedAdvice::DontNeed,
-                    pages.start,
-                    pages.len(),
-                )
-            };
-        }
+        release_shared::<T>(&self.map, self.len, range);
+    }
+}
+
+/// The first `bytes` of `file` (this process's own scratch file) mapped shared and
+/// writable.
+#[allow(unsafe_code)]
+fn map_shared(file: &File, bytes: usize) -> std::io::Result<memmap2::MmapMut> {
+    // SAFETY: `MmapMut::map_mut` is unsafe because another mapping or process may change or
+    // truncate the file under us. The file is this process's own unnamed scratch file,
+    // which nothing else can open, and it is not shrunk while mapped (a `ScratchVec` maps
+    // it again after it grows, dropping the mapping before).
+    unsafe { memmap2::MmapOptions::new().len(bytes).map_mut(file) }
+}
+
+/// Lets the pages of `map` (shared, of its file) wholly inside the values `range` of the
+/// first `len` values of `T` go.
+#[allow(unsafe_code)]
+fn release_shared<T>(map: &memmap2::MmapMut, len: usize, range: Range<usize>) {
+    let size = std::mem::size_of::<T>();
+    let bytes = range.start.saturating_mul(size)..range.end.min(len).saturating_mul(size);
+    if let Some(pages) = crate::input::whole_pages(bytes, len.saturating_mul(size)) {
+        // SAFETY: `MADV_DONTNEED` discards private and anonymous pages' contents; this
+        // mapping is shared and backed by its file, so the pages are only unmapped and
+        // their contents (with every write made through the mapping) stay the file's.
+        // Advice the kernel refuses changes nothing, so its error is ignored.
+        let _ = unsafe {
+            map.unchecked_advise_range(memmap2::UncheckedAdvice::DontNeed, pages.start, pages.len())
+        };
     }
 }
 
@@ -183,7 +191,6 @@ impl<T: bytemuck::Pod> ScratchVec<T> {
 
     /// Room for `additional` more values: the file made larger (doubling) and mapped
     /// again, which also lets every page go.
-    #[allow(unsafe_code)]
     pub fn reserve(&mut self, additional: usize) -> std::io::Result<()> {
         let need = self
             .len
@@ -199,12 +206,7 @@ impl<T: bytemuck::Pod> ScratchVec<T> {
             .ok_or_else(|| std::io::Error::other("scratch array past the address space"))?;
         reserve(&self.file, bytes as u64)?;
         self.map = None;
-        // SAFETY: `MmapMut::map_mut` is unsafe because another mapping or process may change
-        // or truncate the file under us. The file is this process's own unnamed scratch
-        // file, which nothing else can open; it only grows, and only here, after the
-        // mapping before was dropped.
-        let map = unsafe { memmap2::MmapOptions::new().len(bytes).map_mut(&self.file)? };
-        self.map = Some(map);
+        self.map = Some(map_shared(&self.file, bytes)?);
         self.cap = cap;
         self.since_release = 0;
         Ok(())
@@ -250,23 +252,9 @@ impl<T: bytemuck::Pod> ScratchVec<T> {
     }
 
     /// Lets the pages wholly inside the values `range` go, as [`ScratchValues::release`].
-    #[allow(unsafe_code)]
     pub fn release(&self, range: Range<usize>) {
-        let Some(map) = &self.map else {
-            return;
-        };
-        let size = Self::SIZE;
-        let bytes = range.start.saturating_mul(size)..range.end.min(self.len).saturating_mul(size);
-        if let Some(pages) = crate::input::whole_pages(bytes, map.len()) {
-            // SAFETY: as in `ScratchValues::release`: a shared mapping of its file, whose
-            // contents stay the file's when its pages are unmapped.
-            let _ = unsafe {
-                map.unchecked_advise_range(
-                    memmap2::UncheckedAdvice::DontNeed,
-                    pages.start,
-                    pages.len(),
-                )
-            };
+        if let Some(map) = &self.map {
+            release_shared::<T>(map, self.len, range);
         }
     }
 }

@@ -241,8 +241,7 @@ pub struct Region {
 }
 
 /// Inclusive value range.
-// Plain data (`repr(C)`, no padding), so a bake may keep millions of them in a scratch
-// file and read them back as a slice ([`crate::streamed::Structure`]).
+// Plain data, as `Region`.
 #[derive(
     Archive,
     Serialize,
@@ -264,8 +263,7 @@ pub struct ValueRange {
 /// Inner KD-tree node (16 bytes). Points with coordinate `< split` on the node's axis
 /// (`kd_axes`) go to `left`. The children are references: an inner node's index, or
 /// [`crate::kd::LEAF`] `| region`, or [`crate::kd::EMPTY`] for empty space.
-// Plain data (`repr(C)`, no padding), so a bake may keep millions of them in a scratch
-// file and read them back as a slice ([`crate::streamed::Structure`]).
+// Plain data, as `Region`.
 #[derive(
     Archive,
     Serialize,
