@@ -253,8 +253,9 @@ pub fn bake_bytes(
 }
 
 /// Bytes of values a bake of `grids` (see [`bake_bytes`]) keeps in scratch files and maps:
-/// the cell values past `spill.above` and the field values past it. They take address space
-/// (`ulimit -v`) whether resident or not.
+/// the cell values past `spill.above` and the field values past it, and the structure when
+/// it goes to disk (its arrays grow by doubling: twice what [`CELL_BYTES`] counts). They
+/// take address space (`ulimit -v`) whether resident or not.
 pub fn mapped_bytes(
     grids: &[(GridFootprint, u64)],
     extras: &[(GridFootprint, u64)],
@@ -263,11 +264,17 @@ pub fn mapped_bytes(
 ) -> u64 {
     let cells: u64 = grids.iter().map(|g| g.0.cells).fold(0, u64::saturating_add);
     let field_values = cells.saturating_mul(fields.saturating_mul(FIELD_BYTES));
-    mapped_values(grids, extras, spill).saturating_add(if field_values > spill.above {
-        field_values
-    } else {
-        0
-    })
+    let structure = match spill.structure {
+        u64::MAX => 0,
+        _ => cells.saturating_mul(2 * CELL_BYTES),
+    };
+    mapped_values(grids, extras, spill)
+        .saturating_add(if field_values > spill.above {
+            field_values
+        } else {
+            0
+        })
+        .saturating_add(structure)
 }
 
 /// A grid's values: those stored and those made beside them (a staggered grid's centred
