@@ -232,10 +232,15 @@ impl<T: bytemuck::Pod> ScratchVec<T> {
             return Ok(());
         }
         self.reserve(n - self.len)?;
-        let at = self.len;
-        self.len = n;
-        self.as_mut_slice()[at..].fill(value);
-        self.wrote(n - at);
+        // A window at a time, letting the pages go behind (a fill of millions of values
+        // would otherwise make them all resident at once).
+        let step = (self.window / Self::SIZE.max(1)).max(1);
+        while self.len < n {
+            let (at, end) = (self.len, (self.len + step).min(n));
+            self.len = end;
+            self.as_mut_slice()[at..end].fill(value);
+            self.wrote(end - at);
+        }
         Ok(())
     }
 
