@@ -163,8 +163,8 @@ pub(crate) enum BrickValues<'a> {
 /// behind every `window` values.
 ///
 /// The ranges are kept as `store.0` says (in memory, or in a scratch file past a size), and
-/// `store.1` is called behind every batch (to let the pages of the regions and tree go,
-/// when they are kept on disk).
+/// `store.1` is called behind every batch planned and every batch done (to let the pages of
+/// the regions and tree go, when they are kept on disk).
 pub(crate) fn region_ranges(
     input: &RangeInput,
     regions: &Regions,
@@ -223,6 +223,8 @@ fn ranges_in_batches(
         }
         batches.push(start..end);
         start = end;
+        // Planning reads every region's list: kept on disk, its pages go behind.
+        behind_batch();
     }
     for regs in batches {
         let first = regs.start;
@@ -473,7 +475,12 @@ mod tests {
             );
             assert!(on_disk.on_disk());
             assert_eq!(bits(&on_disk), bits(&in_place), "batch {batch} on disk");
-            assert_eq!(calls.into_inner(), 9usize.div_ceil(batch), "batch {batch}");
+            // Behind every batch planned, and every batch done.
+            assert_eq!(
+                calls.into_inner(),
+                2 * 9usize.div_ceil(batch),
+                "batch {batch}"
+            );
             let whole = released
                 .lock()
                 .expect("lock")
