@@ -288,7 +288,7 @@ fn meminfo(key: &str) -> Option<u64> {
 
 /// The soft address-space limit minus the address space in use (`VmSize`), when there
 /// is such a limit.
-pub(crate) fn address_space_left() -> Option<u64> {
+pub fn address_space_left() -> Option<u64> {
     #[cfg(unix)]
     {
         let limit = rustix::process::getrlimit(rustix::process::Resource::As).current?;

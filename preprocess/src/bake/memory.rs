@@ -362,6 +362,35 @@ pub fn spill_within(
     )))
 }
 
+/// The spill of a bake without a budget, and its estimate: the default settings, unless
+/// they are over the machine's memory `limit` while the settings [`spill_within`] that
+/// limit chooses are not (also with the scratch files they map within the address space
+/// `left`, under `ulimit -v`): then the machine's limit is the budget, and the bake keeps
+/// on disk what it must, as `--memory` of that limit would.
+pub fn spill_without_budget(
+    grids: &[(GridFootprint, u64)],
+    extras: &[(GridFootprint, u64)],
+    fields: u64,
+    limit: u64,
+    left: Option<u64>,
+) -> (Spill, u64) {
+    let default = Spill::default();
+    let need = bake_bytes(grids, extras, fields, &default);
+    if need <= limit {
+        return (default, need);
+    }
+    match spill_within(grids, extras, fields, limit) {
+        Ok((spill, within))
+            if left.is_none_or(|left| {
+                within.saturating_add(mapped_bytes(grids, extras, fields, &spill)) <= left
+            }) =>
+        {
+            (spill, within)
+        }
+        _ => (default, need),
+    }
+}
+
 /// Refuses, before any cell is made, a bake of `grids` (and of the scalar grids `extras`
 /// as extra fields) whose estimated peak ([`bake_bytes`]) is over the shared memory limit,
 /// or over the budget `opts.memory` even with its values on disk ([`spill_within`]).
@@ -404,8 +433,25 @@ pub(super) fn check_bake_memory(
     let what = format!("the bake of {input_cells} input cells ({grid_s} {names})");
     let (spill, need) = match opts.memory {
         None => {
-            let need = bake_bytes(&per_grid, &extras, fields, &opts.spill);
-            (opts.spill.clone(), need)
+            let default = Spill {
+                dir: None,
+                ..opts.spill.clone()
+            } == Spill::default();
+            let limit = files::limits::memory_limit().bytes;
+            let left = files::limits::address_space_left();
+            match default.then(|| spill_without_budget(&per_grid, &extras, fields, limit, left)) {
+                Some((spill, need)) => (
+                    Spill {
+                        dir: opts.spill.dir.clone(),
+                        ..spill
+                    },
+                    need,
+                ),
+                None => (
+                    opts.spill.clone(),
+                    bake_bytes(&per_grid, &extras, fields, &opts.spill),
+                ),
+            }
         }
         Some(budget) => match spill_within(&per_grid, &extras, fields, budget) {
             Ok((spill, need)) => (
@@ -511,5 +557,14 @@ mod tests {
         // With room for the structure in memory, it stays there (faster, no scratch files).
         let (spill, _) = spill_within(&grids, &[], 2, 8 << 30).expect("8 GiB does");
         assert_eq!(spill.structure, u64::MAX);
+        // Without a budget: the defaults where the machine holds them; on a machine of
+        // 2 GiB, what that limit as a budget keeps on disk; past the address space left
+        // for the scratch files, the defaults (which the limits then refuse).
+        let (spill, _) = spill_without_budget(&grids, &[], 2, 24 << 30, None);
+        assert_eq!(spill, Spill::default());
+        let (spill, need) = spill_without_budget(&grids, &[], 2, 2 << 30, None);
+        assert!(need <= 2 << 30 && spill.above == 0 && spill.structure != u64::MAX);
+        let (spill, _) = spill_without_budget(&grids, &[], 2, 2 << 30, Some(3 << 30));
+        assert_eq!(spill, Spill::default());
     }
 }
