@@ -98,9 +98,14 @@ impl Spill {
         }
     }
 
+    /// Whether the structure's arrays may go to disk (past [`Spill::structure`] bytes).
+    pub fn structure_on_disk(&self) -> bool {
+        self.structure != u64::MAX
+    }
+
     /// Where the structure's arrays go past [`Spill::structure`] bytes, if they may.
     pub(crate) fn structure_to(&self) -> Option<std::sync::Arc<crate::spilled::SpillTo>> {
-        (self.structure != u64::MAX).then(|| {
+        self.structure_on_disk().then(|| {
             std::sync::Arc::new(crate::spilled::SpillTo {
                 dir: self.dir.clone().unwrap_or_else(std::env::temp_dir),
                 above: usize::try_from(self.structure).unwrap_or(usize::MAX),

@@ -225,9 +225,9 @@ pub fn bake_bytes(
     // a chunk of them beside the cells, then the bricks and regions with a chunk of the
     // fields (they stay on disk, read a part at a time, see `derived::FieldValues`).
     let field_bytes = fields.saturating_mul(FIELD_BYTES);
-    let (structure_per_cell, structure_held) = match spill.structure {
-        u64::MAX => (CELL_BYTES, 0),
-        _ => (CELL_BYTES_STRUCTURE_ON_DISK, STRUCTURE_ON_DISK_HELD),
+    let (structure_per_cell, structure_held) = match spill.structure_on_disk() {
+        false => (CELL_BYTES, 0),
+        true => (CELL_BYTES_STRUCTURE_ON_DISK, STRUCTURE_ON_DISK_HELD),
     };
     let per_cell = field_bytes.saturating_add(structure_per_cell);
     let cells = sum(grids, &|g| g.0.cells);
@@ -264,9 +264,9 @@ pub fn mapped_bytes(
 ) -> u64 {
     let cells: u64 = grids.iter().map(|g| g.0.cells).fold(0, u64::saturating_add);
     let field_values = cells.saturating_mul(fields.saturating_mul(FIELD_BYTES));
-    let structure = match spill.structure {
-        u64::MAX => 0,
-        _ => cells.saturating_mul(2 * CELL_BYTES),
+    let structure = match spill.structure_on_disk() {
+        false => 0,
+        true => cells.saturating_mul(2 * CELL_BYTES),
     };
     mapped_values(grids, extras, spill)
         .saturating_add(if field_values > spill.above {
