@@ -251,6 +251,43 @@ fn locate_from<T: KdTree + ?Sized>(
     None
 }
 
+/// [`locate`] with the leaf's cell: the region reached by `p` and the box `min..max`
+/// cut by the splits on the way down, every number minus `shift`, as [`LeafCells`] gives
+/// it for that leaf. In a tree whose leaves name every region once (what the reader's
+/// validation ensures), that is the region's box, found without a table of them.
+#[inline]
+pub fn locate_cell<T: KdTree + ?Sized>(
+    tree: &T,
+    p: [f64; 3],
+    min: [f64; 3],
+    max: [f64; 3],
+    shift: [f64; 3],
+) -> Option<(u32, [f64; 3], [f64; 3])> {
+    let mut lo: [f64; 3] = std::array::from_fn(|a| min[a] - shift[a]);
+    let mut hi: [f64; 3] = std::array::from_fn(|a| max[a] - shift[a]);
+    let mut n = tree.root();
+    for _ in 0..=tree.node_count() {
+        match tree.node(n)? {
+            Node::Inner {
+                axis,
+                split,
+                left,
+                right,
+            } => {
+                let a = axis.min(2);
+                let (lhi, rlo) = cut_cell(a, split, shift, lo, hi);
+                if p[a] < split - shift[a] {
+                    (n, hi) = (left, lhi);
+                } else {
+                    (n, lo) = (right, rlo);
+                }
+            }
+            Node::Leaf(r) => return r.map(|r| (r, lo, hi)),
+        }
+    }
+    None
+}
+
 /// How many steps of a descent a [`Descent`] keeps.
 const DESCENT_STEPS: usize = 64;
 
@@ -462,7 +499,7 @@ impl<T: KdTree> Iterator for LeafCells<T> {
 /// right child's lower corner. Clamped to the cell: a split outside it leaves one child
 /// empty, as the descent and the ray walk see it, and no box reaches past its parent's.
 #[inline]
-fn cut_cell(
+pub fn cut_cell(
     axis: usize,
     split: f64,
     shift: [f64; 3],

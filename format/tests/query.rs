@@ -98,6 +98,42 @@ proptest! {
         prop_assert_eq!(query::region_boxes(file), boxes);
     }
 
+    /// A descent that keeps the leaf's cell finds the region `locate` finds, with the box
+    /// the walk over every leaf gives it, bit for bit: at random points, on every region's
+    /// corners and just inside its upper faces, with and without a shift.
+    #[test]
+    fn locate_cell_gives_the_region_and_the_walks_box(seed in any::<u64>()) {
+        let (view, boxes) = open(seed);
+        let file = view.file();
+        let tree = kd::file_tree(file);
+        let b = query::bounds(file);
+        let mut rng = Rng::new(seed ^ 0xCE11);
+        for shift in [[0.0; 3], [0.75, -2.5, 1e3]] {
+            let local = |p: [f64; 3]| -> [f64; 3] { std::array::from_fn(|a| p[a] - shift[a]) };
+            let mut cells = std::collections::HashMap::new();
+            kd::leaf_cells(&tree, b.min, b.max, shift, |r, lo, hi| {
+                cells.insert(r, (lo.map(f64::to_bits), hi.map(f64::to_bits)));
+            });
+            let mut points: Vec<[f64; 3]> = (0..100).map(|_| random_point(&mut rng, &b)).collect();
+            for r in &boxes {
+                points.extend([r.min, r.max]);
+                points.push(std::array::from_fn(|a| r.max[a].next_down().max(r.min[a])));
+            }
+            for p in points {
+                let q = local(p);
+                let found = kd::locate_cell(&tree, q, b.min, b.max, shift);
+                prop_assert_eq!(found.map(|f| f.0), kd::locate(&tree, q, shift), "at {:?}", p);
+                if let Some((r, lo, hi)) = found {
+                    prop_assert_eq!(
+                        Some(&(lo.map(f64::to_bits), hi.map(f64::to_bits))),
+                        cells.get(&r),
+                        "region {} at {:?}", r, p
+                    );
+                }
+            }
+        }
+    }
+
     /// A point's descent finds for any other point what a descent from the root finds:
     /// points a little away along one axis (a shading normal's neighbours), points on
     /// region faces, points anywhere, with and without a shift of the coordinates.

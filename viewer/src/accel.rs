@@ -50,30 +50,36 @@ pub struct Accel {
     /// The regions that can hold the iso value; `None` inside when the file's tree cannot
     /// be walked as a tree (iso rays then walk the file's tree).
     active: OnceLock<Option<Arc<ActiveTree>>>,
-    /// Local box of the regions whose range meets the band (`min > max`: none does).
-    clip: ([f64; 3], [f64; 3]),
+    /// Local box of the regions whose range meets the band (`min > max`: none does),
+    /// found from the packed tree when first asked for.
+    clip: OnceLock<([f64; 3], [f64; 3])>,
 }
 
 impl Accel {
-    /// The acceleration of `key` in `vol`.
-    pub fn new(vol: &Volume, key: AccelKey) -> Accel {
-        Accel::reusing(vol, key, None)
+    /// The acceleration of `key`, for one volume: the methods that build its trees take
+    /// that volume, when first needed.
+    pub fn new(key: AccelKey) -> Accel {
+        Accel::reusing(key, None)
     }
 
     /// [`Accel::new`], taking from `like` (an acceleration of the same volume) the trees
     /// it has built that `key` also needs: the packed tree of the same field, the active
     /// tree of the same field and iso value.
-    fn reusing(vol: &Volume, key: AccelKey, like: Option<&Accel>) -> Accel {
-        let (lo, hi) = key.band;
+    fn reusing(key: AccelKey, like: Option<&Accel>) -> Accel {
         let accel = Accel {
             key,
             packed: OnceLock::new(),
             active: OnceLock::new(),
-            clip: vol.active_box(key.field, lo, hi),
+            clip: OnceLock::new(),
         };
         if let Some(like) = like.filter(|l| l.key.field == key.field) {
             if let Some(p) = like.packed.get() {
                 let _ = accel.packed.set(p.clone());
+            }
+            if like.key.band == key.band {
+                if let Some(&c) = like.clip.get() {
+                    let _ = accel.clip.set(c);
+                }
             }
             if like.key.iso == key.iso {
                 if let Some(t) = like.active.get() {
@@ -86,8 +92,8 @@ impl Accel {
 
     /// An acceleration of `key` whose active tree is `tree` (tests compare trees).
     #[cfg(test)]
-    pub(crate) fn with_active(vol: &Volume, key: AccelKey, tree: Arc<ActiveTree>) -> Accel {
-        let accel = Accel::new(vol, key);
+    pub(crate) fn with_active(key: AccelKey, tree: Arc<ActiveTree>) -> Accel {
+        let accel = Accel::new(key);
         let _ = accel.active.set(Some(tree));
         accel
     }
@@ -98,9 +104,16 @@ impl Accel {
     }
 
     /// Local box of the regions that can contribute to the band (rays are clipped to it;
-    /// `min > max` when none can).
-    pub fn clip(&self) -> ([f64; 3], [f64; 3]) {
-        self.clip
+    /// `min > max` when none can), found on first call from the packed tree (which packs
+    /// it, if no frame has yet).
+    pub fn clip(&self, vol: &Volume) -> ([f64; 3], [f64; 3]) {
+        *self.clip.get_or_init(|| {
+            let (lo, hi) = self.key.band;
+            match self.packed(vol) {
+                Some(p) => vol.active_box_in(p, self.key.field, lo, hi),
+                None => ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]),
+            }
+        })
     }
 
     /// Builds the trees a frame in `mode` walks before its first tile: the packed tree,
@@ -152,16 +165,16 @@ pub struct AccelCache {
 }
 
 impl AccelCache {
-    /// The acceleration of `key` in `vol`: a kept one with an equal key, else a new one
-    /// that takes what it can from the newest kept one of the same field.
-    pub fn get(&mut self, vol: &Volume, key: AccelKey) -> Arc<Accel> {
+    /// The acceleration of `key` in the cache's volume: a kept one with an equal key,
+    /// else a new one that takes what it can from the newest kept one of the same field.
+    pub fn get(&mut self, key: AccelKey) -> Arc<Accel> {
         if let Some(i) = self.kept.iter().position(|a| a.key == key) {
             let a = self.kept.remove(i);
             self.kept.push(Arc::clone(&a));
             return a;
         }
         let like = self.kept.iter().rev().find(|a| a.key.field == key.field);
-        let a = Arc::new(Accel::reusing(vol, key, like.map(|a| &**a)));
+        let a = Arc::new(Accel::reusing(key, like.map(|a| &**a)));
         if self.kept.len() == KEEP {
             self.kept.remove(0);
         }

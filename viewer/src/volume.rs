@@ -70,6 +70,34 @@ pub struct BrickN {
     pub level: u32,
 }
 
+/// A region and a box within it (local frame, half-open): what a lookup that found the
+/// region knows of it, handed to the next lookup near the same point so that it can skip a
+/// descent of the tree when the point lies in the box. The box is the region's whole box
+/// where the finder knew it, possibly smaller (never larger), or empty (`min > max`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RegionBox {
+    pub region: u32,
+    pub min: [f64; 3],
+    pub max: [f64; 3],
+}
+
+impl RegionBox {
+    /// Region `region` with no box known.
+    pub fn unknown(region: u32) -> RegionBox {
+        RegionBox {
+            region,
+            min: [f64::INFINITY; 3],
+            max: [f64::NEG_INFINITY; 3],
+        }
+    }
+
+    /// Whether the local point `q` lies in the box (so in the region).
+    #[inline]
+    pub fn holds(&self, q: &[f64; 3]) -> bool {
+        (0..3).all(|a| q[a] >= self.min[a] && q[a] < self.max[a])
+    }
+}
+
 /// A region in the local frame.
 #[derive(Debug, Clone, Copy)]
 pub struct RegionN {
@@ -93,8 +121,10 @@ pub struct Volume<'a> {
     /// Cell width per level.
     level_w: Vec<f64>,
     /// Every region's box (its KD leaf's cell) and step width, derived on first use: the
-    /// file stores neither (format 3). It depends on the file alone, so every view shares
-    /// it; a view that never asks for a region never pays for it.
+    /// file stores neither. 56 bytes a region (0.9 GB for a billion cells), so nothing a
+    /// render does asks for it: the walks and descents that find a region find its box on
+    /// the way ([`Volume::region_box_at`], the active tree's leaves), and a step width is
+    /// read from the region's bricks. Tools and tests that list regions by index build it.
     region_table: OnceLock<Vec<RegionN>>,
     /// The KD-tree packed with field 0's ranges, for point location ([`Volume::region_at`]),
     /// derived on first use: a denser read than the archived tree, which shading normals
@@ -294,7 +324,7 @@ impl<'a> Volume<'a> {
 
     /// Every region in the local frame, by index (derived on first use, one walk over
     /// the tree: a region's box is its leaf's cell, its step width its finest brick's
-    /// level's; see `region_table`).
+    /// level's; see `region_table`: for tools and tests, not for rendering).
     fn region_table(&self) -> &[RegionN] {
         self.region_table.get_or_init(|| {
             // A billion cells have tens of millions of regions: a second or more on one
@@ -355,7 +385,14 @@ impl<'a> Volume<'a> {
         table
     }
 
-    /// Region `r` in the local frame.
+    /// Whether the table of every region has been built (tests of what asks for it).
+    #[cfg(test)]
+    pub(crate) fn region_table_built(&self) -> bool {
+        self.region_table.get().is_some()
+    }
+
+    /// Region `r` in the local frame (builds the table of every region on first call;
+    /// a lookup by point, [`Volume::region_box_at`], needs none).
     #[inline]
     pub fn region(&self, r: usize) -> RegionN {
         self.region_table()[r]
@@ -367,31 +404,93 @@ impl<'a> Volume<'a> {
     }
 
     /// The box (local frame) of every region whose range of field `f` meets `[lo, hi]`;
-    /// empty (`min > max`) when none does. One pass over the regions: a view computes it
-    /// once, for its band ([`crate::accel::Accel`]).
+    /// empty (`min > max`) when none does. A view computes it once, for its band, from
+    /// its packed tree ([`Volume::active_box_in`]); this packs field `f`'s tree for the
+    /// one call (field 0's is the volume's own).
     pub fn active_box(&self, f: usize, lo: f64, hi: f64) -> ([f64; 3], [f64; 3]) {
+        match self.packed(f) {
+            Some(packed) => self.active_box_in(&packed, f, lo, hi),
+            None => ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]),
+        }
+    }
+
+    /// [`Volume::active_box`] from `packed`, the file's tree packed with field `f`'s
+    /// ranges: a walk that keeps each node's cell and steps over every subtree whose range
+    /// does not meet `[lo, hi]`, testing each region it reaches by its own range. So a
+    /// band that few regions meet costs a walk of the few subtrees that hold them.
+    pub(crate) fn active_box_in(
+        &self,
+        packed: &Packed,
+        f: usize,
+        lo: f64,
+        hi: f64,
+    ) -> ([f64; 3], [f64; 3]) {
+        use format::kd::{KdTree, Node, WalkNodes};
         let mut min = [f64::INFINITY; 3];
         let mut max = [f64::NEG_INFINITY; 3];
-        if f < self.fields.len() {
-            for (r, reg) in self.regions().enumerate() {
-                let [mn, mx] = self.range(r, f);
-                if crate::transfer::range_meets(mn, mx, lo, hi) {
-                    for a in 0..3 {
-                        min[a] = min[a].min(reg.min[a]);
-                        max[a] = max[a].max(reg.max[a]);
+        if f >= self.fields.len() || KdTree::node_count(packed) == 0 {
+            return (min, max);
+        }
+        let meets = |mn: f32, mx: f32| crate::transfer::range_meets(mn, mx, lo, hi);
+        let (rmin, rmax) = self.root_cell();
+        let mut stack = vec![(KdTree::root(packed), rmin, rmax)];
+        // Each node is pushed once in a tree; the count only bounds a malformed one.
+        let mut budget = KdTree::node_count(packed)
+            .saturating_mul(2)
+            .saturating_add(1);
+        while let Some((n, cmin, cmax)) = stack.pop() {
+            if budget == 0 {
+                break;
+            }
+            budget -= 1;
+            let Some((node, range, _)) = packed.get(n) else {
+                continue;
+            };
+            if range.is_some_and(|(mn, mx)| !meets(mn, mx)) {
+                continue;
+            }
+            match node {
+                Node::Inner {
+                    axis,
+                    split,
+                    left,
+                    right,
+                } => {
+                    let (lhi, rlo) = format::kd::cut_cell(axis, split, self.frame, cmin, cmax);
+                    stack.push((right, rlo, cmax));
+                    stack.push((left, cmin, lhi));
+                }
+                Node::Leaf(Some(r)) if (r as usize) < self.region_count() => {
+                    let [mn, mx] = self.range(r as usize, f);
+                    if meets(mn, mx) {
+                        for a in 0..3 {
+                            min[a] = min[a].min(cmin[a]);
+                            max[a] = max[a].max(cmax[a]);
+                        }
                     }
                 }
+                Node::Leaf(_) => {}
             }
         }
         (min, max)
     }
 
-    /// Local cell width of a segment's region (the finest width for a skipped subtree).
+    /// Local cell width of a segment's region: its finest brick's level's (the finest
+    /// width for a skipped subtree), read from the region's bricks, which the samples
+    /// along the segment read next.
     #[inline]
     pub fn step_width(&self, region: u32) -> f64 {
-        self.region_table()
-            .get(region as usize)
-            .map_or(self.finest_w, |g| g.finest_w)
+        if region as usize >= self.region_count() {
+            return self.finest_w;
+        }
+        let file = self.file;
+        self.region_brick_ids(region as usize)
+            .iter()
+            .filter_map(|&id| file.bricks.get(id.to_native() as usize))
+            .map(|br| br.level.to_native())
+            .min()
+            .and_then(|l| self.level_w.get(l as usize).copied())
+            .unwrap_or(self.finest_w)
     }
 
     /// Bricks of region `r`.
@@ -421,6 +520,36 @@ impl<'a> Volume<'a> {
             Some(packed) => format::kd::locate(packed, p, self.frame),
             None => format::kd::locate(&format::kd::file_tree(self.file), p, self.frame),
         }
+    }
+
+    /// [`Volume::region_at`] with the region's box, found on the way down (the same
+    /// descent, which keeps the cell it is in): a caller that looks up points near `p`
+    /// next tests them against the box before it descends again.
+    pub fn region_box_at(&self, p: [f64; 3]) -> Option<RegionBox> {
+        if !self.inside(&p) {
+            return None;
+        }
+        let b = &self.file.bounds;
+        let lo: [f64; 3] = std::array::from_fn(|a| b.min[a].to_native());
+        let hi: [f64; 3] = std::array::from_fn(|a| b.max[a].to_native());
+        let found = match self.locate_tree() {
+            Some(packed) => format::kd::locate_cell(packed, p, lo, hi, self.frame),
+            None => {
+                format::kd::locate_cell(&format::kd::file_tree(self.file), p, lo, hi, self.frame)
+            }
+        };
+        found.map(|(region, min, max)| RegionBox { region, min, max })
+    }
+
+    /// The KD root's cell in the local frame as every walk of the tree starts it: the
+    /// file's bounds minus the frame, so that the cells cut from it are the regions'
+    /// boxes bit for bit ([`format::kd::LeafCells`]).
+    pub(crate) fn root_cell(&self) -> ([f64; 3], [f64; 3]) {
+        let b = &self.file.bounds;
+        (
+            std::array::from_fn(|a| b.min[a].to_native() - self.frame[a]),
+            std::array::from_fn(|a| b.max[a].to_native() - self.frame[a]),
+        )
     }
 
     /// Whether the local point `p` lies inside the file's bounds (half-open).

@@ -52,7 +52,7 @@ fn walk(view: &BrickFileView) {
     ] {
         let mut params = testvol::params(&vol, strategy, 0.5, mode, 4.0);
         params.tf.band.sigma = 0.5;
-        let accel = qbricks_viewer::accel::Accel::new(&vol, params.accel_key());
+        let accel = qbricks_viewer::accel::Accel::new(params.accel_key());
         let mut tr = Tracer::new(&vol, &accel, params);
         match mode {
             Mode::Iso => {

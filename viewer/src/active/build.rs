@@ -86,16 +86,19 @@ impl ActiveTree {
         let holds = |mn: f32, mx: f32| range_holds(mn, mx, value);
         let mut nodes: Vec<ActiveNode> = Vec::new();
         let mut lattices: Vec<Lattice> = Vec::new();
-        // Post-order without recursion (a valid tree may still be deep): `(node, expanded)`.
-        let mut todo: Vec<(u32, bool)> = Vec::with_capacity(64);
+        let mut region_boxes: Vec<([f64; 3], [f64; 3])> = Vec::new();
+        // Post-order without recursion (a valid tree may still be deep): `(node, expanded,
+        // its cell)`; a leaf's cell is its region's box (the volume keeps no table of them).
+        let mut todo: Vec<(u32, bool, [f64; 3], [f64; 3])> = Vec::with_capacity(64);
         // The active-tree node each finished subtree became, or `NONE`.
         let mut done: Vec<u32> = Vec::with_capacity(64);
         if tree.node_count() > 0 {
-            todo.push((tree.root(), false));
+            let (lo, hi) = vol.root_cell();
+            todo.push((tree.root(), false, lo, hi));
         }
         // Every node is visited at most twice in a tree; more means it is not one.
         let mut budget = tree.node_count().saturating_mul(2).saturating_add(2);
-        while let Some((n, expanded)) = todo.pop() {
+        while let Some((n, expanded, cmin, cmax)) = todo.pop() {
             budget = budget.checked_sub(1)?;
             let (node, range, _) = tree.get(n)?;
             if expanded {
@@ -111,21 +114,28 @@ impl ActiveTree {
                 continue;
             }
             match node {
-                Node::Inner { left, right, .. } => {
-                    todo.push((n, true));
-                    todo.push((right, false));
-                    todo.push((left, false));
+                Node::Inner {
+                    axis,
+                    split,
+                    left,
+                    right,
+                } => {
+                    let (lhi, rlo) = format::kd::cut_cell(axis, split, vol.frame, cmin, cmax);
+                    todo.push((n, true, cmin, cmax));
+                    todo.push((right, false, rlo, cmax));
+                    todo.push((left, false, cmin, lhi));
                 }
                 Node::Leaf(Some(r)) if (r as usize) < vol.region_count() => {
                     let [mn, mx] = vol.range(r as usize, field);
                     if holds(mn, mx) {
-                        let reg = vol.region(r as usize);
                         let l = Lattices::of(vol, r as usize);
                         let first = u32::try_from(lattices.len()).ok()?;
                         lattices.extend_from_slice(l.as_slice());
+                        let region_box = u32::try_from(region_boxes.len()).ok()?;
+                        region_boxes.push((cmin, cmax));
                         nodes.push(ActiveNode {
-                            min: reg.min,
-                            max: reg.max,
+                            min: cmin,
+                            max: cmax,
                             a: r,
                             b: first,
                             axis: LEAF,
@@ -133,6 +143,7 @@ impl ActiveTree {
                             lattices: l.as_slice().len() as u8,
                             mask: NONE,
                             sub: NONE,
+                            region_box,
                         });
                         done.push((nodes.len() - 1) as u32);
                     } else {
@@ -236,6 +247,7 @@ impl ActiveTree {
             field,
             lattices,
             masks,
+            region_boxes,
             walk,
         })
     }

@@ -35,7 +35,7 @@ mod nodes;
 mod tests;
 mod tree;
 
-pub(crate) use tree::{ActiveTree, Start};
+pub(crate) use tree::{ActiveTree, LeafSearch, Start};
 
 /// Whether the range `[mn, mx]` holds `value`: the one test of which regions an
 /// iso-surface search searches, whether it walks the active tree or the file's.

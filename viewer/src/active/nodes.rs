@@ -30,6 +30,9 @@ pub(super) struct ActiveNode {
     /// Leaf of a whole region: its index in the list of the regions' sub-boxes while the
     /// tree is built (see `build`), or [`NONE`].
     pub(super) sub: u32,
+    /// Leaf: its region's whole box in the tree's list of them (a part keeps its
+    /// region's).
+    pub(super) region_box: u32,
 }
 
 /// The node that joins the subtrees `lo` (below a split plane on `axis`) and `hi` (at or
@@ -51,6 +54,7 @@ pub(super) fn join(nodes: &mut Vec<ActiveNode>, lo: u32, hi: u32, axis: u8) -> u
                 lattices: 0,
                 mask: NONE,
                 sub: NONE,
+                region_box: NONE,
             });
             (nodes.len() - 1) as u32
         }
@@ -211,6 +215,7 @@ pub(super) fn surface_area_tree(tree: &[ActiveNode]) -> Option<Vec<ActiveNode>> 
             lattices: 0,
             mask: NONE,
             sub: NONE,
+            region_box: NONE,
         };
         work.push((lo, lo + k, left));
         work.push((lo + k, hi, right));

@@ -46,7 +46,8 @@ fn both(vol: &Volume, iso: f64, o: [f64; 3], d: [f64; 3], t: (f64, f64)) -> [Vec
         t.1,
         None,
         &mut stack,
-        |s, l, inexact, _| {
+        |s, leaf| {
+            let (l, inexact) = (leaf.lattices, leaf.inexact);
             let want = Lattices::of(vol, s.region as usize);
             assert_eq!(l, want.as_slice(), "lattices of region {}", s.region);
             assert_eq!(inexact, want.inexact);
@@ -152,7 +153,7 @@ fn no_region_holds_the_value_so_the_tree_is_empty_and_trees_are_kept() {
             1e3,
             None,
             &mut stack,
-            |_, _, _, _| {
+            |_, _| {
                 n += 1;
                 true
             },
@@ -162,7 +163,7 @@ fn no_region_holds_the_value_so_the_tree_is_empty_and_trees_are_kept() {
     let mut cache = AccelCache::default();
     let mut accel = |field: usize, iso: f64| {
         let band = (iso, iso);
-        cache.get(&vol, AccelKey { field, iso, band })
+        cache.get(AccelKey { field, iso, band })
     };
     let a = accel(0, 3.0);
     assert!(a.active_tree(&vol).expect("field 0").walk.root.is_some());
@@ -188,7 +189,7 @@ fn from(vol: &Volume, tree: &ActiveTree, start: Start, o: [f64; 3], d: [f64; 3])
         f64::INFINITY,
         None,
         &mut stack,
-        |s, _, _, _| {
+        |s, _| {
             out.push((s.region, s.t0.to_bits(), s.t1.to_bits()));
             true
         },

@@ -12,7 +12,7 @@ use format::kd::{inverse, ray_box, Segment};
 use super::nodes::{ActiveNode, LEAF};
 use crate::dual_mask::DualMask;
 use crate::lattice::Lattice;
-use crate::volume::Volume;
+use crate::volume::{RegionBox, Volume};
 
 /// The regions whose range of one field holds one value, in the file's tree order.
 pub(crate) struct ActiveTree {
@@ -24,8 +24,23 @@ pub(crate) struct ActiveTree {
     /// The dual-cell masks of the leaves' regions of one lattice ([`crate::dual_mask`];
     /// `None` where the region's box is too large for one).
     pub(super) masks: Vec<Option<DualMask>>,
+    /// The whole box of every region in the tree (a leaf may be one part of it): a hit
+    /// hands it on, so that the shading lookups around the hit know its region without a
+    /// descent or a table of every region.
+    pub(super) region_boxes: Vec<([f64; 3], [f64; 3])>,
     /// What the ray walk reads (built from the tree of [`ActiveNode`]s).
     pub(super) walk: Walk,
+}
+
+/// How `exact` searches one leaf of the walk ([`ActiveTree::segments`]): its region's cell
+/// lattices, whether the region has more than are listed, its dual-cell mask, and the
+/// region with its whole box.
+#[derive(Clone, Copy)]
+pub(crate) struct LeafSearch<'t> {
+    pub(crate) lattices: &'t [Lattice],
+    pub(crate) inexact: bool,
+    pub(crate) mask: Option<&'t DualMask>,
+    pub(crate) region: RegionBox,
 }
 
 /// Reference bit of a [`Walk`] child that is a leaf (`LEAF_REF | index into leaves`).
@@ -56,6 +71,8 @@ pub(super) struct WalkLeaf {
     inexact: bool,
     /// Index in [`ActiveTree::masks`], or `u32::MAX` (none).
     mask: u32,
+    /// Index in [`ActiveTree::region_boxes`].
+    region_box: u32,
 }
 
 /// The active tree as the ray walk reads it.
@@ -129,6 +146,7 @@ impl Walk {
                     lattices: node.lattices,
                     inexact: node.inexact,
                     mask: node.mask,
+                    region_box: node.region_box,
                 });
                 LEAF_REF | (walk.leaves.len() - 1) as u32
             } else {
@@ -275,16 +293,16 @@ impl ActiveTree {
 
     /// Calls `f` for every leaf of the tree the ray `o + t d` (local frame) crosses
     /// within `[t_min, t_max]`, front to back (a whole region, or one part of a region
-    /// where its dual cells can hold the value), with the region's range of the field,
-    /// its cell lattices, whether it has more than are listed, and its dual-cell mask;
-    /// `f` returns `false` to stop. `stack` is scratch space reused between calls.
+    /// where its dual cells can hold the value), with the region's range of the field
+    /// and how to search it ([`LeafSearch`]); `f` returns `false` to stop. `stack` is
+    /// scratch space reused between calls.
     ///
     /// With `owned` (one rank's share: the [`ActiveTree::owned_nodes`] and the regions
     /// they were made from) only the leaves of those regions are listed, and the subtrees
     /// without one are stepped over. A segment's bounds come from its leaf's own box, not
     /// from the path to it, so those of the share are the same as without one.
     #[allow(clippy::too_many_arguments)]
-    pub(crate) fn segments<F: FnMut(Segment, &[Lattice], bool, Option<&DualMask>) -> bool>(
+    pub(crate) fn segments<F: FnMut(Segment, &LeafSearch) -> bool>(
         &self,
         vol: &Volume,
         start: Start,
@@ -390,8 +408,21 @@ impl ActiveTree {
                 min: mn,
                 max: mx,
             };
-            let mask = self.masks.get(leaf.mask as usize).and_then(Option::as_ref);
-            if !f(seg, lattices, leaf.inexact, mask) {
+            let region = match self.region_boxes.get(leaf.region_box as usize) {
+                Some(&(min, max)) => RegionBox {
+                    region: leaf.region,
+                    min,
+                    max,
+                },
+                None => RegionBox::unknown(leaf.region),
+            };
+            let search = LeafSearch {
+                lattices,
+                inexact: leaf.inexact,
+                mask: self.masks.get(leaf.mask as usize).and_then(Option::as_ref),
+                region,
+            };
+            if !f(seg, &search) {
                 return;
             }
         }

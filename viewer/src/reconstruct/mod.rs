@@ -15,7 +15,7 @@ pub(crate) use cubic::{Cubic, DualBrick};
 use tent::brick_axes;
 pub(crate) use tent::floor_i64;
 
-use crate::volume::Volume;
+use crate::volume::{RegionBox, Volume};
 
 /// Below this weight sum a point is treated as outside the data (outer support boundary).
 pub(crate) const MIN_WEIGHT: f64 = 1e-9;
@@ -136,27 +136,25 @@ impl Volume<'_> {
         self.shading_gradient_near(None, p, f)
     }
 
-    /// [`Self::shading_gradient`] with the region the caller found `p` in (a ray hit knows
-    /// it), which saves a KD descent when it holds `p`; any other hint is ignored.
+    /// [`Self::shading_gradient`] with the region the caller found `p` in and a box
+    /// within it (a ray hit knows them), which saves a KD descent when the box holds `p`;
+    /// any other hint is ignored. Neighbour points in the box need no descent either.
     pub(crate) fn shading_gradient_near(
         &self,
-        region: Option<u32>,
+        region: Option<RegionBox>,
         p: [f64; 3],
         f: usize,
     ) -> Option<[f64; 3]> {
-        let holds = |r: usize, q: &[f64; 3]| {
-            let reg = self.region(r);
-            (0..3).all(|a| q[a] >= reg.min[a] && q[a] < reg.max[a])
+        let b0 = match region {
+            Some(h) if (h.region as usize) < self.region_count() && h.holds(&p) => h,
+            _ => self.region_box_at(p)?,
         };
-        let r0 = match region {
-            Some(r) if (r as usize) < self.region_count() && holds(r as usize, &p) => r as usize,
-            _ => self.region_at(p)? as usize,
-        };
+        let r0 = b0.region as usize;
         let h = self.finest_w;
         // The neighbour points outside `r0` are found from `p`'s own descent.
         let mut descent = None;
         let mut at = |q: [f64; 3]| -> Option<f64> {
-            let r = if holds(r0, &q) {
+            let r = if b0.holds(&q) {
                 r0
             } else {
                 let near = descent.get_or_insert_with(|| self.descent(p));

@@ -5,10 +5,10 @@
 use super::roots::first_root;
 use super::Gaps;
 use super::{Event, Tracer};
-use crate::active::range_holds;
-use crate::dual_mask::DualMask;
+use crate::active::{range_holds, LeafSearch};
 use crate::lattice::{Lattice, Lattices, MAX_LATTICES};
 use crate::traverse::{segments_skipping, Segment, Skip, SKIPPED};
+use crate::volume::RegionBox;
 
 impl Tracer<'_> {
     /// Exact iso search: per region whose range holds the iso value (the view's
@@ -22,7 +22,7 @@ impl Tracer<'_> {
         d: [f64; 3],
         t0: f64,
         t1: f64,
-    ) -> Option<(f64, Option<u32>)> {
+    ) -> Option<(f64, Option<RegionBox>)> {
         let vol = self.vol;
         let (field, iso) = (self.params.field, self.params.tf.iso);
         let (tree, start) = self.active_walk();
@@ -32,22 +32,12 @@ impl Tracer<'_> {
             Some(tree) => {
                 let mut gaps = Gaps::new(vol, &o, &d, t0, t1);
                 let share = self.owned.zip(self.owned_nodes).map(|(r, n)| (n, r));
-                tree.segments(
-                    vol,
-                    start,
-                    o,
-                    d,
-                    t0,
-                    t1,
-                    share,
-                    &mut stack,
-                    |seg, lattices, inexact, mask| {
-                        gaps.before(self, &seg);
-                        self.enter_segment(&seg, false);
-                        found = self.exact_in_segment(&seg, &o, &d, iso, lattices, inexact, mask);
-                        found.is_none()
-                    },
-                );
+                tree.segments(vol, start, o, d, t0, t1, share, &mut stack, |seg, leaf| {
+                    gaps.before(self, &seg);
+                    self.enter_segment(&seg, false);
+                    found = self.exact_in_segment(&seg, &o, &d, iso, leaf);
+                    found.is_none()
+                });
                 if found.is_none() {
                     gaps.finish(self);
                 }
@@ -66,7 +56,13 @@ impl Tracer<'_> {
                         return true;
                     }
                     let l = Lattices::of(vol, seg.region as usize);
-                    found = self.exact_in_segment(&seg, &o, &d, iso, l.as_slice(), l.inexact, None);
+                    let leaf = LeafSearch {
+                        lattices: l.as_slice(),
+                        inexact: l.inexact,
+                        mask: None,
+                        region: RegionBox::unknown(seg.region),
+                    };
+                    found = self.exact_in_segment(&seg, &o, &d, iso, &leaf);
                     found.is_none()
                 });
             }
@@ -91,19 +87,23 @@ impl Tracer<'_> {
         self.enter_gap(f64::NAN, f64::NAN);
     }
 
-    /// The first root in one region segment whose range holds the iso value; `mask` is
-    /// the region's dual-cell mask (see [`crate::dual_mask`]), when it has one.
-    #[allow(clippy::too_many_arguments)]
+    /// The first root in one region segment whose range holds the iso value, searched
+    /// as `leaf` says (the region's lattices, its dual-cell mask when it has one, see
+    /// [`crate::dual_mask`]); the hit's region is `leaf.region`.
     fn exact_in_segment(
         &mut self,
         seg: &Segment,
         o: &[f64; 3],
         d: &[f64; 3],
         iso: f64,
-        lattices: &[Lattice],
-        inexact: bool,
-        mask: Option<&DualMask>,
-    ) -> Option<(f64, Option<u32>)> {
+        leaf: &LeafSearch,
+    ) -> Option<(f64, Option<RegionBox>)> {
+        let LeafSearch {
+            lattices,
+            inexact,
+            mask,
+            region,
+        } = *leaf;
         if !self.owns(seg.region) {
             // Another rank's: its first root there is that rank's candidate.
             return None;
@@ -158,7 +158,7 @@ impl Tracer<'_> {
             });
             if may_cross {
                 if let Some(x) = first_root(&cubic) {
-                    found = Some((ta + x * (tb - ta), Some(seg.region)));
+                    found = Some((ta + x * (tb - ta), Some(region)));
                     break;
                 }
             }
@@ -432,7 +432,7 @@ mod tests {
         iso: f64,
         o: [f64; 3],
         d: [f64; 3],
-    ) -> Option<(f64, Option<u32>)> {
+    ) -> Option<(f64, Option<RegionBox>)> {
         let params = crate::testvol::params(
             vol,
             super::super::Strategy::Exact,
@@ -440,7 +440,7 @@ mod tests {
             crate::transfer::Mode::Iso,
             iso,
         );
-        let accel = crate::accel::Accel::with_active(vol, params.accel_key(), tree.clone());
+        let accel = crate::accel::Accel::with_active(params.accel_key(), tree.clone());
         let mut tracer = Tracer::new(vol, &accel, params);
         tracer.iso_exact(o, d, -1e3, 1e3)
     }
@@ -557,7 +557,7 @@ mod tests {
             let c = vol.to_local([12.0; 3]);
             for iso in isos {
                 let params = |s| crate::testvol::params(&vol, s, step, Mode::Iso, iso);
-                let accel = crate::accel::Accel::new(&vol, params(Strategy::Exact).accel_key());
+                let accel = crate::accel::Accel::new(params(Strategy::Exact).accel_key());
                 let mut exact = Tracer::new(&vol, &accel, params(Strategy::Exact));
                 let mut tracers = [Strategy::Uniform, Strategy::Paper, Strategy::Bisect]
                     .map(|s| Tracer::new(&vol, &accel, params(s)));

@@ -34,17 +34,24 @@ impl Tracer<'_> {
         }?;
         let p = at(&o, &d, t);
         let vol = self.vol;
-        let mut region = region.or_else(|| vol.region_at(p));
+        let mut region = region.or_else(|| vol.region_box_at(p));
         if let Some(r) = region {
-            self.touch(r);
+            self.touch(r.region);
         }
         let eval = region
-            .and_then(|r| vol.eval(r as usize, p, self.params.field, self.params.colour_field))
+            .and_then(|r| {
+                vol.eval(
+                    r.region as usize,
+                    p,
+                    self.params.field,
+                    self.params.colour_field,
+                )
+            })
             .or_else(|| {
                 // The hit may lie on the region's far face (round-off): look it up.
-                region = vol.region_at(p);
+                region = vol.region_box_at(p);
                 vol.eval(
-                    region? as usize,
+                    region?.region as usize,
                     p,
                     self.params.field,
                     self.params.colour_field,
@@ -201,17 +208,9 @@ impl Tracer<'_> {
             true
         };
         match tree {
-            Some(tree) => tree.segments(
-                vol,
-                start,
-                o,
-                d,
-                t0,
-                t1,
-                None,
-                &mut stack,
-                |seg, _, _, _| visit(seg),
-            ),
+            Some(tree) => tree.segments(vol, start, o, d, t0, t1, None, &mut stack, |seg, _| {
+                visit(seg)
+            }),
             None => segments_skipping(vol, packed, o, d, t0, t1, &mut stack, &skip, visit),
         }
         self.stack = stack;

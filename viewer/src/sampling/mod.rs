@@ -45,7 +45,7 @@ use crate::active::{ActiveTree, Start};
 use crate::reconstruct::Eval;
 use crate::transfer::PreIntegrated;
 use crate::transfer::{Mode, Transfer};
-use crate::volume::Volume;
+use crate::volume::{RegionBox, Volume};
 
 mod dvr;
 mod exact;
@@ -250,8 +250,9 @@ pub struct IsoHit {
     pub p: [f64; 3],
     /// Reconstruction at the hit (`None` only where the weights vanish).
     pub eval: Option<Eval>,
-    /// The region the hit was evaluated in (a hint for shading lookups near it).
-    pub region: Option<u32>,
+    /// The region the hit was evaluated in, with a box within it (a hint for shading
+    /// lookups near it).
+    pub region: Option<RegionBox>,
 }
 
 #[inline]
@@ -275,7 +276,7 @@ pub struct Tracer<'v> {
     pub log: Option<Vec<Event>>,
     stack: Vec<(u32, f64, f64)>,
     /// Region of the last refinement probe.
-    probe_hint: Option<u32>,
+    probe_hint: Option<RegionBox>,
     /// Where an iso-surface search starts walking the active tree for the next rays: set
     /// by the frame loop for each group of pixels (see [`Tracer::group_start`]), the root
     /// otherwise.
@@ -437,17 +438,13 @@ impl<'v> Tracer<'v> {
         let vol = self.vol;
         // Refinement probes cluster: try the region of the previous probe before a KD descent.
         let r = match self.probe_hint {
-            Some(r)
-                if (r as usize) < vol.region_count() && {
-                    let g = vol.region(r as usize);
-                    (0..3).all(|a| p[a] >= g.min[a] && p[a] < g.max[a])
-                } =>
-            {
-                r
+            Some(h) if (h.region as usize) < vol.region_count() && h.holds(&p) => h.region,
+            _ => {
+                let h = vol.region_box_at(p)?;
+                self.probe_hint = Some(h);
+                h.region
             }
-            _ => vol.region_at(p)?,
         };
-        self.probe_hint = Some(r);
         vol.eval_value(r as usize, p, self.params.field)
     }
 }

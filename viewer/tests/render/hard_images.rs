@@ -271,7 +271,7 @@ fn images_do_not_change_when_everything_moves_by_a_million() {
 
 /// Opacity gathered along a world ray in dvr mode.
 fn dvr_alpha(vol: &Volume, p: Params, o: [f64; 3], d: [f64; 3], jitter: f64) -> f64 {
-    let accel = qbricks_viewer::accel::Accel::new(vol, p.accel_key());
+    let accel = qbricks_viewer::accel::Accel::new(p.accel_key());
     let mut tr = Tracer::new(vol, &accel, p);
     tr.dvr(
         vol.to_local(o),

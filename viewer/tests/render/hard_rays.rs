@@ -50,7 +50,7 @@ fn iso_hit(
     let d = d.map(|x| x / n);
     // Without and with clipping to the active box: both must give the same hit.
     let p = params(vol, strategy, step, Mode::Iso, iso);
-    let accel = Accel::new(vol, p.accel_key());
+    let accel = Accel::new(p.accel_key());
     let mut tr = Tracer::new(vol, &accel, p);
     let plain = tr
         .iso(vol.to_local(o), d, 0.0, f64::INFINITY, jitter)
@@ -388,7 +388,7 @@ fn zero_gradient_at_the_hit() {
             // The gradient there is zero from the right: the hit's reconstruction must
             // still be finite.
             let p = params(vol, Strategy::Exact, STEP, Mode::Iso, 0.0);
-            let accel = Accel::new(vol, p.accel_key());
+            let accel = Accel::new(p.accel_key());
             let mut tr = Tracer::new(vol, &accel, p);
             let h = tr
                 .iso(vol.to_local(o), [1.0, 0.0, 0.0], 0.0, f64::INFINITY, 0.0)
@@ -423,7 +423,7 @@ fn iso_outside_the_data_range_hits_nothing_and_samples_nothing() {
         for iso in [-5.0, 40.0, 1e30, -1e30] {
             for s in STRATEGIES {
                 let p = params(vol, s, STEP, Mode::Iso, iso);
-                let accel = Accel::new(vol, p.accel_key());
+                let accel = Accel::new(p.accel_key());
                 let mut tr = Tracer::new(vol, &accel, p);
                 let d = unit([1.0, 0.8, 0.3]);
                 let hit = tr.iso(vol.to_local([-1.0, -1.0, 2.0]), d, 0.0, f64::INFINITY, 0.37);
@@ -443,7 +443,7 @@ fn iso_outside_the_data_range_hits_nothing_and_samples_nothing() {
                     params(vol, s, STEP, Mode::Dvr, iso),
                     params_clipped(vol, s, STEP, Mode::Dvr, iso),
                 ] {
-                    let accel = Accel::new(vol, p.accel_key());
+                    let accel = Accel::new(p.accel_key());
                     let mut tr = Tracer::new(vol, &accel, p);
                     let acc = tr.dvr(
                         vol.to_local([-1.0, -1.0, 2.0]),
@@ -501,7 +501,7 @@ fn empty_space_between_data() {
         }
         // A ray entirely in the gap meets no data: nothing is sampled.
         let p = params(vol, Strategy::Exact, STEP, Mode::Iso, 6.0);
-        let accel = Accel::new(vol, p.accel_key());
+        let accel = Accel::new(p.accel_key());
         let mut tr = Tracer::new(vol, &accel, p);
         assert!(tr
             .iso(

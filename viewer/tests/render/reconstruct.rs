@@ -208,7 +208,7 @@ fn exact_hits_are_on_the_surface_and_miss_nothing_uniform_finds() {
         let vol = Volume::new(&view).expect("volume");
         let range = (vol.fields[0].max - vol.fields[0].min) as f64;
         for iso in [0.3, -0.5, 1.1] {
-            let accel = Accel::new(&vol, params(Strategy::Exact, 1.0, iso).accel_key());
+            let accel = Accel::new(params(Strategy::Exact, 1.0, iso).accel_key());
             let mut exact = Tracer::new(&vol, &accel, params(Strategy::Exact, 1.0, iso));
             let mut reference = Tracer::new(&vol, &accel, params(Strategy::Uniform, 0.01, iso));
             // The same, with rays clipped to the box of regions that can hold the surface.
@@ -286,7 +286,7 @@ fn exact_finds_thin_shells_that_coarse_steps_miss() {
     let view = testvol::open(&file).expect("open");
     let vol = Volume::new(&view).expect("volume");
     let iso = 0.9;
-    let accel = Accel::new(&vol, params(Strategy::Exact, 1.0, iso).accel_key());
+    let accel = Accel::new(params(Strategy::Exact, 1.0, iso).accel_key());
     let mut exact = Tracer::new(&vol, &accel, params(Strategy::Exact, 1.0, iso));
     let mut coarse = Tracer::new(&vol, &accel, params(Strategy::Uniform, 1.0, iso));
     let mut reference = Tracer::new(&vol, &accel, params(Strategy::Uniform, 0.01, iso));
@@ -356,7 +356,7 @@ fn traversal_matches_brute_force() {
 /// `exact` finds every hit of the reference, on the surface, for arbitrary rays.
 fn exact_covers_reference(vol: &Volume, iso: f64, rays: &[([f64; 3], [f64; 3])]) -> (u32, u32) {
     let range = (vol.fields[0].max - vol.fields[0].min) as f64;
-    let accel = Accel::new(vol, params(Strategy::Exact, 1.0, iso).accel_key());
+    let accel = Accel::new(params(Strategy::Exact, 1.0, iso).accel_key());
     let mut exact = Tracer::new(vol, &accel, params(Strategy::Exact, 1.0, iso));
     let mut reference = Tracer::new(vol, &accel, params(Strategy::Uniform, 0.01, iso));
     let (mut e, mut r) = (0, 0);
@@ -415,7 +415,7 @@ fn zero_gradient_and_flat_fields() {
     let file = testvol::nested(8, [0.0; 3], &[("f", &|_| 0.25), ("c", &|_| 0.0)], 8);
     let view = testvol::open(&file).expect("open");
     let vol = Volume::new(&view).expect("volume");
-    let accel = Accel::new(&vol, params(Strategy::Exact, 1.0, 0.25).accel_key());
+    let accel = Accel::new(params(Strategy::Exact, 1.0, 0.25).accel_key());
     let mut t = Tracer::new(&vol, &accel, params(Strategy::Exact, 1.0, 0.25));
     for (o, d) in rays(50) {
         if let Some(h) = t.iso(vol.to_local(o), d, 0.0, 1e3, 0.5) {
@@ -438,7 +438,7 @@ fn empty_file_renders_nothing() {
     let view = testvol::open(&file).expect("open");
     let vol = Volume::new(&view).expect("volume");
     assert_eq!(vol.region_count(), 0);
-    let accel = Accel::new(&vol, params(Strategy::Exact, 1.0, 0.0).accel_key());
+    let accel = Accel::new(params(Strategy::Exact, 1.0, 0.0).accel_key());
     let mut t = Tracer::new(&vol, &accel, params(Strategy::Exact, 1.0, 0.0));
     assert!(t.iso([0.0; 3], [1.0, 0.0, 0.0], 0.0, 1e3, 0.5).is_none());
     assert!(vol.sample([0.0; 3], 0).is_none());
