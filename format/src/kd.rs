@@ -274,12 +274,14 @@ pub fn locate_cell<T: KdTree + ?Sized>(
                 left,
                 right,
             } => {
+                // As `cut_cell` cuts, one side on one axis.
                 let a = axis.min(2);
-                let (lhi, rlo) = cut_cell(a, split, shift, lo, hi);
-                if p[a] < split - shift[a] {
-                    (n, hi) = (left, lhi);
+                let s = split - shift[a];
+                let cut = s.max(lo[a]).min(hi[a]);
+                if p[a] < s {
+                    (n, hi[a]) = (left, cut);
                 } else {
-                    (n, lo) = (right, rlo);
+                    (n, lo[a]) = (right, cut);
                 }
             }
             Node::Leaf(r) => return r.map(|r| (r, lo, hi)),

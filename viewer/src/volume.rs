@@ -15,6 +15,7 @@
 //! in its [`crate::accel::Accel`]. The volume only derives, on first use, two tables that
 //! depend on the file alone (see [`Volume::region`] and [`Volume::region_at`]).
 
+use std::sync::atomic::AtomicU8;
 use std::sync::{Arc, OnceLock};
 
 use format::kd::Descent;
@@ -134,7 +135,14 @@ pub struct Volume<'a> {
     locate: OnceLock<Option<Arc<Packed>>>,
     /// Finest cell width in the file (reference length for opacity).
     pub finest_w: f64,
+    /// Per region, what [`Volume::step_width`] found: its finest level + 1, [`NO_LEVEL`]
+    /// for a region without bricks, 0 before it was asked (or for a level past 253,
+    /// read each time). One byte a region, made on first use (16 MB for a billion cells).
+    finest_levels: OnceLock<Box<[AtomicU8]>>,
 }
+
+/// [`Volume::finest_levels`] of a region that lists no brick.
+const NO_LEVEL: u8 = u8::MAX;
 
 /// Fills `table` from the walk of `tree` cut into subtrees, on `threads` threads, each
 /// subtree's regions into its own stretch of the table; `false` (part of it filled) when
@@ -259,6 +267,7 @@ impl<'a> Volume<'a> {
             level_w,
             region_table: OnceLock::new(),
             locate: OnceLock::new(),
+            finest_levels: OnceLock::new(),
             finest_w: if finest_w.is_finite() { finest_w } else { 1.0 },
         })
     }
@@ -476,19 +485,39 @@ impl<'a> Volume<'a> {
     }
 
     /// Local cell width of a segment's region: its finest brick's level's (the finest
-    /// width for a skipped subtree), read from the region's bricks, which the samples
-    /// along the segment read next.
+    /// width for a skipped subtree). Read from the region's bricks the first time, then
+    /// from one byte a region ([`Volume::finest_levels`]): a region of a fragmented
+    /// layout lists dozens of bricks, and the sampled strategies ask at every segment.
     #[inline]
     pub fn step_width(&self, region: u32) -> f64 {
-        if region as usize >= self.region_count() {
+        use std::sync::atomic::Ordering::Relaxed;
+        let r = region as usize;
+        if r >= self.region_count() {
             return self.finest_w;
         }
-        let file = self.file;
-        self.region_brick_ids(region as usize)
-            .iter()
-            .filter_map(|&id| file.bricks.get(id.to_native() as usize))
-            .map(|br| br.level.to_native())
-            .min()
+        let known = self
+            .finest_levels
+            .get_or_init(|| (0..self.region_count()).map(|_| AtomicU8::new(0)).collect());
+        let level = match known[r].load(Relaxed) {
+            0 => {
+                let file = self.file;
+                let level = self
+                    .region_brick_ids(r)
+                    .iter()
+                    .filter_map(|&id| file.bricks.get(id.to_native() as usize))
+                    .map(|br| br.level.to_native())
+                    .min();
+                match level {
+                    Some(l) if l < u32::from(NO_LEVEL) - 1 => known[r].store(l as u8 + 1, Relaxed),
+                    Some(_) => {}
+                    None => known[r].store(NO_LEVEL, Relaxed),
+                }
+                level
+            }
+            NO_LEVEL => None,
+            k => Some(u32::from(k) - 1),
+        };
+        level
             .and_then(|l| self.level_w.get(l as usize).copied())
             .unwrap_or(self.finest_w)
     }
@@ -588,6 +617,31 @@ impl<'a> Volume<'a> {
 mod tests {
     use super::*;
     use crate::testvol;
+
+    /// A step width read from the region's bricks, first or later (from the byte kept),
+    /// is the table's, on a file of two levels; a segment that is no region steps at
+    /// the finest width.
+    #[test]
+    fn step_widths_kept_per_region_are_the_tables() {
+        let noise = |p: [f64; 3]| (p[0] * 1.3).sin() + p[1] * p[2];
+        let file = testvol::nested(8, [0.5, -3.0, 2.0], &[("n", &noise)], 3);
+        let view = testvol::open(&file).expect("opens");
+        let vol = Volume::new(&view).expect("volume");
+        let widths: std::collections::BTreeSet<u64> = (0..vol.region_count())
+            .map(|r| vol.region(r).finest_w.to_bits())
+            .collect();
+        assert!(widths.len() >= 2, "regions of both levels: {widths:?}");
+        for _ in 0..2 {
+            for r in 0..vol.region_count() {
+                assert_eq!(
+                    vol.step_width(r as u32).to_bits(),
+                    vol.region(r).finest_w.to_bits(),
+                    "region {r}"
+                );
+            }
+        }
+        assert_eq!(vol.step_width(u32::MAX), vol.finest_w);
+    }
 
     /// The region table filled on several threads, stretch by stretch, is the one walk's
     /// bit for bit, on a file of many small regions over two levels.

@@ -34,13 +34,23 @@ pub(crate) struct ActiveTree {
 
 /// How `exact` searches one leaf of the walk ([`ActiveTree::segments`]): its region's cell
 /// lattices, whether the region has more than are listed, its dual-cell mask, and the
-/// region with its whole box.
+/// region's whole box (`None`: not known), which a hit hands on ([`LeafSearch::hit`]).
 #[derive(Clone, Copy)]
 pub(crate) struct LeafSearch<'t> {
     pub(crate) lattices: &'t [Lattice],
     pub(crate) inexact: bool,
     pub(crate) mask: Option<&'t DualMask>,
-    pub(crate) region: RegionBox,
+    pub(crate) region_box: Option<&'t ([f64; 3], [f64; 3])>,
+}
+
+impl LeafSearch<'_> {
+    /// The region of a hit in this leaf's segment of region `region`, with its box.
+    pub(crate) fn hit(&self, region: u32) -> RegionBox {
+        match self.region_box {
+            Some(&(min, max)) => RegionBox { region, min, max },
+            None => RegionBox::unknown(region),
+        }
+    }
 }
 
 /// Reference bit of a [`Walk`] child that is a leaf (`LEAF_REF | index into leaves`).
@@ -408,19 +418,11 @@ impl ActiveTree {
                 min: mn,
                 max: mx,
             };
-            let region = match self.region_boxes.get(leaf.region_box as usize) {
-                Some(&(min, max)) => RegionBox {
-                    region: leaf.region,
-                    min,
-                    max,
-                },
-                None => RegionBox::unknown(leaf.region),
-            };
             let search = LeafSearch {
                 lattices,
                 inexact: leaf.inexact,
                 mask: self.masks.get(leaf.mask as usize).and_then(Option::as_ref),
-                region,
+                region_box: self.region_boxes.get(leaf.region_box as usize),
             };
             if !f(seg, &search) {
                 return;

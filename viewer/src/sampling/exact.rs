@@ -60,7 +60,7 @@ impl Tracer<'_> {
                         lattices: l.as_slice(),
                         inexact: l.inexact,
                         mask: None,
-                        region: RegionBox::unknown(seg.region),
+                        region_box: None,
                     };
                     found = self.exact_in_segment(&seg, &o, &d, iso, &leaf);
                     found.is_none()
@@ -89,7 +89,7 @@ impl Tracer<'_> {
 
     /// The first root in one region segment whose range holds the iso value, searched
     /// as `leaf` says (the region's lattices, its dual-cell mask when it has one, see
-    /// [`crate::dual_mask`]); the hit's region is `leaf.region`.
+    /// [`crate::dual_mask`]); the hit's region is the segment's, with the leaf's box.
     fn exact_in_segment(
         &mut self,
         seg: &Segment,
@@ -102,7 +102,7 @@ impl Tracer<'_> {
             lattices,
             inexact,
             mask,
-            region,
+            ..
         } = *leaf;
         if !self.owns(seg.region) {
             // Another rank's: its first root there is that rank's candidate.
@@ -158,7 +158,7 @@ impl Tracer<'_> {
             });
             if may_cross {
                 if let Some(x) = first_root(&cubic) {
-                    found = Some((ta + x * (tb - ta), Some(region)));
+                    found = Some((ta + x * (tb - ta), Some(leaf.hit(seg.region))));
                     break;
                 }
             }
