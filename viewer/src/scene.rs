@@ -328,6 +328,42 @@ mod tests {
         assert!(vol.region_table_built());
     }
 
+    /// A view of a field other than the first packs one tree, which point location then
+    /// shares (it reads no ranges), and its pictures are those of a volume whose point
+    /// location packed field 0 first: colours, depths and surface values, bit for bit.
+    #[test]
+    fn a_view_of_another_field_packs_one_tree() {
+        let d = |p: [f64; 3]| (0..3).map(|a| (p[a] - 8.0).powi(2)).sum::<f64>().sqrt();
+        let e = |p: [f64; 3]| 10.0 - (p[0] - 7.7).abs() - 0.5 * (p[1] - 8.2).abs() - p[2] * 0.1;
+        let file = crate::testvol::nested(16, [0.0; 3], &[("d", &d), ("e", &e)], 8);
+        let view = crate::testvol::open(&file).expect("open");
+        let meshes = Meshes::empty();
+        let frame_of = |vol: &Volume| {
+            let mut state = ViewState::default_for_volume(vol);
+            (state.width, state.height) = (40, 30);
+            state.iso_field = "e".into();
+            state.set_iso(7.0);
+            let scene = Scene::new(vol, &state, &meshes).expect("scene");
+            crate::render::render(&scene)
+        };
+        let vol = Volume::new(&view).expect("volume");
+        let frame = frame_of(&vol);
+        assert!(frame.hits > 50, "{} hits", frame.hits);
+        assert_eq!(
+            vol.locate_field(),
+            Some(1),
+            "the view's tree locates points"
+        );
+        let first = Volume::new(&view).expect("volume");
+        assert!(first.locate_tree().is_some());
+        assert_eq!(first.locate_field(), Some(0));
+        let other = frame_of(&first);
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(frame.rgb, other.rgb);
+        assert_eq!(bits(&frame.depth), bits(&other.depth));
+        assert_eq!(bits(&frame.surface_values), bits(&other.surface_values));
+    }
+
     /// Camera rays skip the jitter's hash only where nothing reads it: `exact` iso-surfaces
     /// (one or several, with slices); every sampled strategy and dvr take it.
     #[test]

@@ -127,12 +127,15 @@ pub struct Volume<'a> {
     /// the way ([`Volume::region_box_at`], the active tree's leaves), and a step width is
     /// read from the region's bricks. Tools and tests that list regions by index build it.
     region_table: OnceLock<Vec<RegionN>>,
-    /// The KD-tree packed with field 0's ranges, for point location ([`Volume::region_at`]),
-    /// derived on first use: a denser read than the archived tree, which shading normals
-    /// and refinement probes descend for every hit. Point location reads no ranges, so
-    /// which field is packed does not matter; it depends on the file alone. `None` for a
-    /// file without fields (point location then reads the archived tree).
-    locate: OnceLock<Option<Arc<Packed>>>,
+    /// The KD-tree packed with one field's ranges, and that field, for point location
+    /// ([`Volume::region_at`]): a denser read than the archived tree, which shading
+    /// normals and refinement probes descend for every hit. Point location reads no
+    /// ranges, so any field's packing serves: it is the first packed tree a view asks for
+    /// ([`Volume::packed`]), whichever its field, or field 0's when a lookup comes first.
+    /// So a view of another field than the first packs one tree, not two (32 bytes a
+    /// node and leaf: 1 GB each for a billion cells). `None` for a file without fields
+    /// (point location then reads the archived tree).
+    locate: OnceLock<Option<(usize, Arc<Packed>)>>,
     /// Finest cell width in the file (reference length for opacity).
     pub finest_w: f64,
     /// Per region, what [`Volume::step_width`] found: its finest level + 1, [`NO_LEVEL`]
@@ -288,22 +291,37 @@ impl<'a> Volume<'a> {
     }
 
     /// The KD-tree packed with field `f`'s ranges, for a view's acceleration; `None` for
-    /// a field the file does not have. Field 0's is the point-location tree, shared.
+    /// a field the file does not have. The first one packed becomes the point-location
+    /// tree too (see `locate`), shared.
     pub(crate) fn packed(&self, f: usize) -> Option<Arc<Packed>> {
-        match f {
-            0 => self.locate.get_or_init(|| self.pack_locate()).clone(),
-            f if f < self.fields.len() => Some(Arc::new(Packed::build(self.file, f))),
-            _ => None,
+        if f >= self.fields.len() {
+            return None;
         }
+        let (g, p) = self
+            .locate
+            .get_or_init(|| Some((f, Arc::new(Packed::build(self.file, f)))))
+            .as_ref()?;
+        Some(if *g == f {
+            Arc::clone(p)
+        } else {
+            Arc::new(Packed::build(self.file, f))
+        })
     }
 
-    /// The point-location tree (field 0's packed tree), packed on first use.
+    /// The point-location tree (the first packed tree, or field 0's), packed on first use.
     pub(crate) fn locate_tree(&self) -> Option<&Packed> {
-        self.locate.get_or_init(|| self.pack_locate()).as_deref()
+        self.locate
+            .get_or_init(|| {
+                (!self.fields.is_empty()).then(|| (0, Arc::new(Packed::build(self.file, 0))))
+            })
+            .as_ref()
+            .map(|(_, p)| &**p)
     }
 
-    fn pack_locate(&self) -> Option<Arc<Packed>> {
-        (!self.fields.is_empty()).then(|| Arc::new(Packed::build(self.file, 0)))
+    /// The field the point-location tree was packed with (tests of what is packed).
+    #[cfg(test)]
+    pub(crate) fn locate_field(&self) -> Option<usize> {
+        self.locate.get().and_then(|l| l.as_ref().map(|(f, _)| *f))
     }
 
     /// Number of bricks.
