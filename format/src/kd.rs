@@ -667,81 +667,200 @@ impl WalkNodes for FileNodes<'_> {
     }
 }
 
-/// Per node of `tree` reached from its root, in depth-first, left-first order (parents
-/// before children, the root first): the node with its children as positions in this
-/// list, the range of one field over its subtree (`range(region)` gives a region's) and
-/// whether every leaf below holds a region. Empty leaves get the empty range (`+∞..−∞`).
-/// What a reader that skips by subtree ranges builds once per field (the file stores no
-/// per-node ranges); the list is itself a [`WalkNodes`] store (the viewer walks it).
+/// A tree's inner nodes, parent first (depth-first, left first), each with one field's
+/// range over its subtree and whether every leaf below holds a region; a child is a
+/// position in `inner` or a leaf reference as the file stores it ([`LEAF`] | region, or
+/// [`EMPTY`]), and a leaf's range is its region's, one entry a region in `leaves`. What a
+/// reader that skips by subtree ranges builds once per field (the file stores no per-node
+/// ranges): 32 bytes an inner node and 8 a region, about 40 bytes a region in all, where
+/// listing the leaves as nodes too took 64. The tree walks as a [`KdTree`] and a
+/// [`WalkNodes`] store with the same nodes, ranges and fullness as the tree it was made
+/// from.
+#[derive(Debug, Clone, Default)]
+pub struct RangedTree {
+    /// Reference of the root: 0 when it is an inner node, else a leaf reference.
+    pub root: u32,
+    pub inner: Vec<RangedNode>,
+    /// Per region, the field's range over it (`+∞..−∞` where the caller had none).
+    pub leaves: Vec<(f32, f32)>,
+}
+
+/// The empty range: what a subtree without a region, or a region without a range, has.
+const NO_RANGE: (f32, f32) = (f32::INFINITY, f32::NEG_INFINITY);
+
+/// The reference a leaf `node` becomes in a [`RangedTree`] ([`leaf_ref`]; empty space
+/// for a region number past [`MAX_REGION`]); `None` for an inner node.
+#[inline]
+fn ranged_leaf(node: Option<Node>) -> Option<u32> {
+    match node.unwrap_or(Node::Leaf(None)) {
+        Node::Inner { .. } => None,
+        Node::Leaf(r) => Some(leaf_ref(r.filter(|&r| r <= MAX_REGION))),
+    }
+}
+
+impl RangedTree {
+    /// The range and fullness of the child reference `c`, the list starting at position
+    /// `base` of the whole list (a child outside it counts as missing: not full).
+    #[inline]
+    fn child(&self, list: &[RangedNode], base: usize, c: u32) -> (bool, (f32, f32)) {
+        if c & LEAF != 0 {
+            if c == EMPTY {
+                return (false, NO_RANGE);
+            }
+            return (true, self.leaf_range(c & !LEAF));
+        }
+        match (c as usize).checked_sub(base).and_then(|c| list.get(c)) {
+            Some(n) => (n.full, (n.min, n.max)),
+            None => (false, NO_RANGE),
+        }
+    }
+
+    #[inline]
+    fn leaf_range(&self, r: u32) -> (f32, f32) {
+        self.leaves.get(r as usize).copied().unwrap_or(NO_RANGE)
+    }
+}
+
+impl KdTree for RangedTree {
+    fn node_count(&self) -> usize {
+        self.inner.len()
+    }
+    fn root(&self) -> u32 {
+        self.root
+    }
+    #[inline(always)]
+    fn node(&self, n: u32) -> Option<Node> {
+        WalkNodes::node(self, n)
+    }
+}
+
+impl WalkNodes for RangedTree {
+    fn node_count(&self) -> usize {
+        self.inner.len()
+    }
+    fn root(&self) -> u32 {
+        self.root
+    }
+    #[inline(always)]
+    fn node(&self, n: u32) -> Option<Node> {
+        if n & LEAF != 0 {
+            return Some(Node::Leaf((n != EMPTY).then_some(n & !LEAF)));
+        }
+        self.inner.get(n as usize).map(RangedNode::node)
+    }
+    #[inline(always)]
+    fn range(&self, n: u32) -> Option<(f32, f32)> {
+        if n & LEAF != 0 {
+            return Some(if n == EMPTY {
+                NO_RANGE
+            } else {
+                self.leaf_range(n & !LEAF)
+            });
+        }
+        self.inner.get(n as usize).map(|p| (p.min, p.max))
+    }
+    #[inline(always)]
+    fn full(&self, n: u32) -> bool {
+        if n & LEAF != 0 {
+            return n != EMPTY;
+        }
+        self.inner.get(n as usize).is_some_and(|p| p.full)
+    }
+    #[inline(always)]
+    fn get(&self, n: u32) -> Option<NodeEntry> {
+        if n & LEAF == 0 {
+            let p = self.inner.get(n as usize)?;
+            return Some((p.node(), Some((p.min, p.max)), p.full));
+        }
+        if n == EMPTY {
+            return Some((Node::Leaf(None), Some(NO_RANGE), false));
+        }
+        let r = n & !LEAF;
+        Some((Node::Leaf(Some(r)), Some(self.leaf_range(r)), true))
+    }
+}
+
+/// The [`RangedTree`] of `tree` (its nodes reached from the root) with the ranges of its
+/// `regions` regions (`range(region)`; `None`: no range, taken as empty). Empty leaves
+/// get the empty range (`+∞..−∞`) and make their ancestors not full.
 pub fn subtree_ranges<T: KdTree + ?Sized>(
     tree: &T,
+    regions: usize,
     range: impl Fn(u32) -> Option<(f32, f32)>,
-) -> Vec<RangedNode> {
-    let mut out: Vec<RangedNode> = Vec::with_capacity(tree.node_count() * 2 + 1);
-    let mut budget = tree.node_count().saturating_mul(2).saturating_add(1);
-    // (reference, parent position and side)
-    let mut todo: Vec<(u32, Option<(usize, bool)>)> = vec![(tree.root(), None)];
+) -> RangedTree {
+    let leaves = (0..regions)
+        .map(|r| range(r as u32).unwrap_or(NO_RANGE))
+        .collect();
+    let mut out = RangedTree {
+        root: EMPTY,
+        inner: Vec::new(),
+        leaves,
+    };
+    let budget = tree.node_count().saturating_mul(2).saturating_add(1);
+    let mut inner = Vec::with_capacity(tree.node_count().min(budget));
+    out.root = list_inner(tree, tree.root(), &mut inner, 0, budget);
+    fold_ranges(&out, &mut inner, 0);
+    out.inner = inner;
+    out
+}
+
+/// Lists the inner nodes of the subtree of `root` into `out` (children as positions of
+/// the whole list, of which `out` starts at `base`, or leaf references), within `budget`
+/// nodes reached; the reference the subtree's root becomes.
+fn list_inner<T: KdTree + ?Sized>(
+    tree: &T,
+    root: u32,
+    out: &mut Vec<RangedNode>,
+    base: usize,
+    budget: usize,
+) -> u32 {
+    let mut budget = budget;
+    let mut root_ref = EMPTY;
+    // (reference, parent position in `out` and side)
+    let mut todo: Vec<(u32, Option<(usize, bool)>)> = vec![(root, None)];
     while let Some((n, parent)) = todo.pop() {
         if budget == 0 {
             break;
         }
         budget -= 1;
-        let i = out.len();
-        let (entry, children) = ranged_entry(tree.node(n), &range);
-        out.push(entry);
-        if let Some((left, right)) = children {
-            todo.push((right, Some((i, false))));
-            todo.push((left, Some((i, true))));
-        }
-        if let Some((p, left)) = parent {
-            if left {
-                out[p].a = i as u32;
-            } else {
-                out[p].b = i as u32;
+        let node = tree.node(n);
+        let r = match ranged_leaf(node) {
+            Some(leaf) => leaf,
+            None => {
+                let i = out.len();
+                if let Some(Node::Inner {
+                    axis,
+                    split,
+                    left,
+                    right,
+                }) = node
+                {
+                    out.push(RangedNode::inner(axis, split, NO_RANGE));
+                    todo.push((right, Some((i, false))));
+                    todo.push((left, Some((i, true))));
+                }
+                (base + i) as u32
             }
+        };
+        match parent {
+            None => root_ref = r,
+            Some((p, true)) => out[p].a = r,
+            Some((p, false)) => out[p].b = r,
         }
     }
-    fold_ranges(&mut out, 0);
-    out
-}
-
-/// The list entry of a node (an inner node's children not yet placed) and the children
-/// to list after it.
-fn ranged_entry(
-    node: Option<Node>,
-    range: &(impl Fn(u32) -> Option<(f32, f32)> + ?Sized),
-) -> (RangedNode, Option<(u32, u32)>) {
-    let empty = (f32::INFINITY, f32::NEG_INFINITY);
-    match node.unwrap_or(Node::Leaf(None)) {
-        Node::Inner {
-            axis,
-            split,
-            left,
-            right,
-        } => (RangedNode::inner(axis, split, empty), Some((left, right))),
-        Node::Leaf(Some(r)) => (RangedNode::leaf(Some(r), range(r).unwrap_or(empty)), None),
-        Node::Leaf(None) => (RangedNode::leaf(None, empty), None),
-    }
+    root_ref
 }
 
 /// Sets every inner node's range and fullness from its children's, back to front
-/// (children come after parents); `list` starts at position `base` of the whole list, and
-/// a child outside it counts as missing (not full).
-fn fold_ranges(list: &mut [RangedNode], base: usize) {
+/// (children come after parents); `list` starts at position `base` of the whole list.
+fn fold_ranges(tree: &RangedTree, list: &mut [RangedNode], base: usize) {
     for i in (0..list.len()).rev() {
-        if list[i].axis == RangedNode::LEAF {
-            continue;
-        }
-        let (mut full, mut lo, mut hi) = (true, f32::INFINITY, f32::NEG_INFINITY);
+        let (mut full, (mut lo, mut hi)) = (true, NO_RANGE);
         for c in [list[i].a, list[i].b] {
-            match (c as usize).checked_sub(base).and_then(|c| list.get(c)) {
-                Some(child) => {
-                    full &= child.full;
-                    lo = lo.min(child.min);
-                    hi = hi.max(child.max);
-                }
-                None => full = false,
-            }
+            let (f, (a, b)) = tree.child(list, base, c);
+            full &= f;
+            lo = lo.min(a);
+            hi = hi.max(b);
         }
         list[i].full = full;
         list[i].min = lo;
@@ -749,22 +868,42 @@ fn fold_ranges(list: &mut [RangedNode], base: usize) {
     }
 }
 
-/// [`subtree_ranges`] on `threads` threads, the same list: the subtrees a few levels
-/// below the root are counted, then filled, each into its own stretch of the list, and
-/// the nodes above them last. A billion cells make tens of millions of nodes, a second
-/// of the first frame on one core. Plain scoped threads (a caller may be a rayon task
-/// initialising something other tasks wait for).
+/// [`subtree_ranges`] on `threads` threads, the same tree: the regions' ranges are copied
+/// a stretch a thread, the subtrees a few levels below the root are counted, then listed,
+/// each into its own stretch of the list, and the nodes above them last. A billion cells
+/// make tens of millions of nodes, a second of the first frame on one core. Plain scoped
+/// threads (a caller may be a rayon task initialising something other tasks wait for).
 pub fn subtree_ranges_on<T: KdTree + Sync + ?Sized>(
     tree: &T,
+    regions: usize,
     range: impl Fn(u32) -> Option<(f32, f32)> + Sync,
     threads: usize,
-) -> Vec<RangedNode> {
+) -> RangedTree {
     let budget = tree.node_count().saturating_mul(2).saturating_add(1);
     if threads <= 1 {
-        return subtree_ranges(tree, range);
+        return subtree_ranges(tree, regions, range);
     }
-    // The nodes above the cut in list order, each an inner node (with the entries of its
-    // children) or a subtree below the cut.
+    let mut out = RangedTree {
+        root: EMPTY,
+        inner: Vec::new(),
+        leaves: vec![NO_RANGE; regions],
+    };
+    {
+        let range = &range;
+        let chunk = regions.div_ceil(threads * 4).max(1 << 12);
+        on_threads(
+            out.leaves.chunks_mut(chunk).enumerate().map(|(k, part)| {
+                move || {
+                    for (i, slot) in part.iter_mut().enumerate() {
+                        *slot = range((k * chunk + i) as u32).unwrap_or(NO_RANGE);
+                    }
+                }
+            }),
+            threads,
+        );
+    }
+    // The inner nodes above the cut in list order (with the entries of their children),
+    // and the subtrees below it.
     enum Top {
         Inner(usize, f64, [usize; 2]),
         Below(u32),
@@ -801,9 +940,9 @@ pub fn subtree_ranges_on<T: KdTree + Sync + ?Sized>(
             Top::Inner(..) => None,
         })
         .collect();
-    // How many nodes each subtree below the cut lists (`None`: past the budget).
+    // How many inner nodes each subtree below the cut lists (`None`: past the budget).
     let counts = on_threads(
-        below.iter().map(|&n| move || count_nodes(tree, n, budget)),
+        below.iter().map(|&n| move || count_inner(tree, n, budget)),
         threads,
     );
     let mut total = top.len() - below.len();
@@ -815,18 +954,19 @@ pub fn subtree_ranges_on<T: KdTree + Sync + ?Sized>(
                 sizes.push(c);
             }
             // A malformed tree: the one walk stops where it stops.
-            _ => return subtree_ranges(tree, range),
+            _ => return subtree_ranges(tree, regions, range),
         }
     }
-    let empty = (f32::INFINITY, f32::NEG_INFINITY);
-    let mut out = vec![RangedNode::leaf(None, empty); total];
-    // Where each entry starts in the list; each subtree below the cut gets its stretch.
-    let mut at = Vec::with_capacity(top.len());
+    let mut inner = vec![RangedNode::inner(0, 0.0, NO_RANGE); total];
+    // Per entry of `top`: where its stretch starts and how long it is, and the reference
+    // it becomes.
+    let mut at: Vec<(usize, usize)> = Vec::with_capacity(top.len());
+    let mut refs: Vec<u32> = vec![EMPTY; top.len()];
     {
         let mut work = Vec::with_capacity(below.len());
-        let mut rest: &mut [RangedNode] = &mut out;
+        let mut rest: &mut [RangedNode] = &mut inner;
         let mut sizes = sizes.iter();
-        for t in &top {
+        for (k, t) in top.iter().enumerate() {
             let base = at.last().map_or(0, |&(p, len)| p + len);
             let len = match t {
                 Top::Inner(..) => 1,
@@ -835,14 +975,29 @@ pub fn subtree_ranges_on<T: KdTree + Sync + ?Sized>(
             at.push((base, len));
             let (here, after) = std::mem::take(&mut rest).split_at_mut(len);
             rest = after;
-            if let Top::Below(n) = t {
-                work.push((*n, base, here));
+            match t {
+                Top::Inner(..) => refs[k] = base as u32,
+                Top::Below(n) => match ranged_leaf(tree.node(*n)) {
+                    Some(leaf) => refs[k] = leaf,
+                    None => {
+                        refs[k] = base as u32;
+                        work.push((*n, base, here));
+                    }
+                },
             }
         }
-        let range = &range;
+        let shared = &out;
         on_threads(
-            work.into_iter()
-                .map(|(n, base, stretch)| move || fill_nodes(tree, n, range, stretch, base)),
+            work.into_iter().map(|(n, base, stretch)| {
+                move || {
+                    let mut list = Vec::with_capacity(stretch.len());
+                    list_inner(tree, n, &mut list, base, budget);
+                    fold_ranges(shared, &mut list, base);
+                    for (slot, node) in stretch.iter_mut().zip(list) {
+                        *slot = node;
+                    }
+                }
+            }),
             threads,
         );
     }
@@ -851,27 +1006,29 @@ pub fn subtree_ranges_on<T: KdTree + Sync + ?Sized>(
         let Top::Inner(axis, split, children) = top[k] else {
             continue;
         };
-        let mut node = RangedNode::inner(axis, split, empty);
-        let (mut full, mut lo, mut hi) = (true, empty.0, empty.1);
-        for (side, &c) in children.iter().enumerate() {
-            let pos = at.get(c).map_or(u32::MAX, |&(p, _)| p as u32);
-            if side == 0 {
-                node.a = pos;
-            } else {
-                node.b = pos;
-            }
-            match out.get(pos as usize) {
-                Some(child) => {
-                    full &= child.full;
-                    lo = lo.min(child.min);
-                    hi = hi.max(child.max);
-                }
-                None => full = false,
-            }
+        let mut node = RangedNode::inner(axis, split, NO_RANGE);
+        node.a = children
+            .first()
+            .and_then(|&c| refs.get(c))
+            .copied()
+            .unwrap_or(EMPTY);
+        node.b = children
+            .get(1)
+            .and_then(|&c| refs.get(c))
+            .copied()
+            .unwrap_or(EMPTY);
+        let (mut full, (mut lo, mut hi)) = (true, NO_RANGE);
+        for c in [node.a, node.b] {
+            let (f, (a, b)) = out.child(&inner, 0, c);
+            full &= f;
+            lo = lo.min(a);
+            hi = hi.max(b);
         }
         (node.full, node.min, node.max) = (full, lo, hi);
-        out[at[k].0] = node;
+        inner[at[k].0] = node;
     }
+    out.root = refs.first().copied().unwrap_or(EMPTY);
+    out.inner = inner;
     out
 }
 
@@ -906,16 +1063,18 @@ pub fn on_threads<R: Send, J: FnOnce() -> R + Send>(
     results.into_iter().map(|(_, r)| r).collect()
 }
 
-/// How many nodes [`subtree_ranges`] lists for the subtree of `root`; `None` past `budget`.
-fn count_nodes<T: KdTree + ?Sized>(tree: &T, root: u32, budget: usize) -> Option<usize> {
+/// How many inner nodes [`subtree_ranges`] lists for the subtree of `root`; `None` past
+/// `budget` nodes reached.
+fn count_inner<T: KdTree + ?Sized>(tree: &T, root: u32, budget: usize) -> Option<usize> {
     let mut todo = vec![root];
-    let mut count = 0usize;
+    let (mut reached, mut count) = (0usize, 0usize);
     while let Some(n) = todo.pop() {
-        if count >= budget {
+        if reached >= budget {
             return None;
         }
-        count += 1;
+        reached += 1;
         if let Some(Node::Inner { left, right, .. }) = tree.node(n) {
+            count += 1;
             todo.push(right);
             todo.push(left);
         }
@@ -923,67 +1082,31 @@ fn count_nodes<T: KdTree + ?Sized>(tree: &T, root: u32, budget: usize) -> Option
     Some(count)
 }
 
-/// [`subtree_ranges`] of the subtree of `root` into `out` (exactly as long as its list:
-/// [`count_nodes`]), which starts at position `base` of the whole list.
-fn fill_nodes<T: KdTree + ?Sized>(
-    tree: &T,
-    root: u32,
-    range: &(impl Fn(u32) -> Option<(f32, f32)> + ?Sized),
-    out: &mut [RangedNode],
-    base: usize,
-) {
-    let mut todo: Vec<(u32, Option<(usize, bool)>)> = vec![(root, None)];
-    let mut i = 0;
-    while let Some((n, parent)) = todo.pop() {
-        if i >= out.len() {
-            break;
-        }
-        let (entry, children) = ranged_entry(tree.node(n), range);
-        out[i] = entry;
-        if let Some((left, right)) = children {
-            todo.push((right, Some((i, false))));
-            todo.push((left, Some((i, true))));
-        }
-        if let Some((p, left)) = parent {
-            if left {
-                out[p].a = (base + i) as u32;
-            } else {
-                out[p].b = (base + i) as u32;
-            }
-        }
-        i += 1;
-    }
-    fold_ranges(out, base);
-}
-
-/// A node of [`subtree_ranges`] with its subtree's range of one field (32 bytes: half a
-/// cache line, so a walk reads node and range with one load).
+/// An inner node of a [`RangedTree`] with its subtree's range of one field (32 bytes:
+/// half a cache line, so a walk reads node and range with one load).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RangedNode {
-    /// Split plane as stored (inner nodes).
+    /// Split plane as stored.
     pub split: f64,
-    /// Inner: position of the left child; leaf: the region, or `u32::MAX` for empty space.
+    /// The left child: a position in the list, or a leaf reference.
     pub a: u32,
-    /// Inner: position of the right child.
+    /// The right child: a position in the list, or a leaf reference.
     pub b: u32,
     /// Range of the field over the subtree.
     pub min: f32,
     pub max: f32,
-    /// 0..=2: inner node splitting this axis; [`RangedNode::LEAF`]: a leaf.
+    /// The axis the split plane cuts (0..=2).
     pub axis: u8,
     /// Every leaf below holds a region.
     pub full: bool,
 }
 
 impl RangedNode {
-    /// [`RangedNode::axis`] of a leaf.
-    pub const LEAF: u8 = 3;
-
     fn inner(axis: usize, split: f64, (min, max): (f32, f32)) -> Self {
         RangedNode {
             split,
-            a: u32::MAX,
-            b: u32::MAX,
+            a: EMPTY,
+            b: EMPTY,
             min,
             max,
             axis: axis.min(2) as u8,
@@ -991,30 +1114,14 @@ impl RangedNode {
         }
     }
 
-    fn leaf(region: Option<u32>, (min, max): (f32, f32)) -> Self {
-        RangedNode {
-            split: 0.0,
-            a: region.unwrap_or(u32::MAX),
-            b: 0,
-            min,
-            max,
-            axis: Self::LEAF,
-            full: region.is_some(),
-        }
-    }
-
-    /// The node, its children as positions in its list.
+    /// The node, its children as positions in its list or leaf references.
     #[inline(always)]
     pub fn node(&self) -> Node {
-        if self.axis < Self::LEAF {
-            Node::Inner {
-                axis: usize::from(self.axis),
-                split: self.split,
-                left: self.a,
-                right: self.b,
-            }
-        } else {
-            Node::Leaf((self.a != u32::MAX).then_some(self.a))
+        Node::Inner {
+            axis: usize::from(self.axis),
+            split: self.split,
+            left: self.a,
+            right: self.b,
         }
     }
 }

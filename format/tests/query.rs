@@ -406,9 +406,17 @@ fn deep_tree_spills_the_stack_and_stays_correct() {
     assert_eq!(query::region_at(f, [0.0, 0.5, 0.5]), Some(0));
 }
 
-/// Every number of a packed list, as bits (NaN ranges compare too).
-fn ranged_bits(list: &[kd::RangedNode]) -> Vec<(u64, u32, u32, u32, u32, u8, bool)> {
-    list.iter()
+/// Every number of a packed tree, as bits (NaN ranges compare too).
+type RangedBits = (
+    u32,
+    Vec<(u64, u32, u32, u32, u32, u8, bool)>,
+    Vec<(u32, u32)>,
+);
+
+fn ranged_bits(tree: &kd::RangedTree) -> RangedBits {
+    let inner = tree
+        .inner
+        .iter()
         .map(|n| {
             (
                 n.split.to_bits(),
@@ -420,7 +428,13 @@ fn ranged_bits(list: &[kd::RangedNode]) -> Vec<(u64, u32, u32, u32, u32, u8, boo
                 n.full,
             )
         })
-        .collect()
+        .collect();
+    let leaves = tree
+        .leaves
+        .iter()
+        .map(|&(a, b)| (a.to_bits(), b.to_bits()))
+        .collect();
+    (tree.root, inner, leaves)
 }
 
 /// A complete tree of `depth` levels over the unit cube, its leaves numbered left to
@@ -467,17 +481,23 @@ impl kd::KdTree for Complete {
     }
 }
 
-/// `subtree_ranges_on` gives `subtree_ranges`' list on large trees, whatever the number of
-/// threads (cuts below, at and above the tree's depth), with missing region ranges.
+/// `subtree_ranges_on` gives `subtree_ranges`' tree on large trees, whatever the number
+/// of threads (cuts below, at and above the tree's depth), with missing region ranges;
+/// the tree lists its inner nodes only, its leaves as references.
 #[test]
 fn subtree_ranges_on_threads_are_the_one_walks() {
     for depth in [0, 1, 3, 6, 11] {
         let tree = Complete::new(depth);
+        let regions = 1usize << depth;
         let range = |r: u32| (r % 5 != 3).then_some((r as f32 * 0.5, r as f32 * 0.5 + 2.0));
-        let one = ranged_bits(&kd::subtree_ranges(&tree, range));
-        assert_eq!(one.len(), tree.0.len());
+        let one = ranged_bits(&kd::subtree_ranges(&tree, regions, range));
+        assert_eq!(one.1.len(), regions - 1, "inner nodes");
+        assert_eq!(one.2.len(), regions, "one range a region");
+        if depth == 0 {
+            assert_eq!(one.0, kd::LEAF, "a root leaf is a leaf reference");
+        }
         for threads in [2, 3, 4, 8, 64] {
-            let on = ranged_bits(&kd::subtree_ranges_on(&tree, range, threads));
+            let on = ranged_bits(&kd::subtree_ranges_on(&tree, regions, range, threads));
             assert_eq!(on, one, "depth {depth}, {threads} threads");
         }
     }
@@ -496,27 +516,30 @@ proptest! {
         let nf = file.fields.len();
         let field = (seed % nf as u64) as usize;
         let range = |r: u32| query::region_range(file, r, field);
-        let list = kd::subtree_ranges(&kd::file_tree(file), range);
-        prop_assert!(!list.is_empty());
-        // Counted and filled subtree by subtree on several threads: the same list.
+        let regions = file.regions.len();
+        let tree = kd::subtree_ranges(&kd::file_tree(file), regions, range);
+        // Counted and filled subtree by subtree on several threads: the same tree.
         for threads in [2, 3, 8] {
-            let on = kd::subtree_ranges_on(&kd::file_tree(file), range, threads);
-            prop_assert_eq!(ranged_bits(&on), ranged_bits(&list), "{} threads", threads);
+            let on = kd::subtree_ranges_on(&kd::file_tree(file), regions, range, threads);
+            prop_assert_eq!(ranged_bits(&on), ranged_bits(&tree), "{} threads", threads);
         }
-        // Leaves below each position, by recursion over the list.
-        fn leaves(list: &[kd::RangedNode], i: usize, out: &mut Vec<Option<u32>>) {
-            match list[i].node() {
+        // Leaves below each reference, by recursion over the tree.
+        fn leaves(tree: &kd::RangedTree, n: u32, out: &mut Vec<Option<u32>>) {
+            use kd::WalkNodes;
+            match tree.node(n).expect("a node") {
                 kd::Node::Inner { left, right, .. } => {
-                    assert!(left as usize > i && right as usize > i, "parent first");
-                    leaves(list, left as usize, out);
-                    leaves(list, right as usize, out);
+                    for c in [left, right] {
+                        assert!(c & kd::LEAF != 0 || c > n, "parent first");
+                    }
+                    leaves(tree, left, out);
+                    leaves(tree, right, out);
                 }
                 kd::Node::Leaf(r) => out.push(r),
             }
         }
-        for (i, n) in list.iter().enumerate() {
+        for (i, n) in tree.inner.iter().enumerate() {
             let mut below = Vec::new();
-            leaves(&list, i, &mut below);
+            leaves(&tree, i as u32, &mut below);
             prop_assert_eq!(n.full, below.iter().all(|r| r.is_some()));
             let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
             for r in below.into_iter().flatten() {
@@ -526,8 +549,16 @@ proptest! {
             }
             prop_assert_eq!((n.min, n.max), (lo, hi), "node {}", i);
         }
+        // The walk's reads of a leaf: its region's range, full unless empty.
+        for r in 0..regions as u32 {
+            use kd::WalkNodes;
+            let want = range(r).expect("region range");
+            prop_assert_eq!(tree.range(kd::LEAF | r), Some(want));
+            prop_assert!(tree.full(kd::LEAF | r));
+        }
+        prop_assert!(!kd::WalkNodes::full(&tree, kd::EMPTY));
         let mut all = Vec::new();
-        leaves(&list, 0, &mut all);
+        leaves(&tree, tree.root, &mut all);
         let mut regions: Vec<u32> = all.into_iter().flatten().collect();
         regions.sort_unstable();
         prop_assert_eq!(regions, (0..file.regions.len() as u32).collect::<Vec<_>>());

@@ -2,19 +2,18 @@
 //!
 //! The file stores no per-node value ranges (format 3 keeps its structure small): packing
 //! derives each subtree's range and fullness from the regions' ranges
-//! ([`format::kd::subtree_ranges`]) and puts node, range and fullness into one 32-byte
-//! record per node (a few milliseconds for a quarter of a million nodes; larger trees on
-//! all cores, [`format::kd::subtree_ranges_on`]), so that a walk
-//! reads one line per node and skips a whole subtree whose values cannot matter. Which
-//! field is packed is a view setting, so a view's acceleration ([`crate::accel`]) owns
-//! the tree of its iso field; the volume keeps field 0's for point location, which any
-//! packing serves.
+//! ([`format::kd::subtree_ranges`]) and puts inner node, range and fullness into one
+//! 32-byte record, and each region's range into a table of 8 bytes a region (a few
+//! milliseconds for a quarter of a million nodes; larger trees on all cores,
+//! [`format::kd::subtree_ranges_on`]), so that a walk reads one line per node and skips a
+//! whole subtree whose values cannot matter. Which field is packed is a view setting, so a
+//! view's acceleration ([`crate::accel`]) owns the tree of its iso field; the volume keeps
+//! the first one packed for point location, which any packing serves.
 
-use format::kd::{Node, RangedNode, WalkNodes};
+use format::kd::{Node, RangedTree, WalkNodes};
 
-/// A field's packed tree: [`format::kd::subtree_ranges`] of the file's tree, node, range
-/// and fullness in one 32-byte record per node, the root first.
-pub(crate) struct Packed(Vec<RangedNode>);
+/// A field's packed tree: [`format::kd::subtree_ranges`] of the file's tree.
+pub(crate) struct Packed(RangedTree);
 
 impl Packed {
     /// The tree of `file` packed with the ranges of field `field` (a field the file does
@@ -31,6 +30,7 @@ impl Packed {
         };
         Packed(format::kd::subtree_ranges_on(
             &tree,
+            file.regions.len(),
             |r| {
                 let v = file
                     .region_ranges
@@ -44,39 +44,38 @@ impl Packed {
 
 impl format::kd::KdTree for Packed {
     fn node_count(&self) -> usize {
-        self.0.len()
+        format::kd::KdTree::node_count(&self.0)
     }
     fn root(&self) -> u32 {
-        0
+        format::kd::KdTree::root(&self.0)
     }
     #[inline(always)]
     fn node(&self, n: u32) -> Option<Node> {
-        WalkNodes::node(self, n)
+        WalkNodes::node(&self.0, n)
     }
 }
 
 impl WalkNodes for Packed {
     fn node_count(&self) -> usize {
-        self.0.len()
+        WalkNodes::node_count(&self.0)
     }
     fn root(&self) -> u32 {
-        0
+        WalkNodes::root(&self.0)
     }
     #[inline(always)]
     fn node(&self, n: u32) -> Option<Node> {
-        self.0.get(n as usize).map(RangedNode::node)
+        WalkNodes::node(&self.0, n)
     }
     #[inline(always)]
     fn range(&self, n: u32) -> Option<(f32, f32)> {
-        self.0.get(n as usize).map(|p| (p.min, p.max))
+        self.0.range(n)
     }
     #[inline(always)]
     fn full(&self, n: u32) -> bool {
-        self.0.get(n as usize).is_some_and(|p| p.full)
+        self.0.full(n)
     }
     #[inline(always)]
     fn get(&self, n: u32) -> Option<format::kd::NodeEntry> {
-        let p = self.0.get(n as usize)?;
-        Some((p.node(), Some((p.min, p.max)), p.full))
+        self.0.get(n)
     }
 }

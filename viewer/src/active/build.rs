@@ -92,12 +92,12 @@ impl ActiveTree {
         let mut todo: Vec<(u32, bool, [f64; 3], [f64; 3])> = Vec::with_capacity(64);
         // The active-tree node each finished subtree became, or `NONE`.
         let mut done: Vec<u32> = Vec::with_capacity(64);
-        if tree.node_count() > 0 {
-            let (lo, hi) = vol.root_cell();
-            todo.push((tree.root(), false, lo, hi));
-        }
-        // Every node is visited at most twice in a tree; more means it is not one.
-        let mut budget = tree.node_count().saturating_mul(2).saturating_add(2);
+        // The root may be a leaf (a file of one region), or empty space.
+        let (lo, hi) = vol.root_cell();
+        todo.push((tree.root(), false, lo, hi));
+        // An inner node is visited twice and a leaf once, and a tree of `n` inner nodes
+        // has `n + 1` leaves; more visits mean it is not a tree.
+        let mut budget = tree.node_count().saturating_mul(3).saturating_add(2);
         while let Some((n, expanded, cmin, cmax)) = todo.pop() {
             budget = budget.checked_sub(1)?;
             let (node, range, _) = tree.get(n)?;

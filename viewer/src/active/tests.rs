@@ -297,3 +297,29 @@ fn a_group_of_camera_rays_gets_the_same_segments_from_its_start_as_from_the_root
     );
     assert!(rays_met > 1000, "only {rays_met} rays met a region");
 }
+
+/// A file of one region, whose KD root is a leaf (the packed tree lists no inner node):
+/// the region's tree holds it, and its segments are the file walk's, with the surface
+/// found along the rays that cross it.
+#[test]
+fn a_file_of_one_region_has_its_tree() {
+    let f = |p: [f64; 3]| (0..3).map(|a| (p[a] - 2.0).powi(2)).sum::<f64>().sqrt();
+    let grid = testvol::GridSpec::covering([0.0; 3], [4.0; 3], 0.5);
+    let file = testvol::build(&[grid], &[("d", &f)], 64);
+    let view = testvol::open(&file).expect("opens");
+    let vol = Volume::new(&view).expect("volume");
+    assert_eq!(vol.region_count(), 1, "one brick, one region");
+    let tree = ActiveTree::uncut(&vol, 0, 1.0).expect("a valid tree");
+    assert_eq!(tree.leaf_count(), (1, 1));
+    let mut crossed = 0;
+    for (o, d) in [
+        ([-1.0, 2.1, 1.9], [1.0, 0.0, 0.0]),
+        ([2.05, -3.0, 2.2], [0.0, 1.0, 0.0]),
+        ([-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]),
+    ] {
+        let [file_segs, tree_segs] = both(&vol, 1.0, o, d, (0.0, 100.0));
+        assert_eq!(file_segs, tree_segs, "{o:?} {d:?}");
+        crossed += tree_segs.len();
+    }
+    assert_eq!(crossed, 3);
+}
