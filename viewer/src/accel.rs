@@ -36,12 +36,13 @@ pub struct AccelKey {
 /// A view's acceleration for one [`AccelKey`]: built for one volume, and only used with
 /// it (a scene pairs them).
 ///
-/// The clip box is found when the acceleration is made (one pass over the regions). The
-/// two trees are built when first needed: by `Accel::prepare` before a frame's tiles, on
-/// the render pool, or by the first ray that asks (a `--pixel` trace, a pick in the
-/// window, a test). So a scene costs nothing until it is rendered, a dvr view never builds
-/// the active tree unless a pick asks for the iso-surface, and a headless render reports
-/// the set-up inside its first frame's time, where it was before.
+/// The clip box is found when a scene first asks for it (as it is made), by a walk of the
+/// packed tree that skips the subtrees outside the band, so making a scene packs the tree
+/// its frames walk anyway (what it replaced, a pass over a table of every region, cost
+/// more). The active tree is built when first needed: by `Accel::prepare` before a
+/// frame's tiles, on the render pool, or by the first ray that asks (a `--pixel` trace, a
+/// pick in the window, a test). So a dvr view never builds the active tree unless a pick
+/// asks for the iso-surface.
 pub struct Accel {
     key: AccelKey,
     /// The file's tree packed with the iso field's ranges; `None` inside for a field the

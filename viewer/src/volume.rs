@@ -12,8 +12,10 @@
 //! A [`Volume`] is immutable once built and shared by every view of the file. What a view
 //! adds (the tree packed with its iso field's ranges, the regions that can hold its iso
 //! value, the box of the regions that can contribute to its band) belongs to that view,
-//! in its [`crate::accel::Accel`]. The volume only derives, on first use, two tables that
-//! depend on the file alone (see [`Volume::region`] and [`Volume::region_at`]).
+//! in its [`crate::accel::Accel`]. The volume only derives, on first use, what depends on
+//! the file alone: the tree point location descends (the first packed one, see
+//! [`Volume::region_at`]), a byte a region of step width ([`Volume::step_width`]), and,
+//! for tools and tests only, the table of every region's box ([`Volume::region`]).
 
 use std::sync::atomic::AtomicU8;
 use std::sync::{Arc, OnceLock};
@@ -132,9 +134,9 @@ pub struct Volume<'a> {
     /// normals and refinement probes descend for every hit. Point location reads no
     /// ranges, so any field's packing serves: it is the first packed tree a view asks for
     /// ([`Volume::packed`]), whichever its field, or field 0's when a lookup comes first.
-    /// So a view of another field than the first packs one tree, not two (32 bytes a
-    /// node and leaf: 1 GB each for a billion cells). `None` for a file without fields
-    /// (point location then reads the archived tree).
+    /// So a view of another field than the first packs one tree, not two (about 40
+    /// bytes a region: 0.6 GiB each for a billion cells). `None` for a file without
+    /// fields (point location then reads the archived tree).
     locate: OnceLock<Option<(usize, Arc<Packed>)>>,
     /// Finest cell width in the file (reference length for opacity).
     pub finest_w: f64,
