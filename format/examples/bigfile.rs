@@ -171,6 +171,7 @@ fn measure_open(path: &Path, verify: bool) {
         path,
         &OpenOptions {
             verify_checksum: verify,
+            ..OpenOptions::default()
         },
     )
     .expect("open");

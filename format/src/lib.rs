@@ -21,5 +21,5 @@ pub mod writer;
 
 pub use error::{FormatError, FormatErrorKind};
 pub use header::FORMAT_VERSION;
-pub use reader::{BrickFileView, OpenOptions};
+pub use reader::{BrickFileView, OpenOptions, Structure};
 pub use schema::*;

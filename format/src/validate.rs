@@ -151,11 +151,57 @@ fn entry_name(entry: usize, in_region: Option<(usize, usize)>) -> String {
     }
 }
 
-/// Checks the invariants of a structurally valid archive. Cost is linear in the number
-/// of bricks, regions, region brick entries and KD nodes; the value arrays are not read.
+/// Checks the invariants of a structurally valid archive: [`check_top`], every brick
+/// ([`check_brick`]), every region's list ([`check_region`], one flat pass over the
+/// lists' entries) and the KD-tree ([`check_kd`]). Cost is linear in the number of
+/// bricks, regions, region brick entries and KD nodes; the value arrays are not read.
 pub fn check(file: &ArchivedBrickFile) -> Result<(), ValidationError> {
-    let n_levels = file.levels.len();
+    check_top(file)?;
+    for b in 0..file.bricks.len() {
+        check_brick(file, b)?;
+    }
+    let n_entries = file.region_bricks.len() as u64;
+    for (i, region) in file.regions.iter().enumerate() {
+        let start = u64::from(region.bricks_start.to_native());
+        let len = u64::from(region.bricks_len.to_native());
+        if start + len > n_entries {
+            return Err(ValidationError::RegionBricksOutOfRange {
+                region: i,
+                start,
+                len,
+                entries: n_entries,
+            });
+        }
+    }
+    // Every entry of every list names a brick: one flat pass over the entries (a list is
+    // a slice of them, checked above), not one per region.
     let n_bricks = file.bricks.len();
+    if let Some(at) = file
+        .region_bricks
+        .iter()
+        .position(|id| id.to_native() as usize >= n_bricks)
+    {
+        let id = file.region_bricks[at].to_native();
+        let in_region = file.regions.iter().enumerate().find_map(|(i, r)| {
+            let start = r.bricks_start.to_native() as usize;
+            let len = r.bricks_len.to_native() as usize;
+            (start..start + len).contains(&at).then(|| (i, at - start))
+        });
+        return Err(ValidationError::BrickIdOutOfRange {
+            entry: at,
+            in_region,
+            id,
+            bricks: n_bricks,
+        });
+    }
+    check_kd(file)
+}
+
+/// The invariants that do not grow with the data: the bounds, the levels, the fields'
+/// lengths and the lengths of the tables indexed per region and per KD node. What a
+/// reader that checks each brick, region and the tree where it reads them
+/// ([`crate::Structure::OnUse`]) runs at open.
+pub fn check_top(file: &ArchivedBrickFile) -> Result<(), ValidationError> {
     let n_regions = file.regions.len();
     let n_fields = file.fields.len();
 
@@ -183,7 +229,7 @@ pub fn check(file: &ArchivedBrickFile) -> Result<(), ValidationError> {
     }
 
     // Fields: one value per leaf cell in every field.
-    let n_values = file.fields.first().map_or(0, |f| f.values.len() as u64);
+    let n_values = value_count(file);
     for (i, field) in file.fields.iter().enumerate() {
         if field.values.len() as u64 != n_values {
             return Err(ValidationError::FieldLength {
@@ -194,106 +240,6 @@ pub fn check(file: &ArchivedBrickFile) -> Result<(), ValidationError> {
         }
     }
 
-    // Bricks.
-    for (i, brick) in file.bricks.iter().enumerate() {
-        let level = brick.level.to_native();
-        if level as usize >= n_levels {
-            return Err(ValidationError::BrickLevelOutOfRange {
-                brick: i,
-                level,
-                levels: n_levels,
-            });
-        }
-        let dims = brick.dims.map(|d| d.to_native());
-        if dims.contains(&0) {
-            return Err(ValidationError::BrickEmptyDims { brick: i, dims });
-        }
-        let w = brick.cell_width.to_native();
-        if !(w.is_finite() && w > 0.0) {
-            return Err(ValidationError::BrickCellWidth { brick: i, width: w });
-        }
-        let inv = brick.inv_cell_width.to_native();
-        if inv != 1.0 / w {
-            return Err(ValidationError::BrickInvCellWidth {
-                brick: i,
-                width: w,
-                found: inv,
-            });
-        }
-        // The viewer steps through a region in units of its finest *level's* width and
-        // reconstructs with the *bricks'* widths: a level far finer than its bricks made
-        // every ray take millions of samples per region (found by the `qbk_open` fuzz
-        // target). The baker merges widths equal to 1e-6, so 1e-3 is loose enough.
-        let lw = file.levels[level as usize].cell_width.to_native();
-        if (w - lw).abs() > 1e-3 * lw {
-            return Err(ValidationError::BrickWidthNotLevels {
-                brick: i,
-                width: w,
-                level,
-                level_width: lw,
-            });
-        }
-        if brick.origin.iter().any(|c| !c.to_native().is_finite()) {
-            return Err(ValidationError::BrickOriginNotFinite { brick: i });
-        }
-        // Three u32 dims can hold up to 2^96 cells. Unchecked, the product wraps in
-        // release builds (found by the `qbk_open` fuzz target): a brick of 2^22 x 2^21 x
-        // 2^21 cells then counts as 0 cells, passes the range check below, and the viewer
-        // indexes far past the value arrays.
-        let Some(cells) = dims
-            .iter()
-            .try_fold(1u64, |n, &d| n.checked_mul(u64::from(d)))
-        else {
-            return Err(ValidationError::BrickTooManyCells { brick: i, dims });
-        };
-        if n_fields > 0 {
-            let first = brick.first_value.to_native();
-            let end = first.checked_add(cells);
-            if end.is_none_or(|e| e > n_values) {
-                return Err(ValidationError::BrickOutOfRange {
-                    brick: i,
-                    first,
-                    len: cells,
-                    values: n_values,
-                });
-            }
-        }
-    }
-
-    // Regions and their brick lists.
-    let n_entries = file.region_bricks.len() as u64;
-    for (i, region) in file.regions.iter().enumerate() {
-        let start = u64::from(region.bricks_start.to_native());
-        let len = u64::from(region.bricks_len.to_native());
-        if start + len > n_entries {
-            return Err(ValidationError::RegionBricksOutOfRange {
-                region: i,
-                start,
-                len,
-                entries: n_entries,
-            });
-        }
-    }
-    // Every entry of every list names a brick: one flat pass over the entries (a list is
-    // a slice of them, checked above), not one per region.
-    if let Some(at) = file
-        .region_bricks
-        .iter()
-        .position(|id| id.to_native() as usize >= n_bricks)
-    {
-        let id = file.region_bricks[at].to_native();
-        let in_region = file.regions.iter().enumerate().find_map(|(i, r)| {
-            let start = r.bricks_start.to_native() as usize;
-            let len = r.bricks_len.to_native() as usize;
-            (start..start + len).contains(&at).then(|| (i, at - start))
-        });
-        return Err(ValidationError::BrickIdOutOfRange {
-            entry: at,
-            in_region,
-            id,
-            bricks: n_bricks,
-        });
-    }
     let expected_ranges = n_regions as u64 * n_fields as u64;
     if file.region_ranges.len() as u64 != expected_ranges {
         return Err(ValidationError::RegionRangesLength {
@@ -303,14 +249,145 @@ pub fn check(file: &ArchivedBrickFile) -> Result<(), ValidationError> {
             found: file.region_ranges.len(),
         });
     }
+    if file.kd_axes.len() != file.kd_nodes.len() {
+        return Err(ValidationError::KdAxesLength {
+            expected: file.kd_nodes.len(),
+            found: file.kd_axes.len(),
+        });
+    }
+    Ok(())
+}
 
-    check_kd(file)
+/// Values per field (every field holds as many as the first, see [`check_top`]).
+fn value_count(file: &ArchivedBrickFile) -> u64 {
+    file.fields.first().map_or(0, |f| f.values.len() as u64)
+}
+
+/// Brick `i`'s invariants (an index past the bricks is [`ValidationError::BrickIdOutOfRange`]):
+/// its level exists and has its cell width, its cells are at least one per axis and
+/// their values all lie in the value arrays. Needs [`check_top`].
+pub fn check_brick(file: &ArchivedBrickFile, i: usize) -> Result<(), ValidationError> {
+    let n_levels = file.levels.len();
+    let n_fields = file.fields.len();
+    let n_values = value_count(file);
+    let Some(brick) = file.bricks.get(i) else {
+        return Err(ValidationError::BrickIdOutOfRange {
+            entry: i,
+            in_region: None,
+            id: i as u32,
+            bricks: file.bricks.len(),
+        });
+    };
+    let level = brick.level.to_native();
+    if level as usize >= n_levels {
+        return Err(ValidationError::BrickLevelOutOfRange {
+            brick: i,
+            level,
+            levels: n_levels,
+        });
+    }
+    let dims = brick.dims.map(|d| d.to_native());
+    if dims.contains(&0) {
+        return Err(ValidationError::BrickEmptyDims { brick: i, dims });
+    }
+    let w = brick.cell_width.to_native();
+    if !(w.is_finite() && w > 0.0) {
+        return Err(ValidationError::BrickCellWidth { brick: i, width: w });
+    }
+    let inv = brick.inv_cell_width.to_native();
+    if inv != 1.0 / w {
+        return Err(ValidationError::BrickInvCellWidth {
+            brick: i,
+            width: w,
+            found: inv,
+        });
+    }
+    // The viewer steps through a region in units of its finest *level's* width and
+    // reconstructs with the *bricks'* widths: a level far finer than its bricks made
+    // every ray take millions of samples per region (found by the `qbk_open` fuzz
+    // target). The baker merges widths equal to 1e-6, so 1e-3 is loose enough.
+    let lw = file.levels[level as usize].cell_width.to_native();
+    if (w - lw).abs() > 1e-3 * lw {
+        return Err(ValidationError::BrickWidthNotLevels {
+            brick: i,
+            width: w,
+            level,
+            level_width: lw,
+        });
+    }
+    if brick.origin.iter().any(|c| !c.to_native().is_finite()) {
+        return Err(ValidationError::BrickOriginNotFinite { brick: i });
+    }
+    // Three u32 dims can hold up to 2^96 cells. Unchecked, the product wraps in
+    // release builds (found by the `qbk_open` fuzz target): a brick of 2^22 x 2^21 x
+    // 2^21 cells then counts as 0 cells, passes the range check below, and the viewer
+    // indexes far past the value arrays.
+    let Some(cells) = dims
+        .iter()
+        .try_fold(1u64, |n, &d| n.checked_mul(u64::from(d)))
+    else {
+        return Err(ValidationError::BrickTooManyCells { brick: i, dims });
+    };
+    if n_fields > 0 {
+        let first = brick.first_value.to_native();
+        let end = first.checked_add(cells);
+        if end.is_none_or(|e| e > n_values) {
+            return Err(ValidationError::BrickOutOfRange {
+                brick: i,
+                first,
+                len: cells,
+                values: n_values,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Region `r`'s list of bricks lies in `region_bricks`, and every brick it names exists
+/// and passes [`check_brick`]: what reading the region's bricks needs. Needs
+/// [`check_top`]; `r` past the regions is [`ValidationError::KdRegionOutOfRange`].
+pub fn check_region(file: &ArchivedBrickFile, r: usize) -> Result<(), ValidationError> {
+    let Some(region) = file.regions.get(r) else {
+        return Err(ValidationError::KdRegionOutOfRange {
+            node: None,
+            region: r as u32,
+            regions: file.regions.len(),
+        });
+    };
+    let n_entries = file.region_bricks.len() as u64;
+    let start = u64::from(region.bricks_start.to_native());
+    let len = u64::from(region.bricks_len.to_native());
+    if start + len > n_entries {
+        return Err(ValidationError::RegionBricksOutOfRange {
+            region: r,
+            start,
+            len,
+            entries: n_entries,
+        });
+    }
+    let n_bricks = file.bricks.len();
+    for (j, id) in file.region_bricks[start as usize..(start + len) as usize]
+        .iter()
+        .enumerate()
+    {
+        let id = id.to_native();
+        if id as usize >= n_bricks {
+            return Err(ValidationError::BrickIdOutOfRange {
+                entry: start as usize + j,
+                in_region: Some((r, j)),
+                id,
+                bricks: n_bricks,
+            });
+        }
+        check_brick(file, id as usize)?;
+    }
+    Ok(())
 }
 
 /// The KD nodes reachable from the root form a tree (no node has two parents, no
 /// cycles), every index is in range, and every region sits in exactly one leaf (its box
-/// is that leaf's cell).
-fn check_kd(file: &ArchivedBrickFile) -> Result<(), ValidationError> {
+/// is that leaf's cell). Linear in the nodes and regions; reads no brick.
+pub fn check_kd(file: &ArchivedBrickFile) -> Result<(), ValidationError> {
     let nodes = file.kd_nodes.as_slice();
     let axes = file.kd_axes.as_slice();
     let n_regions = file.regions.len();

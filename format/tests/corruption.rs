@@ -8,10 +8,11 @@ use std::path::Path;
 use proptest::prelude::*;
 use qbricks_format::header::{checksum, Header, HEADER_LEN};
 use qbricks_format::validate::ValidationError;
-use qbricks_format::{query, writer, BrickFileView, FormatErrorKind, OpenOptions};
+use qbricks_format::{query, writer, BrickFileView, FormatErrorKind, OpenOptions, Structure};
 
 const NO_CHECKSUM: OpenOptions = OpenOptions {
     verify_checksum: false,
+    structure: Structure::AtOpen,
 };
 
 fn small_file() -> Vec<u8> {
@@ -210,4 +211,98 @@ fn level_widths_must_match_the_bricks() {
             && msg.contains("differs"),
         "{msg}"
     );
+}
+
+/// What a view opened with [`Structure::OnUse`] checks, part by part: the top at open,
+/// then every brick, every region with its list and the KD-tree as a reader would when it
+/// first reads them. Every error found, in that order.
+fn part_errors(file: &qbricks_format::ArchivedBrickFile) -> Vec<ValidationError> {
+    use qbricks_format::validate;
+    let mut out = Vec::new();
+    if let Err(e) = validate::check_top(file) {
+        return vec![e];
+    }
+    for b in 0..file.bricks.len() {
+        out.extend(validate::check_brick(file, b).err());
+    }
+    for r in 0..file.regions.len() {
+        out.extend(validate::check_region(file, r).err());
+    }
+    out.extend(validate::check_kd(file).err());
+    out
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(if cfg!(miri) { 4 } else { 512 }))]
+
+    /// One number of a file changed as a faulty writer could: a brick's level, cells,
+    /// first value, width or origin; a region's list or one of its entries; a KD node's
+    /// child, split or axis; the root. Opened to be checked where it is read, the file
+    /// either fails at open as an open that checks everything does, or opens, and then
+    /// the parts a reader checks fail exactly when that whole check fails, one of them
+    /// with its very error: nothing the whole check refuses gets past the parts.
+    #[test]
+    fn parts_checked_on_use_refuse_what_the_whole_check_refuses(
+        seed in 0u64..64,
+        what in 0usize..12,
+        pick in any::<prop::sample::Index>(),
+        big in any::<u32>(),
+    ) {
+        let mut file = common::random_file(seed);
+        let nb = file.bricks.len().max(1);
+        let nr = file.regions.len().max(1);
+        let nn = file.kd_nodes.len().max(1);
+        let ne = file.region_bricks.len().max(1);
+        match what {
+            0 => if let Some(b) = file.bricks.get_mut(pick.index(nb)) { b.level = big % 4 },
+            1 => if let Some(b) = file.bricks.get_mut(pick.index(nb)) { b.dims[big as usize % 3] = big % 5 },
+            2 => if let Some(b) = file.bricks.get_mut(pick.index(nb)) { b.first_value = u64::from(big) },
+            3 => if let Some(b) = file.bricks.get_mut(pick.index(nb)) { b.cell_width *= 1.0 + f64::from(big % 3) },
+            4 => if let Some(b) = file.bricks.get_mut(pick.index(nb)) { b.origin[0] = f64::NAN },
+            5 => if let Some(r) = file.regions.get_mut(pick.index(nr)) { r.bricks_start = big % (ne as u32 + 3) },
+            6 => if let Some(r) = file.regions.get_mut(pick.index(nr)) { r.bricks_len = big % 9 },
+            7 => if let Some(e) = file.region_bricks.get_mut(pick.index(ne)) { *e = big % (nb as u32 + 3) },
+            8 => if let Some(n) = file.kd_nodes.get_mut(pick.index(nn)) { n.left = big % (nn as u32 + 2) },
+            9 => if let Some(n) = file.kd_nodes.get_mut(pick.index(nn)) { n.split = f64::from(big) - 2e9 },
+            10 => if let Some(a) = file.kd_axes.get_mut(pick.index(nn)) { *a = (big % 4) as u8 },
+            _ => file.kd_root = big % (nn as u32 + 2),
+        }
+        let bytes = writer::to_bytes(&file).expect("to_bytes");
+        let whole = BrickFileView::from_bytes(Path::new("w.qbk"), &bytes);
+        let on_use = BrickFileView::from_bytes_with(
+            Path::new("w.qbk"),
+            &bytes,
+            &OpenOptions { verify_checksum: true, structure: Structure::OnUse },
+        );
+        match (&whole, &on_use) {
+            (_, Err(e)) => {
+                // Refused at open: by the top checks, which the whole check runs too.
+                prop_assert_eq!(whole.as_ref().err().map(ToString::to_string), Some(e.to_string()));
+            }
+            (_, Ok(view)) => {
+                prop_assert_eq!(view.structure(), Structure::OnUse);
+                let parts = part_errors(view.file());
+                match whole {
+                    Ok(_) => prop_assert!(parts.is_empty(), "{parts:?}"),
+                    Err(e) => {
+                        let FormatErrorKind::Invalid(want) = &e.kind else {
+                            return Err(TestCaseError::fail(format!("not a schema error: {e}")));
+                        };
+                        prop_assert!(
+                            parts.iter().any(|p| p == want || matches!(
+                                (p, want),
+                                (ValidationError::BrickIdOutOfRange { entry: a, id: x, .. },
+                                 ValidationError::BrickIdOutOfRange { entry: b, id: y, .. })
+                                    if a == b && x == y
+                            )),
+                            "{want} not among {parts:?}"
+                        );
+                    }
+                }
+                // Whatever was found, the query functions stay safe on the view.
+                let b = query::bounds(view.file());
+                let _ = query::region_at(view.file(), b.min);
+            }
+        }
+    }
 }

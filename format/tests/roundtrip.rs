@@ -157,7 +157,7 @@ proptest! {
         prop_assert_eq!(view.header().format_version, FORMAT_VERSION);
         prop_assert_eq!(&view.to_brick_file().expect("deserialize"), &original);
 
-        let unchecked = BrickFileView::open_with(&path, &OpenOptions { verify_checksum: false })
+        let unchecked = BrickFileView::open_with(&path, &OpenOptions { verify_checksum: false, ..OpenOptions::default() })
             .expect("open without checksum");
         prop_assert!(!unchecked.checksum_verified());
         prop_assert_eq!(&unchecked.to_brick_file().expect("deserialize"), &original);
@@ -251,6 +251,7 @@ fn checksum_mismatch_is_reported_unless_skipped() {
         &bytes,
         &OpenOptions {
             verify_checksum: false,
+            ..OpenOptions::default()
         },
     )
     .expect("checksum skipped, archive intact");

@@ -3,9 +3,10 @@
 //! hot loops index the archive with `[]`, trusting `format::BrickFileView` validation for
 //! every index they use, so a file that validates but panics here is a validation bug.
 //!
-//! The bytes are opened twice: with the checksum on (what users get) and off, so that
-//! mutations of the payload get past the checksum and reach bytecheck and the schema
-//! checks. A validated file is then walked the way the viewer walks it: every region,
+//! The bytes are opened three times: with the checksum on and off, so that mutations of
+//! the payload get past the checksum and reach bytecheck and the schema checks, and as
+//! renders open files (`viewer::dataset::render_options`: the bricks, regions and tree
+//! checked where the walk reads them, which must then read a damaged part as empty). A validated file is then walked the way the viewer walks it: every region,
 //! its bricks, the reconstruction at its centre, point location, and a few rays per
 //! sampling strategy, with small caps so that one input stays fast.
 #![no_main]
@@ -33,9 +34,13 @@ fuzz_target!(|data: &[u8]| {
         data,
         &OpenOptions {
             verify_checksum: false,
+            ..OpenOptions::default()
         },
     );
-    for result in [checked, unchecked] {
+    // As renders open it: the structure checked where the walk reads it.
+    let on_use =
+        BrickFileView::from_bytes_with(path, data, &viewer::dataset::render_options(false));
+    for result in [checked, unchecked, on_use] {
         match result {
             Ok(view) => exercise(&view),
             Err(e) => {
@@ -132,7 +137,7 @@ fn exercise(view: &BrickFileView) {
                     iso,
                     band: Band {
                         sigma,
-                        peak: 1.6,
+                        peak_opacity: 1.6,
                         k: 2.0,
                     },
                 },
@@ -148,7 +153,7 @@ fn exercise(view: &BrickFileView) {
             if preintegrated {
                 params.preintegrated = PreIntegrated::new(&params.tf, params.delta0);
             }
-            let accel = viewer::accel::Accel::new(&vol, params.accel_key());
+            let accel = viewer::accel::Accel::new(params.accel_key());
             let mut tr = Tracer::new(&vol, &accel, params);
             for (o, e) in origins.iter().zip(ends.iter()) {
                 let d: [f64; 3] = std::array::from_fn(|a| e[a] - o[a]);

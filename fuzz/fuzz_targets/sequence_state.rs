@@ -224,9 +224,7 @@ fn render(s: &Setup, from_file: bool, flags: &Flags) {
         let (x, y): (u32, u32) = (x.trim().parse().ok()?, y.trim().parse().ok()?);
         (x < state.width && y < state.height).then_some((x, y))
     });
-    let options = format::OpenOptions {
-        verify_checksum: !flags.no_checksum,
-    };
+    let options = viewer::dataset::render_options(!flags.no_checksum);
     for (_, input) in &frames {
         if !input.exists() {
             continue;

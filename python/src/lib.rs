@@ -408,7 +408,9 @@ impl Dataset {
                     .map_err(|e| anyhow::anyhow!("plane: {e}"))?;
                 let res = res.resolve(&plane)?;
                 pl::check_memory(res, fields.len())?;
-                Ok(pl::sample(vol, &plane, res, &fields)?)
+                let samples = pl::sample(vol, &plane, res, &fields)?;
+                vol.check_structure(&path)?;
+                Ok(samples)
             })
         })?;
         let (nu, nv, nf) = (
@@ -466,7 +468,9 @@ impl Dataset {
                     None => viewer::probe::default_field(vol),
                 };
                 let names: Vec<String> = vol.fields.iter().map(|f| f.name.clone()).collect();
-                Ok((names, viewer::probe::probe(vol, &pts, gf)))
+                let probed = viewer::probe::probe(vol, &pts, gf);
+                vol.check_structure(&path)?;
+                Ok((names, probed))
             })
         })?;
         let n = probed.len();
@@ -539,6 +543,7 @@ impl RenderJob {
                 None => return Ok(None),
             },
         };
+        vol.check_structure(&path)?;
         let title = title.unwrap_or_else(|| overlay::file_title(&path));
         let rgb8 = overlay::figure(&frame, &state, vol, aov.is_some(), &title);
         let mut rgba = Vec::with_capacity(rgb8.len() / 3 * 4);
@@ -604,9 +609,7 @@ fn open(py: Python<'_>, path: PathBuf, checksum: bool) -> PyResult<Dataset> {
     let p = path.clone();
     let inner = py.allow_threads(move || {
         guarded(|| {
-            let options = format::OpenOptions {
-                verify_checksum: checksum,
-            };
+            let options = viewer::dataset::render_options(checksum);
             Ok(Opened::open_with(&p, &options)?)
         })
     })?;

@@ -44,6 +44,18 @@ const _: fn() = || {
     shared::<Dataset>();
 };
 
+/// How every command that renders opens its files: the checksum verified or not as asked,
+/// and the bricks, regions and KD-tree checked where a frame first reads them
+/// ([`format::Structure::OnUse`], see [`Volume::structure_error`]), so that opening costs
+/// the same for a billion cells as for a thousand. A command reports a part that failed
+/// after its frame ([`Volume::check_structure`]).
+pub fn render_options(verify_checksum: bool) -> OpenOptions {
+    OpenOptions {
+        verify_checksum,
+        structure: format::Structure::OnUse,
+    }
+}
+
 impl Dataset {
     /// Opens, validates (checksum included) and prepares `path` for rendering.
     pub fn open(path: &Path) -> Result<Dataset, OpenError> {

@@ -71,7 +71,11 @@ impl SurfaceBoxes {
         let per_brick: Vec<(Option<Box<[u8]>>, Aabb)> = (0..vol.brick_count() as u32)
             .into_par_iter()
             .map(|b| {
-                let br = vol.brick(b);
+                // Every brick by index, not through a region's list: checked here when
+                // the file was opened to be checked where it is read.
+                let Some(br) = vol.brick_checked(b) else {
+                    return (None, Aabb::default());
+                };
                 let [nx, ny, nz] = br.dims;
                 if below_only[b as usize] {
                     // The box the loop below would grow from every cell, from its corners.

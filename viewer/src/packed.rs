@@ -42,6 +42,17 @@ impl Packed {
     }
 }
 
+impl Packed {
+    /// A tree without regions: what a view of a tree that failed its check walks.
+    pub(crate) fn empty() -> Packed {
+        Packed(RangedTree {
+            root: format::kd::EMPTY,
+            inner: Vec::new(),
+            leaves: Vec::new(),
+        })
+    }
+}
+
 impl format::kd::KdTree for Packed {
     fn node_count(&self) -> usize {
         format::kd::KdTree::node_count(&self.0)

@@ -329,8 +329,10 @@ fn survey_with(
     let mut bounds: Option<([f64; 3], [f64; 3])> = None;
     let mut own: Vec<FieldRange> = Vec::new();
     let mut summaries = Vec::new();
+    // Only the bounds and the fields are read: nothing that grows with the data.
     let options = OpenOptions {
         verify_checksum: false,
+        structure: format::Structure::OnUse,
     };
     for (frame, path) in frames {
         let Ok(view) = format::BrickFileView::open_with(path, &options) else {

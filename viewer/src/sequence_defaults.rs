@@ -253,8 +253,10 @@ pub fn frame_surfaces(
     rule: IsoRule,
     info: &SequenceInfo,
 ) -> Framed {
+    // Framing reads every brick: checked at open.
     let options = format::OpenOptions {
         verify_checksum: false,
+        structure: format::Structure::AtOpen,
     };
     // Per frame with a surface: its boxes (world frame) when there are at most
     // `MAX_BOXES` (more make the total pass it anyway), their count and their union.

@@ -17,7 +17,7 @@
 //! [`Volume::region_at`]), a byte a region of step width ([`Volume::step_width`]), and,
 //! for tools and tests only, the table of every region's box ([`Volume::region`]).
 
-use std::sync::atomic::AtomicU8;
+use std::sync::atomic::{AtomicU64, AtomicU8, Ordering};
 use std::sync::{Arc, OnceLock};
 
 use format::kd::Descent;
@@ -144,6 +144,25 @@ pub struct Volume<'a> {
     /// for a region without bricks, 0 before it was asked (or for a level past 253,
     /// read each time). One byte a region, made on first use (16 MB for a billion cells).
     finest_levels: OnceLock<Box<[AtomicU8]>>,
+    /// For a view opened with [`format::Structure::OnUse`], what has been checked so far;
+    /// `None` when every index was checked at open.
+    checks: Option<Checks>,
+}
+
+/// The checks of a view opened with [`format::Structure::OnUse`], run where the volume
+/// first reads each part: a region (its list of bricks and those bricks) before its
+/// bricks are read, the KD-tree before it is packed. A part that fails reads as empty
+/// (nothing of it is indexed), and the first failure is kept for the command to report
+/// after its frame ([`Volume::structure_error`]). So opening costs the same for any size,
+/// and a frame checks only the regions it reads.
+#[derive(Default)]
+struct Checks {
+    /// One bit a region, set once its check passed (2 MB for a billion cells).
+    regions: OnceLock<Box<[AtomicU64]>>,
+    /// Whether the KD-tree passed, once checked.
+    kd: OnceLock<bool>,
+    /// The first check that failed.
+    broken: OnceLock<format::validate::ValidationError>,
 }
 
 /// [`Volume::finest_levels`] of a region that lists no brick.
@@ -244,11 +263,20 @@ impl<'a> Volume<'a> {
             .iter()
             .map(|l| l.cell_width.to_native())
             .collect();
-        let finest_w = file
-            .bricks
-            .iter()
-            .map(|br| br.cell_width.to_native())
-            .fold(f64::INFINITY, f64::min);
+        // The finest width of a level that has bricks (a brick's width is its level's to
+        // 1e-3, see `format::validate::check_brick`): read from the levels, not the
+        // bricks, so that making a volume reads nothing that grows with the data.
+        let finest_of = |with_bricks: bool| {
+            file.levels
+                .iter()
+                .filter(|l| !with_bricks || l.bricks.to_native() > 0)
+                .map(|l| l.cell_width.to_native())
+                .fold(f64::INFINITY, f64::min)
+        };
+        let finest_w = match finest_of(true) {
+            w if w.is_finite() => w,
+            _ => finest_of(false),
+        };
         let reach = bmin
             .iter()
             .chain(&bmax)
@@ -274,6 +302,7 @@ impl<'a> Volume<'a> {
             locate: OnceLock::new(),
             finest_levels: OnceLock::new(),
             finest_w: if finest_w.is_finite() { finest_w } else { 1.0 },
+            checks: (view.structure() == format::Structure::OnUse).then(Checks::default),
         })
     }
 
@@ -301,21 +330,29 @@ impl<'a> Volume<'a> {
         }
         let (g, p) = self
             .locate
-            .get_or_init(|| Some((f, Arc::new(Packed::build(self.file, f)))))
+            .get_or_init(|| Some((f, Arc::new(self.pack(f)))))
             .as_ref()?;
         Some(if *g == f {
             Arc::clone(p)
         } else {
-            Arc::new(Packed::build(self.file, f))
+            Arc::new(self.pack(f))
         })
+    }
+
+    /// The file's tree packed with field `f`'s ranges, or an empty tree when the tree
+    /// fails its check ([`Volume::kd_checked`]).
+    fn pack(&self, f: usize) -> Packed {
+        if self.kd_checked() {
+            Packed::build(self.file, f)
+        } else {
+            Packed::empty()
+        }
     }
 
     /// The point-location tree (the first packed tree, or field 0's), packed on first use.
     pub(crate) fn locate_tree(&self) -> Option<&Packed> {
         self.locate
-            .get_or_init(|| {
-                (!self.fields.is_empty()).then(|| (0, Arc::new(Packed::build(self.file, 0))))
-            })
+            .get_or_init(|| (!self.fields.is_empty()).then(|| (0, Arc::new(self.pack(0)))))
             .as_ref()
             .map(|(_, p)| &**p)
     }
@@ -381,6 +418,9 @@ impl<'a> Volume<'a> {
             finest_w: self.finest_w,
         };
         let mut table = vec![empty; file.regions.len()];
+        if !self.kd_checked() {
+            return table;
+        }
         let b = &file.bounds;
         let (lo, hi): ([f64; 3], [f64; 3]) = (
             std::array::from_fn(|a| b.min[a].to_native()),
@@ -542,12 +582,99 @@ impl<'a> Volume<'a> {
             .unwrap_or(self.finest_w)
     }
 
-    /// Bricks of region `r`.
+    /// Bricks of region `r` (none for a region that failed its check, see [`Checks`]).
     #[inline]
     pub fn region_brick_ids(&self, r: usize) -> &'a [Archived<u32>] {
+        if !self.region_checked(r) {
+            return &[];
+        }
         let reg = &self.file.regions[r];
         let start = reg.bricks_start.to_native() as usize;
         &self.file.region_bricks[start..start + reg.bricks_len.to_native() as usize]
+    }
+
+    /// Whether region `r`'s list and its bricks may be indexed: checked at open, or by
+    /// the first call for it ([`Checks`]).
+    #[inline(always)]
+    fn region_checked(&self, r: usize) -> bool {
+        let Some(checks) = &self.checks else {
+            return true;
+        };
+        let bits = checks.regions.get_or_init(|| {
+            (0..self.file.regions.len().div_ceil(64))
+                .map(|_| AtomicU64::new(0))
+                .collect()
+        });
+        match bits.get(r / 64) {
+            Some(w) if w.load(Ordering::Relaxed) & (1 << (r % 64)) != 0 => true,
+            Some(w) => self.check_region(checks, w, r),
+            None => false,
+        }
+    }
+
+    /// Checks region `r` (its bit in `word`) the first time it is read.
+    #[cold]
+    #[inline(never)]
+    fn check_region(&self, checks: &Checks, word: &AtomicU64, r: usize) -> bool {
+        match format::validate::check_region(self.file, r) {
+            Ok(()) => {
+                word.fetch_or(1 << (r % 64), Ordering::Relaxed);
+                true
+            }
+            Err(e) => {
+                let _ = checks.broken.set(e);
+                false
+            }
+        }
+    }
+
+    /// Whether the KD-tree may be walked with the file's regions: checked at open, or on
+    /// the first call ([`Checks`]); a tree that failed reads as empty.
+    pub(crate) fn kd_checked(&self) -> bool {
+        let Some(checks) = &self.checks else {
+            return true;
+        };
+        *checks
+            .kd
+            .get_or_init(|| match format::validate::check_kd(self.file) {
+                Ok(()) => true,
+                Err(e) => {
+                    let _ = checks.broken.set(e);
+                    false
+                }
+            })
+    }
+
+    /// Brick `b` in the local frame, or `None` when it fails its check: for readers that
+    /// go through the bricks by index, not through a region's list (whose bricks
+    /// [`Volume::region_brick_ids`] checked).
+    pub fn brick_checked(&self, b: u32) -> Option<BrickN> {
+        if let Some(checks) = &self.checks {
+            if let Err(e) = format::validate::check_brick(self.file, b as usize) {
+                let _ = checks.broken.set(e);
+                return None;
+            }
+        }
+        Some(self.brick(b))
+    }
+
+    /// The first part of the file that failed its check since the view was opened with
+    /// [`format::Structure::OnUse`] (it read as empty): every command reports it after its
+    /// frame, as an open would have. `None` when all read so far passed.
+    pub fn structure_error(&self) -> Option<&format::validate::ValidationError> {
+        self.checks.as_ref().and_then(|c| c.broken.get())
+    }
+
+    /// [`Volume::structure_error`] as the error an open that checked everything would
+    /// have given for the file at `path`, for commands to report after their frames.
+    pub fn check_structure(&self, path: &std::path::Path) -> Result<(), format::FormatError> {
+        match self.structure_error() {
+            None => Ok(()),
+            Some(e) => Err(format::FormatError {
+                path: path.to_path_buf(),
+                kind: format::FormatErrorKind::Invalid(e.clone()),
+            }),
+        }
     }
 
     /// `[min, max]` of field `f` over region `r`.
@@ -567,7 +694,7 @@ impl<'a> Volume<'a> {
         }
         match self.locate_tree() {
             Some(packed) => format::kd::locate(packed, p, self.frame),
-            None => format::kd::locate(&format::kd::file_tree(self.file), p, self.frame),
+            None => format::kd::locate(&self.archived_tree(), p, self.frame),
         }
     }
 
@@ -583,11 +710,23 @@ impl<'a> Volume<'a> {
         let hi: [f64; 3] = std::array::from_fn(|a| b.max[a].to_native());
         let found = match self.locate_tree() {
             Some(packed) => format::kd::locate_cell(packed, p, lo, hi, self.frame),
-            None => {
-                format::kd::locate_cell(&format::kd::file_tree(self.file), p, lo, hi, self.frame)
-            }
+            None => format::kd::locate_cell(&self.archived_tree(), p, lo, hi, self.frame),
         };
         found.map(|(region, min, max)| RegionBox { region, min, max })
+    }
+
+    /// The file's own tree, for a file without fields (which packs none); empty when the
+    /// tree fails its check ([`Volume::kd_checked`]).
+    fn archived_tree(&self) -> format::kd::Stored<'a, format::ArchivedKdNode> {
+        if self.kd_checked() {
+            format::kd::file_tree(self.file)
+        } else {
+            format::kd::Stored {
+                root: format::kd::EMPTY,
+                nodes: &[],
+                axes: &[],
+            }
+        }
     }
 
     /// The KD root's cell in the local frame as every walk of the tree starts it: the
@@ -610,7 +749,7 @@ impl<'a> Volume<'a> {
     pub(crate) fn descent(&self, p: [f64; 3]) -> Descent {
         match self.locate_tree() {
             Some(packed) => Descent::of(packed, p, self.frame),
-            None => Descent::of(&format::kd::file_tree(self.file), p, self.frame),
+            None => Descent::of(&self.archived_tree(), p, self.frame),
         }
     }
 
@@ -622,7 +761,7 @@ impl<'a> Volume<'a> {
         }
         match self.locate_tree() {
             Some(packed) => near.locate(packed, q, self.frame),
-            None => near.locate(&format::kd::file_tree(self.file), q, self.frame),
+            None => near.locate(&self.archived_tree(), q, self.frame),
         }
     }
 

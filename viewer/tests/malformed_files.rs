@@ -232,3 +232,124 @@ fn a_brick_far_from_the_data_walks() {
     }
     assert!(opened > 0, "no file with a far brick opened");
 }
+
+/// Opens `file` as every render does ([`qbricks_viewer::dataset::render_options`]): only
+/// what does not grow with the data is checked at open, the rest where it is read.
+fn open_on_use(file: &BrickFile, name: &str) -> Result<BrickFileView, format::FormatError> {
+    let bytes = format::writer::to_bytes(file).expect("to_bytes");
+    BrickFileView::from_bytes_with(
+        Path::new(name),
+        &bytes,
+        &qbricks_viewer::dataset::render_options(true),
+    )
+}
+
+/// A frame of `vol` in `mode` with the `exact` or `bisect` default strategy, 24² pixels,
+/// the default camera.
+fn frame(vol: &Volume, mode: Mode) -> qbricks_viewer::render::Frame {
+    let mut state = qbricks_viewer::view_state::ViewState::default_for_volume(vol);
+    state.width = 24;
+    state.height = 24;
+    state.mode = mode;
+    state.strategy = match mode {
+        Mode::Iso => Strategy::Exact,
+        Mode::Dvr => Strategy::Bisect,
+    };
+    let meshes = qbricks_viewer::mesh::Meshes::empty();
+    let scene = qbricks_viewer::scene::Scene::new(vol, &state, &meshes).expect("scene");
+    qbricks_viewer::render::render(&scene)
+}
+
+/// Damages of a file's bricks, regions and KD-tree that a faulty writer could leave, one
+/// each, on a part that frames read.
+fn damaged_files() -> Vec<(&'static str, BrickFile)> {
+    let base = small_volume();
+    let b = base.region_bricks[0] as usize;
+    let mut out = Vec::new();
+    let mut f = base.clone();
+    f.bricks[b].first_value = f.fields[0].values.len() as u64;
+    out.push(("a brick's values past the arrays", f));
+    let mut f = base.clone();
+    f.bricks[b].level = 7;
+    out.push(("a brick's level that does not exist", f));
+    let mut f = base.clone();
+    f.bricks[b].cell_width *= 3.0;
+    f.bricks[b].inv_cell_width = 1.0 / f.bricks[b].cell_width;
+    out.push(("a brick's width not its level's", f));
+    let mut f = base.clone();
+    let last = f.region_bricks.len() - 1;
+    f.region_bricks[last] = f.bricks.len() as u32 + 5;
+    out.push(("a region's entry naming no brick", f));
+    let mut f = base.clone();
+    f.regions[1].bricks_len = f.region_bricks.len() as u32 + 1;
+    out.push(("a region's list past the entries", f));
+    let mut f = base.clone();
+    f.kd_nodes[0].right = f.kd_nodes.len() as u32 + 3;
+    out.push(("a KD child that does not exist", f));
+    let mut f = base.clone();
+    f.kd_nodes[0].split = f64::NAN;
+    out.push(("a KD split that is NaN", f));
+    let mut f = base;
+    f.kd_axes[0] = 5;
+    out.push(("a KD axis past z", f));
+    out
+}
+
+/// A file opened as renders open it costs nothing that grows with the data to open, so a
+/// damaged brick, region or tree opens; the frames that read the damage read that part as
+/// empty, never panic, and leave the very error an open that checks everything gives,
+/// for the command to report (`Volume::check_structure`, naming the file).
+#[test]
+fn damage_opened_to_be_checked_on_use_is_found_where_frames_read_it() {
+    for (what, file) in damaged_files() {
+        let Err(whole) = open(&file, "damaged.qbk") else {
+            panic!("{what}: the whole check passed");
+        };
+        let FormatErrorKind::Invalid(want) = &whole.kind else {
+            panic!("{what}: {whole}");
+        };
+        let view = open_on_use(&file, "damaged.qbk")
+            .unwrap_or_else(|e| panic!("{what}: refused at open: {e}"));
+        let vol = Volume::new(&view).expect("volume");
+        assert!(
+            vol.structure_error().is_none(),
+            "{what}: found before any read"
+        );
+        // Frames first, then everything a walk reads.
+        for mode in [Mode::Iso, Mode::Dvr] {
+            let _ = frame(&vol, mode);
+        }
+        walk(&view);
+        let got = vol
+            .structure_error()
+            .unwrap_or_else(|| panic!("{what}: not found"));
+        assert_eq!(got, want, "{what}");
+        let msg = vol
+            .check_structure(Path::new("damaged.qbk"))
+            .expect_err("reported")
+            .to_string();
+        assert_eq!(msg, whole.to_string(), "{what}");
+    }
+}
+
+/// Checked where it is read or all at open, an intact file renders the same frames, bit
+/// for bit, and reports nothing.
+#[test]
+fn an_intact_file_renders_the_same_checked_on_use() {
+    let file = small_volume();
+    let whole = open(&file, "intact.qbk").expect("open");
+    let on_use = open_on_use(&file, "intact.qbk").expect("open on use");
+    assert_eq!(on_use.structure(), format::Structure::OnUse);
+    let (a, b) = (
+        Volume::new(&whole).expect("volume"),
+        Volume::new(&on_use).expect("volume"),
+    );
+    assert_eq!(a.finest_w.to_bits(), b.finest_w.to_bits());
+    for mode in [Mode::Iso, Mode::Dvr] {
+        let (fa, fb) = (frame(&a, mode), frame(&b, mode));
+        assert!(fa.hits > 0, "{mode:?}: nothing seen");
+        assert!(fa == fb, "{mode:?}");
+    }
+    walk(&on_use);
+    assert!(b.structure_error().is_none());
+}

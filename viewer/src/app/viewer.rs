@@ -847,7 +847,35 @@ impl ViewerApp {
             self.frame_job = Some(self.generation);
         }
         let received = self.frames.receive(&ctx);
+        if self.take_structure_error(&ctx) {
+            return;
+        }
         self.after_frame(&ctx, received);
+    }
+
+    /// A part of the file that failed its check when a frame read it (files are opened to
+    /// be checked where they are read, see `dataset::render_options`): shown as an open's
+    /// error would be, and a scripted run fails with it and writes nothing, as `render`
+    /// does. `true` when the window is closing for it.
+    fn take_structure_error(&mut self, ctx: &egui::Context) -> bool {
+        let Some(doc) = &self.document.doc else {
+            return false;
+        };
+        let Err(e) = doc.dataset.volume().check_structure(&doc.path) else {
+            return false;
+        };
+        let message = e.to_string();
+        if self.error.as_deref() != Some(message.as_str()) {
+            self.error = Some(message);
+        }
+        if self.script.is_none() {
+            return false;
+        }
+        if let Ok(mut g) = self.outcome.lock() {
+            *g = Some(Err(anyhow::Error::from(e)));
+        }
+        ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+        true
     }
 
     /// Playback and the script, once the frame's image is taken.

@@ -425,3 +425,52 @@ fn cutting_flags_render_and_explain_a_pixel() {
         assert!(!out.exists(), "{bad:?} wrote a file");
     }
 }
+
+/// `render` opens a file checking only what does not grow with the data, and a part a
+/// frame reads that fails its check fails the render as an open would have: the exit
+/// code of a file refused at open, the
+/// file and the part named, no picture written. `info` still checks everything at open.
+#[test]
+fn render_refuses_a_damaged_part_it_reads_and_writes_nothing() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let q = |p: [f64; 3]| (p[0] / 4.0).sin() * (p[1] / 5.0).cos() * 0.1;
+    let base = testvol::nested(8, [0.0; 3], &[("q", &q)], 8);
+    let b = base.region_bricks[0] as usize;
+    let mut brick = base.clone();
+    brick.bricks[b].first_value = brick.fields[0].values.len() as u64;
+    let mut tree = base;
+    tree.kd_axes[0] = 7;
+    for (name, file, part) in [
+        ("brick.qbk", brick, format!("bricks[{b}]")),
+        ("tree.qbk", tree, "kd_axes[0]".to_string()),
+    ] {
+        let path = dir.path().join(name);
+        format::writer::write(&path, &file).expect("write");
+        let png = dir.path().join(format!("{name}.png"));
+        let (code, _, err) = run(
+            &[
+                "render",
+                path.to_str().expect("utf8"),
+                "-o",
+                png.to_str().expect("utf8"),
+                "--width",
+                "32",
+                "--height",
+                "32",
+            ],
+            dir.path(),
+        );
+        assert_ne!(code, 0, "{name}: {err}");
+        assert!(
+            err.contains(name) && err.contains(&part) && err.contains("archive is invalid"),
+            "{name}: {err}"
+        );
+        assert!(!png.exists(), "{name}: a picture was written");
+        let (info_code, _, err) = run(&["info", path.to_str().expect("utf8")], dir.path());
+        assert_eq!(
+            info_code, code,
+            "{name}: info opened it, or failed otherwise: {err}"
+        );
+        assert!(err.contains(&part), "{name}: {err}");
+    }
+}

@@ -33,11 +33,10 @@ fn resolve_file(file: Option<PathBuf>) -> anyhow::Result<PathBuf> {
     }
 }
 
-/// Opens and validates a `.qbk` file; `checksum`: verify the payload checksum too.
+/// Opens and validates a `.qbk` file as every render does; `checksum`: verify the payload
+/// checksum too.
 fn open_volume(path: &std::path::Path, checksum: bool) -> anyhow::Result<format::BrickFileView> {
-    let options = format::OpenOptions {
-        verify_checksum: checksum,
-    };
+    let options = viewer::dataset::render_options(checksum);
     format::BrickFileView::open_with(path, &options).map_err(anyhow::Error::from)
 }
 
@@ -143,6 +142,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     })
     .with_context(|| format!("{}", path.display()))?;
     bar.finish_and_clear();
+    vol.check_structure(&path)?;
     if let Some(p) = &args.plot {
         let title = format!(
             "{} — {} {}x{}, {} threads",

@@ -22,6 +22,7 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let options = OpenOptions {
         verify_checksum: !args.no_checksum,
+        structure: format::Structure::AtOpen,
     };
     let view = BrickFileView::open_with(&args.file, &options)?;
     let info = qbricks_viewer::info::info(&view);

@@ -91,11 +91,11 @@ pub fn resolve_file(file: Option<PathBuf>) -> anyhow::Result<PathBuf> {
     }
 }
 
-/// Opens and validates a `.qbk` file; `checksum`: verify the payload checksum too.
+/// Opens and validates a `.qbk` file as every render does
+/// ([`qbricks_viewer::dataset::render_options`]); `checksum`: verify the payload checksum
+/// too.
 pub fn open_volume(path: &Path, checksum: bool) -> anyhow::Result<format::BrickFileView> {
-    let options = format::OpenOptions {
-        verify_checksum: checksum,
-    };
+    let options = qbricks_viewer::dataset::render_options(checksum);
     format::BrickFileView::open_with(path, &options).map_err(anyhow::Error::from)
 }
 
@@ -177,6 +177,7 @@ pub fn run(args: Args, path: PathBuf, ranks: &Ranks) -> anyhow::Result<()> {
     if let Some(px) = &args.pixel {
         let (x, y) = parse_pixel(px, state.width, state.height)?;
         let trace = renderer.trace_pixel(&scene, x, y);
+        vol.check_structure(&path)?;
         writeln!(
             QuietStdout::new(),
             "{}",
@@ -188,6 +189,7 @@ pub fn run(args: Args, path: PathBuf, ranks: &Ranks) -> anyhow::Result<()> {
     }
 
     let (frame, ms) = render_frame(&renderer, &scene, &args);
+    vol.check_structure(&path)?;
     let title = args.title.clone().unwrap_or_else(|| file_title(&path));
     let picture = overlay::figure(&frame, &state, &vol, args.aov.is_some(), &title);
     write_outputs(&args, &state, Some((&frame, picture)))?;
@@ -284,6 +286,8 @@ fn run_over_ranks(
         last = frame_of(&scene, &owned)?;
         times.push(t.elapsed().as_secs_f64() * 1e3);
     }
+    // A part of the file that failed its check on any rank fails the run on every rank.
+    ranks.agree(vol.check_structure(path).map_err(anyhow::Error::from))?;
     // The other ranks are done: rank 0 has the frame.
     let Some((frame, reports)) = last else {
         return Ok(());

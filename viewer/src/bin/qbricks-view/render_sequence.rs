@@ -152,9 +152,7 @@ fn render_one(
     if !input.exists() {
         bail!("{}: no such file", input.display());
     }
-    let options = format::OpenOptions {
-        verify_checksum: !args.no_checksum,
-    };
+    let options = qbricks_viewer::dataset::render_options(!args.no_checksum);
     let data = Dataset::open_with(input, &options)?;
     let vol = data.volume();
     // `--colour-range visible` fits each frame's map to what that frame shows.
@@ -173,6 +171,7 @@ fn render_one(
     };
     let scene = Scene::new(vol, state, meshes).with_context(|| input.display().to_string())?;
     let (frame, ms) = render_frame(renderer, &scene, args);
+    vol.check_structure(input)?;
     let title = args
         .title
         .clone()
