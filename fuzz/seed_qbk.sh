@@ -3,11 +3,12 @@
 # so that the fuzzer starts from archives that validate and mutates real layouts rather
 # than having to discover rkyv's structure from nothing.
 #
-# Usage (from the repository root, after `cargo build --release`):
+# Usage (from the repository root, after `cargo build --release --workspace`):
 #   sh fuzz/seed_qbk.sh [corpus dir, default fuzz/corpus/qbk_open]
 set -eu
 out=${1:-fuzz/corpus/qbk_open}
 bake=${BAKE:-./target/release/qbricks-bake}
+lab=${LAB:-./target/release/qbricks-lab}
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 mkdir -p "$out"
@@ -15,7 +16,7 @@ mkdir -p "$out"
 seed() { # name, synth arguments...
     name=$1
     shift
-    "$bake" synth "$@" -o "$tmp/$name.vdb" >/dev/null
+    "$lab" synth "$@" -o "$tmp/$name.vdb" >/dev/null
     "$bake" bake "$tmp/$name.vdb" -o "$out/$name.qbk" >/dev/null
 }
 

@@ -5,18 +5,19 @@
 # writes, and command-line flags, each seed `MANIFEST 0xFF STATE 0xFF FLAGS` as the target
 # reads it (an empty part: no manifest, no --state, no flags). About 3 KB each.
 #
-# Usage (from the repository root, after `cargo build --release`):
+# Usage (from the repository root, after `cargo build --release --workspace`):
 #   sh fuzz/seed_sequence_state.sh [corpus dir, default fuzz/corpus/sequence_state]
 set -eu
 out=${1:-fuzz/corpus/sequence_state}
 bake=${BAKE:-./target/release/qbricks-bake}
 view=${VIEW:-./target/release/qbricks-view}
+lab=${LAB:-./target/release/qbricks-lab}
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 mkdir -p "$out"
 
 # Frames 1 and 4 bake, 2 is not a VDB file (failed), 3 is missing.
-"$bake" synth ring-plume --n0 8 --frames 4 -o "$tmp/in_####.vdb" >/dev/null
+"$lab" synth ring-plume --n0 8 --frames 4 -o "$tmp/in_####.vdb" >/dev/null
 rm "$tmp/in_0003.vdb"
 echo 'not a VDB file' >"$tmp/in_0002.vdb"
 "$bake" bake "$tmp/in_####.vdb" -o "$tmp/out_####.qbk" >/dev/null 2>&1 || true

@@ -171,13 +171,15 @@ pub fn region_range(file: &ArchivedBrickFile, r: u32, f: usize) -> Option<(f32, 
     Some((range.min.to_native(), range.max.to_native()))
 }
 
-/// Number of cells of a brick.
+/// Number of cells of a brick, `u64::MAX` for dims whose product a `u64` cannot hold
+/// (three `u32`s can: such a brick fails `validate::check_brick`, but a view whose bricks
+/// are checked where they are read may still be summarised, found by the `qbk_open` fuzz
+/// target).
 pub fn brick_cells(brick: &ArchivedBrick) -> u64 {
     brick
         .dims
         .iter()
-        .map(|d| u64::from(d.to_native()))
-        .product()
+        .fold(1u64, |n, d| n.saturating_mul(u64::from(d.to_native())))
 }
 
 /// Values of field `field` over the cells of brick `brick` (x fastest, see

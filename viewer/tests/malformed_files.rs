@@ -24,7 +24,11 @@ fn small_volume() -> BrickFile {
 /// What the viewer does with an open file, in small: every region, its bricks, the
 /// reconstruction at its centre, and a few rays per strategy (as the fuzz target does).
 fn walk(view: &BrickFileView) {
-    let vol = Volume::new(view).expect("volume");
+    walk_volume(&Volume::new(view).expect("volume"), view);
+}
+
+/// [`walk`] of the volume `vol` of `view`.
+fn walk_volume(vol: &Volume, view: &BrickFileView) {
     let file = view.file();
     for r in 0..vol.region_count() {
         let reg = vol.region(r);
@@ -50,10 +54,10 @@ fn walk(view: &BrickFileView) {
         (Mode::Iso, Strategy::Uniform),
         (Mode::Dvr, Strategy::Bisect),
     ] {
-        let mut params = testvol::params(&vol, strategy, 0.5, mode, 4.0);
+        let mut params = testvol::params(vol, strategy, 0.5, mode, 4.0);
         params.tf.band.sigma = 0.5;
         let accel = qbricks_viewer::accel::Accel::new(params.accel_key());
-        let mut tr = Tracer::new(&vol, &accel, params);
+        let mut tr = Tracer::new(vol, &accel, params);
         match mode {
             Mode::Iso => {
                 let _ = tr.iso(o, d, 0.0, f64::INFINITY, 0.37);
@@ -107,6 +111,26 @@ fn brick_dims_overflowing_the_cell_count_are_refused() {
             Ok(view) => panic!("{dims:?}: opened ({view:?})"),
         }
     }
+}
+
+/// Fuzz crash 1 again, for a file opened as renders open it (its bricks checked where they
+/// are read): the open succeeds, and the file's summary (`info`, Python's `info_json`)
+/// counts the brick's cells as `u64::MAX` instead of overflowing (a panic in a build with
+/// overflow checks, a wrapped count of 0 without).
+#[test]
+fn brick_dims_overflowing_the_cell_count_are_summarised_saturated() {
+    let mut file = small_volume();
+    let b = file.region_bricks[0] as usize;
+    file.bricks[b].dims = [1 << 22, 1 << 21, 1 << 21];
+    let view = open_on_use(&file, "overflow.qbk").expect("opens: checked where read");
+    let info = qbricks_viewer::info::info(&view);
+    assert_eq!(info.cells, u64::MAX);
+    let vol = Volume::new(&view).expect("volume");
+    walk_volume(&vol, &view);
+    assert!(matches!(
+        vol.structure_error(),
+        Some(ValidationError::BrickTooManyCells { brick, .. }) if *brick == b
+    ));
 }
 
 /// Fuzz timeout 1: a level's cell width of 1.1e-12 under bricks of width 1 (the fuzzer
@@ -319,7 +343,7 @@ fn damage_opened_to_be_checked_on_use_is_found_where_frames_read_it() {
         for mode in [Mode::Iso, Mode::Dvr] {
             let _ = frame(&vol, mode);
         }
-        walk(&view);
+        walk_volume(&vol, &view);
         let got = vol
             .structure_error()
             .unwrap_or_else(|| panic!("{what}: not found"));
