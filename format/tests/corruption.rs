@@ -306,3 +306,38 @@ proptest! {
         }
     }
 }
+
+/// A view opened without the checksum verifies it later, mapped or in memory, with the
+/// error an open with the checksum gives: what a command that hashes the file beside its
+/// frames relies on.
+#[test]
+fn a_checksum_verified_after_open_is_the_opens() {
+    let good = small_file();
+    // One value's lowest mantissa bit: the archive stays valid, the checksum fails.
+    let view = BrickFileView::from_bytes(Path::new("good.qbk"), &good).expect("valid");
+    let values = &view.file().fields[0].values;
+    let probe = values[values.len() / 2].to_native().to_le_bytes();
+    let at = good
+        .windows(4)
+        .position(|w| w == probe)
+        .expect("the value's bytes are in the file");
+    let mut flipped = good.clone();
+    flipped[at] ^= 1;
+    let dir = tempfile::tempdir().expect("dir");
+    for (bytes, ok) in [(&good, true), (&flipped, false)] {
+        let path = dir.path().join(if ok { "good.qbk" } else { "flipped.qbk" });
+        std::fs::write(&path, bytes).expect("write");
+        let at_open = BrickFileView::open(&path)
+            .map(|_| ())
+            .map_err(|e| e.to_string());
+        let mapped = BrickFileView::open_with(&path, &NO_CHECKSUM).expect("opens");
+        assert!(mapped.is_mapped());
+        let owned = BrickFileView::from_bytes_with(&path, bytes, &NO_CHECKSUM).expect("opens");
+        for view in [&mapped, &owned] {
+            assert!(!view.checksum_verified());
+            let later = view.verify_checksum().map_err(|e| e.to_string());
+            assert_eq!(later, at_open, "{}", path.display());
+            assert_eq!(later.is_ok(), ok);
+        }
+    }
+}

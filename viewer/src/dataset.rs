@@ -56,6 +56,35 @@ pub fn render_options(verify_checksum: bool) -> OpenOptions {
     }
 }
 
+/// Runs `work` while the checksum of `view` is verified on a thread of its own (when
+/// `verify`, and not verified at open already): a command that opens a file without the
+/// checksum and hands this the frames it renders costs the larger of hash and frames, not
+/// their sum, and opening costs the same at any size. `work` must write nothing: its
+/// result is returned only when the checksum matches, else the checksum's error (the one
+/// an open with the checksum gives), so a damaged file gives no output.
+pub fn beside_checksum<R, E: From<format::FormatError>>(
+    view: &BrickFileView,
+    verify: bool,
+    work: impl FnOnce() -> Result<R, E>,
+) -> Result<R, E> {
+    if !verify || view.checksum_verified() {
+        return work();
+    }
+    std::thread::scope(|s| {
+        let sum = std::thread::Builder::new()
+            .name("qbricks-checksum".to_string())
+            .spawn_scoped(s, || view.verify_checksum());
+        let out = work();
+        let checked = match sum {
+            Ok(handle) => handle.join().unwrap_or_else(|_| view.verify_checksum()),
+            // No thread to be had: verify here.
+            Err(_) => view.verify_checksum(),
+        };
+        checked?;
+        out
+    })
+}
+
 impl Dataset {
     /// Opens, validates (checksum included) and prepares `path` for rendering.
     pub fn open(path: &Path) -> Result<Dataset, OpenError> {

@@ -197,6 +197,20 @@ fn render_no_checksum_opens_a_file_whose_payload_checksum_fails() {
     assert_eq!(code, 2, "{stderr}");
     assert!(stderr.contains("checksum"), "{stderr}");
     assert!(!dir.path().join("x.png").exists());
+    // The checksum is verified beside the frame: nothing else is written either, not the
+    // view state, the report or a pixel's trace.
+    let more = ["--save-state", "st.json", "--json", "--pixel", "3,3"];
+    let (code, stdout, stderr) = run(&[&args[..], &more[..]].concat(), dir.path());
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains("flipped.qbk") && stderr.contains("checksum"),
+        "{stderr}"
+    );
+    assert!(stdout.is_empty(), "{stdout}");
+    assert!(!dir.path().join("x.png").exists() && !dir.path().join("st.json").exists());
+    let pixel = ["render", "flipped.qbk", "--pixel", "3,3"];
+    let (code, stdout, stderr) = run(&pixel, dir.path());
+    assert_eq!((code, stdout.as_str()), (2, ""), "{stderr}");
 
     let (code, _, stderr) = run(&[&args[..], &["--no-checksum"]].concat(), dir.path());
     assert_eq!(code, 0, "{stderr}");

@@ -127,20 +127,73 @@ pub fn target(args: &Args) -> anyhow::Result<Target> {
 pub fn run(args: Args, path: PathBuf, ranks: &Ranks) -> anyhow::Result<()> {
     ranks.agree(check_args(&args, &path, ranks))?;
 
-    // Open.
+    // Open. In one process the checksum (it reads every byte) is verified beside the view's
+    // set-up and frames, and nothing is written before it matched; over MPI ranks each
+    // rank verifies it at open, so that all agree before the frame.
+    let beside = !args.no_checksum && !ranks.is_parallel();
     let t_open = Instant::now();
-    let view = ranks.agree(open_volume(&path, !args.no_checksum))?;
+    let view = ranks.agree(open_volume(&path, !args.no_checksum && !beside))?;
     let vol = ranks.agree(Volume::new(&view).with_context(|| format!("{}", path.display())))?;
     let open_ms = t_open.elapsed().as_secs_f64() * 1e3;
 
+    let rendered = qbricks_viewer::dataset::beside_checksum(&view, beside, || {
+        render_file(&args, &path, ranks, &vol, open_ms)
+    })?;
+    let Some(Rendered {
+        state,
+        trace,
+        frame,
+        threads,
+    }) = rendered
+    else {
+        return Ok(());
+    };
+    if let Some(trace) = trace {
+        writeln!(
+            QuietStdout::new(),
+            "{}",
+            serde_json::to_string_pretty(&trace)?
+        )?;
+    }
+    let Some((frame, ms, picture)) = frame else {
+        return write_outputs(&args, &state, None);
+    };
+    write_outputs(&args, &state, Some((&frame, picture)))?;
+    if args.json {
+        let report = FrameReport::new(&frame, &state, ms, open_ms, threads);
+        writeln!(QuietStdout::new(), "{}", serde_json::to_string(&report)?)?;
+    }
+    Ok(())
+}
+
+/// What a render of one file in one process writes, made before anything is written.
+struct Rendered {
+    state: ViewState,
+    /// `--pixel`: the pixel's trace.
+    trace: Option<qbricks_viewer::render::PixelTrace>,
+    /// The frame, its median time (ms) and the picture; `None` for `--pixel` alone.
+    frame: Option<(Frame, f64, Vec<u8>)>,
+    /// The threads it was rendered on.
+    threads: usize,
+}
+
+/// The view of `path` and its frames, writing nothing (see [`run`]); over MPI ranks the
+/// whole run, which writes on rank 0 (`None`).
+fn render_file(
+    args: &Args,
+    path: &Path,
+    ranks: &Ranks,
+    vol: &Volume,
+    open_ms: f64,
+) -> anyhow::Result<Option<Rendered>> {
     // View state: file or data-derived defaults, then flags.
     let resolved = ranks.agree((|| {
         let given = args.state.as_deref().map(ViewState::load).transpose()?;
-        let resolved = args.view.resolve(&vol, &path, given)?;
+        let resolved = args.view.resolve(vol, path, given)?;
         check_files(
-            &args,
+            args,
             &resolved.state,
-            [("brick file".to_string(), path.as_path())],
+            [("brick file".to_string(), path)],
             args.output.iter().map(|o| ("-o".to_string(), o.as_path())),
         )?;
         anyhow::Ok(resolved)
@@ -165,39 +218,44 @@ pub fn run(args: Args, path: PathBuf, ranks: &Ranks) -> anyhow::Result<()> {
     })?;
     let renderer = ranks.agree(Renderer::new(args.threads).context("starting worker threads"))?;
     if ranks.is_parallel() {
-        return run_over_ranks(
-            &args, &path, ranks, &vol, state, &meshes, &renderer, open_ms,
-        );
+        run_over_ranks(args, path, ranks, vol, state, &meshes, &renderer, open_ms)?;
+        return Ok(None);
     }
-    fit_visible(&renderer, &vol, &mut state, &meshes, &args.view)
+    fit_visible(&renderer, vol, &mut state, &meshes, &args.view)
         .with_context(|| path.display().to_string())?;
-    let scene = Scene::new(&vol, &state, &meshes).with_context(|| format!("{}", path.display()))?;
+    let scene = Scene::new(vol, &state, &meshes).with_context(|| format!("{}", path.display()))?;
 
     // One pixel, explained.
-    if let Some(px) = &args.pixel {
-        let (x, y) = parse_pixel(px, state.width, state.height)?;
-        let trace = renderer.trace_pixel(&scene, x, y);
-        vol.check_structure(&path)?;
-        writeln!(
-            QuietStdout::new(),
-            "{}",
-            serde_json::to_string_pretty(&trace)?
-        )?;
-        if args.output.is_none() {
-            return write_outputs(&args, &state, None);
+    let trace = match &args.pixel {
+        Some(px) => {
+            let (x, y) = parse_pixel(px, state.width, state.height)?;
+            let trace = renderer.trace_pixel(&scene, x, y);
+            vol.check_structure(path)?;
+            Some(trace)
         }
+        None => None,
+    };
+    if trace.is_some() && args.output.is_none() {
+        drop(scene);
+        return Ok(Some(Rendered {
+            state,
+            trace,
+            frame: None,
+            threads: renderer.threads(),
+        }));
     }
 
-    let (frame, ms) = render_frame(&renderer, &scene, &args);
-    vol.check_structure(&path)?;
-    let title = args.title.clone().unwrap_or_else(|| file_title(&path));
-    let picture = overlay::figure(&frame, &state, &vol, args.aov.is_some(), &title);
-    write_outputs(&args, &state, Some((&frame, picture)))?;
-    if args.json {
-        let report = FrameReport::new(&frame, &state, ms, open_ms, renderer.threads());
-        writeln!(QuietStdout::new(), "{}", serde_json::to_string(&report)?)?;
-    }
-    Ok(())
+    let (frame, ms) = render_frame(&renderer, &scene, args);
+    vol.check_structure(path)?;
+    let title = args.title.clone().unwrap_or_else(|| file_title(path));
+    let picture = overlay::figure(&frame, &state, vol, args.aov.is_some(), &title);
+    drop(scene);
+    Ok(Some(Rendered {
+        state,
+        trace,
+        frame: Some((frame, ms, picture)),
+        threads: renderer.threads(),
+    }))
 }
 
 /// What a render of one file is asked that it cannot do, before anything is opened.

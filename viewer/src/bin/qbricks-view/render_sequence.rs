@@ -152,38 +152,44 @@ fn render_one(
     if !input.exists() {
         bail!("{}: no such file", input.display());
     }
-    let options = qbricks_viewer::dataset::render_options(!args.no_checksum);
+    // The checksum is verified beside the frame (see `render::run`), before it is written.
+    let options = qbricks_viewer::dataset::render_options(false);
     let data = Dataset::open_with(input, &options)?;
     let vol = data.volume();
-    // `--colour-range visible` fits each frame's map to what that frame shows.
-    let mut mine;
-    let state = if args.view.wants_visible_range() || own.is_some() {
-        mine = state.clone();
-        if let Some(o) = own {
-            // A state file's band is the user's.
-            o.apply(&mut mine, args.state.is_none());
-        }
-        fit_visible(renderer, vol, &mut mine, meshes, &args.view)
-            .with_context(|| input.display().to_string())?;
-        &mine
-    } else {
-        state
-    };
-    let scene = Scene::new(vol, state, meshes).with_context(|| input.display().to_string())?;
-    let (frame, ms) = render_frame(renderer, &scene, args);
-    vol.check_structure(input)?;
-    let title = args
-        .title
-        .clone()
-        .unwrap_or_else(|| format!("{}  frame {number}", file_title(input)));
-    let rgb8 = overlay::figure(&frame, state, vol, args.aov.is_some(), &title);
-    let png = film::encode_png_rgb8(frame.width, frame.height, rgb8)
-        .map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
+    let (frame, ms, png, mine) =
+        qbricks_viewer::dataset::beside_checksum(data.view(), !args.no_checksum, || {
+            // `--colour-range visible` fits each frame's map to what that frame shows.
+            let mine = if args.view.wants_visible_range() || own.is_some() {
+                let mut mine = state.clone();
+                if let Some(o) = own {
+                    // A state file's band is the user's.
+                    o.apply(&mut mine, args.state.is_none());
+                }
+                fit_visible(renderer, vol, &mut mine, meshes, &args.view)
+                    .with_context(|| input.display().to_string())?;
+                Some(mine)
+            } else {
+                None
+            };
+            let state = mine.as_ref().unwrap_or(state);
+            let scene =
+                Scene::new(vol, state, meshes).with_context(|| input.display().to_string())?;
+            let (frame, ms) = render_frame(renderer, &scene, args);
+            vol.check_structure(input)?;
+            let title = args
+                .title
+                .clone()
+                .unwrap_or_else(|| format!("{}  frame {number}", file_title(input)));
+            let rgb8 = overlay::figure(&frame, state, vol, args.aov.is_some(), &title);
+            let png = film::encode_png_rgb8(frame.width, frame.height, rgb8)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
+            anyhow::Ok((frame, ms, png, mine))
+        })?;
     files::output::write_atomic(out, |f| f.write_all(&png))
         .with_context(|| out.display().to_string())?;
     Ok(FrameReport::new(
         &frame,
-        state,
+        mine.as_ref().unwrap_or(state),
         ms,
         data.open_ms,
         renderer.threads(),
