@@ -6,7 +6,7 @@ use std::sync::Arc;
 
 use format::sequence::FieldRange;
 
-use super::background::Pending;
+use super::background::{Pending, Poll};
 use super::player::Player;
 use crate::dataset::Dataset;
 use crate::mesh::MeshInstance;
@@ -23,6 +23,33 @@ pub(crate) struct Doc {
     pub regions: usize,
     /// Per field: name, range and histogram (bins over `min..=max`).
     pub fields: Vec<FieldSummary>,
+    /// The payload checksum, verified on a thread of its own while the window frames and
+    /// renders the file (see [`Checksum`]).
+    pub checksum: Checksum,
+}
+
+/// Where the window's check of a file's checksum is: it reads every byte (seconds for a
+/// large file whose pages are not cached), so it runs beside the first frames instead of
+/// before them; a file that fails is refused once it is known (its error shown, nothing
+/// more rendered or saved), and a scripted run writes nothing before it passed.
+pub(crate) enum Checksum {
+    Pending(Pending<Result<(), String>>),
+    Passed,
+    Failed(String),
+}
+
+impl Checksum {
+    /// Takes the result if it has come.
+    pub(crate) fn poll(&mut self) {
+        if let Checksum::Pending(job) = self {
+            match job.poll() {
+                Poll::Pending => {}
+                Poll::Done(Ok(())) => *self = Checksum::Passed,
+                Poll::Done(Err(e)) => *self = Checksum::Failed(e),
+                Poll::Failed => *self = Checksum::Failed("the checksum failed to run".into()),
+            }
+        }
+    }
 }
 
 pub(crate) struct FieldSummary {
@@ -60,10 +87,17 @@ impl Opening {
 impl Doc {
     /// Opens, validates and summarises `path`; the error is one line naming the file.
     pub(crate) fn open(path: &Path) -> Result<Doc, String> {
-        // As every render opens: the structure checked where frames read it, so that a
-        // billion cells open as fast as a thousand.
-        let dataset = Dataset::open_with(path, &crate::dataset::render_options(true))
-            .map_err(|e| e.to_string())?;
+        // As every render opens: the structure checked where frames read it, and the
+        // checksum beside the first frames, so that a billion cells open as fast as a
+        // thousand.
+        let dataset = Arc::new(
+            Dataset::open_with(path, &crate::dataset::render_options(false))
+                .map_err(|e| e.to_string())?,
+        );
+        let hashed = Arc::clone(&dataset);
+        let checksum = Checksum::Pending(Pending::start("qbricks-checksum", move || {
+            hashed.view().verify_checksum().map_err(|e| e.to_string())
+        }));
         let file = dataset.view().file();
         let cells = file.levels.iter().map(|l| l.cells.to_native()).sum();
         let fields = file
@@ -82,8 +116,24 @@ impl Doc {
             cells,
             fields,
             path: path.to_path_buf(),
-            dataset: Arc::new(dataset),
+            dataset,
+            checksum,
         })
+    }
+
+    /// Why the file is refused after it opened: its checksum failed, or a part its frames
+    /// read failed its check (the message an open that checked everything gives).
+    pub(crate) fn failure(&self) -> Option<String> {
+        if let Checksum::Failed(e) = &self.checksum {
+            return Some(e.clone());
+        }
+        let e = self.dataset.volume().check_structure(&self.path).err()?;
+        Some(e.to_string())
+    }
+
+    /// Whether the checksum is still being verified.
+    pub(crate) fn checksum_pending(&self) -> bool {
+        matches!(self.checksum, Checksum::Pending(_))
     }
 
     pub(crate) fn field(&self, name: &str) -> Option<&FieldSummary> {

@@ -159,6 +159,7 @@ impl ScriptRunner {
         shown: Option<&Update>,
         preview_scale: u32,
         no_image: bool,
+        checked: bool,
     ) -> anyhow::Result<Option<OrbitReport>> {
         if self.started.elapsed() > TIMEOUT {
             anyhow::bail!(
@@ -217,7 +218,7 @@ impl ScriptRunner {
                     // One more frame after the refined image arrived, so it is on screen.
                     None => complete && !received,
                 };
-                if ready && !*requested {
+                if ready && checked && !*requested {
                     ctx.send_viewport_cmd(egui::ViewportCommand::Screenshot(
                         egui::UserData::default(),
                     ));
@@ -236,7 +237,7 @@ impl ScriptRunner {
             }
             Phase::Done => {}
         }
-        if matches!(self.phase, Phase::Done) {
+        if matches!(self.phase, Phase::Done) && checked {
             return Ok(Some(self.report.clone()));
         }
         Ok(None)
@@ -291,6 +292,7 @@ mod tests {
         ctx: &egui::Context,
         events: Vec<egui::Event>,
         no_image: bool,
+        checked: bool,
     ) -> (anyhow::Result<Option<OrbitReport>>, bool) {
         let mut result = None;
         let input = egui::RawInput {
@@ -298,7 +300,7 @@ mod tests {
             ..egui::RawInput::default()
         };
         let out = ctx.run_ui(input, |ui| {
-            result = Some(runner.after_frame(ui.ctx(), false, None, 1, no_image));
+            result = Some(runner.after_frame(ui.ctx(), false, None, 1, no_image, checked));
         });
         let asked = out.viewport_output.values().any(|v| {
             v.commands
@@ -317,9 +319,9 @@ mod tests {
             frames: None,
         });
         let ctx = egui::Context::default();
-        let (first, asked) = frame(&mut runner, &ctx, Vec::new(), true);
+        let (first, asked) = frame(&mut runner, &ctx, Vec::new(), true, true);
         assert!(matches!(first, Ok(None)) && !asked);
-        let (second, asked) = frame(&mut runner, &ctx, Vec::new(), true);
+        let (second, asked) = frame(&mut runner, &ctx, Vec::new(), true, true);
         assert!(matches!(second, Ok(None)) && asked);
         let image = egui::ColorImage::new([4, 3], vec![egui::Color32::RED; 12]);
         let shot = egui::Event::Screenshot {
@@ -327,7 +329,7 @@ mod tests {
             user_data: egui::UserData::default(),
             image: std::sync::Arc::new(image),
         };
-        let (third, _) = frame(&mut runner, &ctx, vec![shot], true);
+        let (third, _) = frame(&mut runner, &ctx, vec![shot], true, true);
         assert!(matches!(third, Ok(Some(_))));
         let saved = image::open(&out).expect("a PNG").to_rgb8();
         assert_eq!(saved.dimensions(), (4, 3));
@@ -342,8 +344,29 @@ mod tests {
         });
         let ctx = egui::Context::default();
         for _ in 0..5 {
-            let (result, asked) = frame(&mut runner, &ctx, Vec::new(), false);
+            let (result, asked) = frame(&mut runner, &ctx, Vec::new(), false, true);
             assert!(matches!(result, Ok(None)) && !asked);
         }
+    }
+
+    /// While the file's checksum is being verified (beside the first frames) a script asks
+    /// for no screenshot and reports nothing, however long it waits; once it passed, it
+    /// goes on as it would have.
+    #[test]
+    fn a_script_writes_nothing_before_the_checksum_passed() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let out = dir.path().join("shot.png");
+        let mut runner = ScriptRunner::new(Script::Screenshot {
+            out: out.clone(),
+            frames: None,
+        });
+        let ctx = egui::Context::default();
+        for _ in 0..5 {
+            let (result, asked) = frame(&mut runner, &ctx, Vec::new(), true, false);
+            assert!(matches!(result, Ok(None)) && !asked);
+        }
+        let (result, asked) = frame(&mut runner, &ctx, Vec::new(), true, true);
+        assert!(matches!(result, Ok(None)) && asked);
+        assert!(!out.exists());
     }
 }

@@ -295,7 +295,11 @@ impl ViewerApp {
                 outcome => self.take_open(opening, outcome),
             }
         }
-        if self.background_pending() {
+        let checksum_pending = self.document.doc.as_mut().is_some_and(|doc| {
+            doc.checksum.poll();
+            doc.checksum_pending()
+        });
+        if self.background_pending() || checksum_pending {
             // Often enough to take the result soon after it comes; seldom enough that
             // drawing the window (a software renderer's full repaint) takes little
             // from the work. Input repaints at once anyway.
@@ -474,7 +478,13 @@ impl ViewerApp {
     /// without it.
     pub fn save_png(&mut self, path: &Path) {
         let path = &dialogs::with_extension(path, "png");
+        let doc = self.document.doc.as_ref();
         let result = match &self.frames.finished {
+            _ if doc.is_some_and(Doc::checksum_pending) => Err(format!(
+                "{}: the file's checksum is still being verified; save once it is",
+                path.display()
+            )),
+            _ if let Some(e) = doc.and_then(Doc::failure) => Err(e),
             Some(u) => self.check_output("Save image", path).and_then(|()| {
                 let (w, h, rgb8) = u.picture();
                 film::save_png_rgb8(path, w, h, rgb8).map_err(|e| e.to_string())
@@ -763,6 +773,10 @@ impl ViewerApp {
         let Some(doc) = &self.document.doc else {
             return;
         };
+        if doc.failure().is_some() {
+            // Refused (its error is shown): nothing more is rendered of it.
+            return;
+        }
         let dataset = Arc::clone(&doc.dataset);
         if let Some(g) = self
             .frames
@@ -847,32 +861,29 @@ impl ViewerApp {
             self.frame_job = Some(self.generation);
         }
         let received = self.frames.receive(&ctx);
-        if self.take_structure_error(&ctx) {
+        if self.take_file_error(&ctx) {
             return;
         }
         self.after_frame(&ctx, received);
     }
 
-    /// A part of the file that failed its check when a frame read it (files are opened to
-    /// be checked where they are read, see `dataset::render_options`): shown as an open's
-    /// error would be, and a scripted run fails with it and writes nothing, as `render`
-    /// does. `true` when the window is closing for it.
-    fn take_structure_error(&mut self, ctx: &egui::Context) -> bool {
-        let Some(doc) = &self.document.doc else {
+    /// The file's checksum failed (verified beside the first frames) or a part of it
+    /// failed its check when a frame read it (files are opened to be checked where they
+    /// are read, see `dataset::render_options`): shown as an open's error would be, nothing
+    /// more is rendered or saved of it, and a scripted run fails with it and writes
+    /// nothing, as `render` does. `true` when the window is closing for it.
+    fn take_file_error(&mut self, ctx: &egui::Context) -> bool {
+        let Some(message) = self.document.doc.as_ref().and_then(Doc::failure) else {
             return false;
         };
-        let Err(e) = doc.dataset.volume().check_structure(&doc.path) else {
-            return false;
-        };
-        let message = e.to_string();
         if self.error.as_deref() != Some(message.as_str()) {
-            self.error = Some(message);
+            self.error = Some(message.clone());
         }
         if self.script.is_none() {
             return false;
         }
         if let Ok(mut g) = self.outcome.lock() {
-            *g = Some(Err(anyhow::Error::from(e)));
+            *g = Some(Err(anyhow::anyhow!("{message}")));
         }
         ctx.send_viewport_cmd(egui::ViewportCommand::Close);
         true
@@ -902,7 +913,13 @@ impl ViewerApp {
         let shown = self.frames.shown.as_ref().map(|s| &s.update);
         let no_image = self.document.doc.is_none() && self.sequence.is_none();
         let scale = self.frames.renderer().preview_scale();
-        match script.after_frame(ctx, received, shown, scale, no_image) {
+        // Nothing is written before the file's checksum passed.
+        let checked = !self
+            .document
+            .doc
+            .as_ref()
+            .is_some_and(Doc::checksum_pending);
+        match script.after_frame(ctx, received, shown, scale, no_image, checked) {
             Ok(Some(report)) => {
                 if let Ok(mut g) = self.outcome.lock() {
                     *g = Some(Ok(Some(report)));
