@@ -100,12 +100,18 @@ pub const CHECKSUM_CHUNK: usize = 1 << 20;
 /// [`CHECKSUM_CHUNK`]-byte chunks of `bytes` (the last one shorter; no chunk for empty
 /// bytes). The chunks are hashed on up to as many threads as the machine has cores.
 pub fn checksum(bytes: &[u8]) -> u64 {
+    checksum_on(
+        bytes,
+        std::thread::available_parallelism().map_or(1, |n| n.get()),
+    )
+}
+
+/// [`checksum`] on at most `threads` threads (the calling one when 1): a hash that runs
+/// beside other work takes one core, not all.
+pub fn checksum_on(bytes: &[u8], threads: usize) -> u64 {
     let chunks = bytes.len().div_ceil(CHECKSUM_CHUNK);
     let mut hashes = vec![0u64; chunks];
-    let threads = std::thread::available_parallelism()
-        .map_or(1, |n| n.get())
-        .min(chunks / 4)
-        .max(1);
+    let threads = threads.min(chunks / 4).max(1);
     let per_thread = chunks.div_ceil(threads).max(1);
     let hash_run = |first: usize, out: &mut [u64]| {
         for (k, h) in out.iter_mut().enumerate() {
@@ -307,6 +313,13 @@ mod tests {
             }
             let want = xxhash_rust::xxh3::xxh3_64(&joined);
             assert_eq!(checksum(b), want, "threaded, {len} bytes");
+            for threads in [1, 2, 3, 64] {
+                assert_eq!(
+                    checksum_on(b, threads),
+                    want,
+                    "{threads} threads, {len} bytes"
+                );
+            }
             let mut streamed = ChunkedChecksum::default();
             let mut rest = b;
             let mut step = 1;

@@ -71,9 +71,13 @@ pub fn beside_checksum<R, E: From<format::FormatError>>(
         return work();
     }
     std::thread::scope(|s| {
+        // One core, below the frames' priority: the frames are what the user waits for.
         let sum = std::thread::Builder::new()
             .name("qbricks-checksum".to_string())
-            .spawn_scoped(s, || view.verify_checksum());
+            .spawn_scoped(s, || {
+                crate::render::lower_priority();
+                view.verify_checksum()
+            });
         let out = work();
         let checked = match sum {
             Ok(handle) => handle.join().unwrap_or_else(|_| view.verify_checksum()),

@@ -371,7 +371,7 @@ fn render_under(scene: &Scene, cancel: &CancelToken) -> (Frame, bool) {
 pub const BACKGROUND_NICENESS: i8 = 5;
 
 /// Lowers the calling thread's priority to [`BACKGROUND_NICENESS`] (Linux), or leaves it.
-fn lower_priority() {
+pub(crate) fn lower_priority() {
     #[cfg(target_os = "linux")]
     {
         use thread_priority::unix::{

@@ -295,7 +295,11 @@ impl ViewerApp {
                 outcome => self.take_open(opening, outcome),
             }
         }
+        let framing = self.background_pending();
         let checksum_pending = self.document.doc.as_mut().is_some_and(|doc| {
+            if !framing {
+                doc.checksum.start(&doc.dataset);
+            }
             doc.checksum.poll();
             doc.checksum_pending()
         });
