@@ -9,6 +9,9 @@ use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+#[path = "common/mod.rs"]
+mod common;
+
 fn sample() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/wake_small.qbk")
 }
@@ -231,6 +234,23 @@ fn a_screenshot_of_a_file_that_fails_to_open_fails_and_writes_nothing() {
     }
 }
 
+/// Runs a scripted window (`--screenshot`) on `file` in `dir` and checks that it is
+/// refused as `render` refuses it: exit 2, the message holding each of `needles`, no
+/// screenshot written.
+fn assert_screenshot_refused(file: &str, dir: &Path, needles: &[&str]) {
+    let args = [file, "--size", "800x600", "--screenshot", "window.png"];
+    let out = in_xvfb(&args, dir);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{file}: {err}");
+    for needle in needles {
+        assert!(err.contains(needle), "{file}: no {needle:?} in {err}");
+    }
+    assert!(
+        !dir.join("window.png").exists(),
+        "{file}: a screenshot was written"
+    );
+}
+
 /// A scripted window on a file whose structure is damaged where its frames read it (a
 /// brick's values past the arrays; the window opens files to be checked where they are
 /// read, see `dataset::render_options`): it fails as `render` does, exit 2 naming the
@@ -246,28 +266,14 @@ fn a_screenshot_of_a_file_damaged_where_frames_read_it_fails_and_writes_nothing(
     let b = file.region_bricks[0] as usize;
     file.bricks[b].first_value = file.fields[0].values.len() as u64;
     format::writer::write(&dir.path().join("damaged.qbk"), &file).expect("write");
-    let shot = dir.path().join("window.png");
-    let args = [
-        "damaged.qbk",
-        "--size",
-        "800x600",
-        "--screenshot",
-        "window.png",
-    ];
-    let out = in_xvfb(&args, dir.path());
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(2), "{err}");
-    assert!(
-        err.contains("damaged.qbk") && err.contains(&format!("bricks[{b}]")),
-        "{err}"
-    );
-    assert!(!shot.exists(), "a screenshot was written");
+    let part = format!("bricks[{b}]");
+    assert_screenshot_refused("damaged.qbk", dir.path(), &["damaged.qbk", &part]);
 }
 
 /// A scripted window on a file whose payload checksum fails (one value's lowest bit
 /// flipped: the archive stays valid). The window opens files without waiting for the
-/// checksum and verifies it beside the first frames: the run fails as `render` does, exit
-/// 2 naming the file and the checksum, and writes no screenshot.
+/// checksum and verifies it once the camera is framed: the run fails as `render` does,
+/// exit 2 naming the file and the checksum, and writes no screenshot.
 #[test]
 fn a_screenshot_of_a_file_whose_checksum_fails_writes_nothing() {
     if !have_xvfb() {
@@ -275,30 +281,7 @@ fn a_screenshot_of_a_file_whose_checksum_fails_writes_nothing() {
     }
     let dir = tempfile::tempdir().expect("tempdir");
     let good = std::fs::read(sample()).expect("read the sample");
-    let view = format::BrickFileView::from_bytes(Path::new("good.qbk"), &good).expect("valid");
-    let values = &view.file().fields[0].values;
-    let probe = values[values.len() / 2].to_native().to_le_bytes();
-    let at = good
-        .windows(4)
-        .position(|w| w == probe)
-        .expect("the value's bytes are in the file");
-    let mut flipped = good.clone();
-    flipped[at] ^= 1;
+    let flipped = common::with_one_value_flipped(&good);
     std::fs::write(dir.path().join("flipped.qbk"), &flipped).expect("write");
-    let shot = dir.path().join("window.png");
-    let args = [
-        "flipped.qbk",
-        "--size",
-        "800x600",
-        "--screenshot",
-        "window.png",
-    ];
-    let out = in_xvfb(&args, dir.path());
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(2), "{err}");
-    assert!(
-        err.contains("flipped.qbk") && err.contains("checksum"),
-        "{err}"
-    );
-    assert!(!shot.exists(), "a screenshot was written");
+    assert_screenshot_refused("flipped.qbk", dir.path(), &["flipped.qbk", "checksum"]);
 }

@@ -172,15 +172,7 @@ fn render_errors_are_one_line_with_exit_code_2() {
 fn render_no_checksum_opens_a_file_whose_payload_checksum_fails() {
     let dir = tempfile::tempdir().expect("tempdir");
     let good = std::fs::read(sample(dir.path())).expect("read");
-    let view = format::BrickFileView::from_bytes(Path::new("good.qbk"), &good).expect("valid");
-    let values = &view.file().fields[0].values;
-    let probe = values[values.len() / 2].to_native().to_le_bytes();
-    let at = good
-        .windows(4)
-        .position(|w| w == probe)
-        .expect("the value's bytes are in the file");
-    let mut flipped = good.clone();
-    flipped[at] ^= 1;
+    let flipped = crate::common::with_one_value_flipped(&good);
     std::fs::write(dir.path().join("flipped.qbk"), &flipped).expect("write");
 
     let args = [
