@@ -4,7 +4,10 @@
 //! Zero-copy: bricks, regions, brick lists, the KD-tree and the field values are all read
 //! from the archive as stored (the page cache, or the memory map, is the only copy), so
 //! opening costs nothing proportional to the file beyond the checks
-//! [`format::BrickFileView`] runs once. The only conversion is to a local frame centred
+//! [`format::BrickFileView`] runs once; for a view opened with
+//! [`format::Structure::OnUse`] (every command that renders) not even those: the volume
+//! checks each region and the KD-tree where it first reads them. The only conversion is
+//! to a local frame centred
 //! on the data, applied as each number is read (`local = stored − frame`), so that data
 //! placed at 1e6 keeps sub-cell precision; the traversal and point location use the same
 //! subtraction ([`format::kd`]), so their edge rules agree.
@@ -32,7 +35,8 @@ use crate::packed::Packed;
 pub(crate) type StoredF32 = rkyv::Archived<f32>;
 
 /// Why a volume could not be built from a file [`BrickFileView`] has validated (every index
-/// the volume reads was checked there): only data placed where double precision cannot
+/// the volume reads was checked there, or is checked where it is first read): only data
+/// placed where double precision cannot
 /// resolve its cells.
 #[derive(Debug, thiserror::Error)]
 pub enum VolumeError {
@@ -233,8 +237,10 @@ fn fill_in_stretches<T: format::kd::KdTree + Copy + Send>(
 }
 
 impl<'a> Volume<'a> {
-    /// The ray caster's view of a file that [`BrickFileView`] has validated (every index
-    /// the hot loops use was checked there, once).
+    /// The ray caster's view of a file that [`BrickFileView`] has validated: every index
+    /// the hot loops use was checked there, once, or for a view opened with
+    /// [`format::Structure::OnUse`] is checked by the volume where it first reads it
+    /// ([`Checks`]). Reads nothing that grows with the data.
     pub fn new(view: &'a BrickFileView) -> Result<Volume<'a>, VolumeError> {
         let file = view.file();
         let b = &file.bounds;
@@ -765,7 +771,7 @@ impl<'a> Volume<'a> {
         }
     }
 
-    /// Value of field `f`, cell `idx` (checked at open to be in range for every brick cell).
+    /// Value of field `f`, cell `idx` (in range for every cell of a checked brick).
     #[inline]
     pub(crate) fn value(&self, f: usize, idx: usize) -> f32 {
         self.values[f][idx].to_native()
