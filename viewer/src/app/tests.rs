@@ -236,3 +236,54 @@ fn a_late_sequence_frame_keeps_the_view_and_playback_waits_for_it() {
     assert!(app.frame_shown(), "a broken frame counts as shown");
     assert_eq!(app.state.camera, view);
 }
+
+/// The window interactively (no script) on a file whose payload checksum fails (one
+/// value's lowest bit flipped, the archive valid): it opens and frames without waiting
+/// for the checksum, which runs once framed; when its failure is known the file is
+/// refused: the error names the file and the checksum, and saving the picture is refused
+/// and writes nothing.
+#[test]
+fn a_file_whose_checksum_fails_is_refused_once_known() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let good = std::fs::read(sample()).expect("read");
+    let view = format::BrickFileView::from_bytes(Path::new("good.qbk"), &good).expect("valid");
+    let values = &view.file().fields[0].values;
+    let probe = values[values.len() / 2].to_native().to_le_bytes();
+    let at = good
+        .windows(4)
+        .position(|w| w == probe)
+        .expect("the value's bytes are in the file");
+    let mut flipped = good.clone();
+    flipped[at] ^= 1;
+    let path = dir.path().join("flipped.qbk");
+    std::fs::write(&path, &flipped).expect("write");
+
+    let mut app = ViewerApp::for_tests(&path, Some(1)).expect("app");
+    finish_framing(&mut app);
+    assert!(app.document.doc.is_some(), "opened without the checksum");
+    let ctx = eframe::egui::Context::default();
+    let t = std::time::Instant::now();
+    while app
+        .document
+        .doc
+        .as_ref()
+        .is_some_and(super::document::Doc::checksum_pending)
+    {
+        assert!(t.elapsed().as_secs() < 60, "the checksum never came");
+        std::thread::sleep(std::time::Duration::from_millis(2));
+        app.poll_background(&ctx);
+    }
+    assert!(
+        !app.take_file_error(&ctx),
+        "an interactive window stays open"
+    );
+    let error = app.error.clone().unwrap_or_default();
+    assert!(
+        error.contains("flipped.qbk") && error.contains("checksum"),
+        "{error}"
+    );
+    let png = dir.path().join("shot.png");
+    app.save_png(&png);
+    assert!(!png.exists(), "a picture of a refused file was saved");
+    assert!(app.error.as_deref().is_some_and(|e| e.contains("checksum")));
+}

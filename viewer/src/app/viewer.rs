@@ -876,7 +876,7 @@ impl ViewerApp {
     /// are read, see `dataset::render_options`): shown as an open's error would be, nothing
     /// more is rendered or saved of it, and a scripted run fails with it and writes
     /// nothing, as `render` does. `true` when the window is closing for it.
-    fn take_file_error(&mut self, ctx: &egui::Context) -> bool {
+    pub(super) fn take_file_error(&mut self, ctx: &egui::Context) -> bool {
         let Some(message) = self.document.doc.as_ref().and_then(Doc::failure) else {
             return false;
         };
