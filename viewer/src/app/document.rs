@@ -88,29 +88,45 @@ pub(crate) struct Opening {
 }
 
 impl Opening {
+    /// Opens a file, its checksum verified once its camera is framed.
     pub(crate) fn start(path: &Path) -> Opening {
+        Self::open(path, false)
+    }
+
+    /// Opens a frame of a sequence, its checksum verified as it opens: playback steps on
+    /// once a frame is shown, and hashes left running behind it would pile up.
+    pub(crate) fn start_frame(path: &Path) -> Opening {
+        Self::open(path, true)
+    }
+
+    fn open(path: &Path, frame: bool) -> Opening {
         let p = path.to_path_buf();
         Opening {
             path: path.to_path_buf(),
-            job: Pending::start("qbricks-open", move || Doc::open(&p)),
+            job: Pending::start("qbricks-open", move || Doc::open(&p, frame)),
             startup: false,
             state: None,
-            frame: false,
+            frame,
         }
     }
 }
 
 impl Doc {
     /// Opens, validates and summarises `path`; the error is one line naming the file.
-    pub(crate) fn open(path: &Path) -> Result<Doc, String> {
+    /// `checksum_now`: verify the checksum as it opens, else leave it [`Checksum::Waiting`].
+    pub(crate) fn open(path: &Path, checksum_now: bool) -> Result<Doc, String> {
         // As every render opens: the structure checked where frames read it, and the
-        // checksum beside the first frames, so that a billion cells open as fast as a
-        // thousand.
+        // checksum, but for a sequence's frames, beside the first frames, so that a
+        // billion cells open as fast as a thousand.
         let dataset = Arc::new(
-            Dataset::open_with(path, &crate::dataset::render_options(false))
+            Dataset::open_with(path, &crate::dataset::render_options(checksum_now))
                 .map_err(|e| e.to_string())?,
         );
-        let checksum = Checksum::Waiting;
+        let checksum = if checksum_now {
+            Checksum::Passed
+        } else {
+            Checksum::Waiting
+        };
         let file = dataset.view().file();
         let cells = file.levels.iter().map(|l| l.cells.to_native()).sum();
         let fields = file

@@ -388,8 +388,7 @@ impl ViewerApp {
         self.frames.finished = None;
         // Not on screen until it is open and rendered: playback waits for it.
         self.frame_job = None;
-        let mut opening = Opening::start(&path);
-        opening.frame = true;
+        let opening = Opening::start_frame(&path);
         match opening.job.wait(self.background_wait) {
             Poll::Pending => self.opening = Some(opening),
             outcome => self.take_open(opening, outcome),
