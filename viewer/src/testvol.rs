@@ -364,6 +364,23 @@ impl Builder<'_> {
     }
 }
 
+/// The bytes of the valid `.qbk` file `good` with one field value's lowest mantissa bit
+/// flipped: the archive stays valid, its payload checksum fails (what the checksum tests
+/// of the commands and the window open).
+pub fn with_one_value_flipped(good: &[u8]) -> Vec<u8> {
+    let view = format::BrickFileView::from_bytes(std::path::Path::new("good.qbk"), good)
+        .expect("a valid file");
+    let values = &view.file().fields[0].values;
+    let probe = values[values.len() / 2].to_native().to_le_bytes();
+    let at = good
+        .windows(4)
+        .position(|w| w == probe)
+        .expect("the value's bytes are in the file");
+    let mut flipped = good.to_vec();
+    flipped[at] ^= 1;
+    flipped
+}
+
 /// Serialises `file` and opens it the way the viewer opens a file on disk.
 pub fn open(file: &BrickFile) -> Result<format::BrickFileView, format::FormatError> {
     let path = std::path::Path::new("testvol.qbk");

@@ -9,9 +9,6 @@ use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-#[path = "common/mod.rs"]
-mod common;
-
 fn sample() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/wake_small.qbk")
 }
@@ -281,7 +278,7 @@ fn a_screenshot_of_a_file_whose_checksum_fails_writes_nothing() {
     }
     let dir = tempfile::tempdir().expect("tempdir");
     let good = std::fs::read(sample()).expect("read the sample");
-    let flipped = common::with_one_value_flipped(&good);
+    let flipped = qbricks_viewer::testvol::with_one_value_flipped(&good);
     std::fs::write(dir.path().join("flipped.qbk"), &flipped).expect("write");
     assert_screenshot_refused("flipped.qbk", dir.path(), &["flipped.qbk", "checksum"]);
 }

@@ -246,15 +246,7 @@ fn a_late_sequence_frame_keeps_the_view_and_playback_waits_for_it() {
 fn a_file_whose_checksum_fails_is_refused_once_known() {
     let dir = tempfile::tempdir().expect("tempdir");
     let good = std::fs::read(sample()).expect("read");
-    let view = format::BrickFileView::from_bytes(Path::new("good.qbk"), &good).expect("valid");
-    let values = &view.file().fields[0].values;
-    let probe = values[values.len() / 2].to_native().to_le_bytes();
-    let at = good
-        .windows(4)
-        .position(|w| w == probe)
-        .expect("the value's bytes are in the file");
-    let mut flipped = good.clone();
-    flipped[at] ^= 1;
+    let flipped = crate::testvol::with_one_value_flipped(&good);
     let path = dir.path().join("flipped.qbk");
     std::fs::write(&path, &flipped).expect("write");
 

@@ -172,7 +172,7 @@ fn render_errors_are_one_line_with_exit_code_2() {
 fn render_no_checksum_opens_a_file_whose_payload_checksum_fails() {
     let dir = tempfile::tempdir().expect("tempdir");
     let good = std::fs::read(sample(dir.path())).expect("read");
-    let flipped = crate::common::with_one_value_flipped(&good);
+    let flipped = testvol::with_one_value_flipped(&good);
     std::fs::write(dir.path().join("flipped.qbk"), &flipped).expect("write");
 
     let args = [

@@ -1,6 +1,5 @@
-//! Helpers shared by the viewer's integration tests (`cli/`, `render/`, `window_smoke`),
-//! each of which includes this module as `#[path = "../common/mod.rs"] mod common;` (or
-//! `"common/mod.rs"`).
+//! Helpers shared by the viewer's integration tests (`cli/`, `render/`), each of which
+//! includes this module as `#[path = "../common/mod.rs"] mod common;`.
 #![allow(dead_code)]
 
 use std::path::PathBuf;
@@ -78,20 +77,4 @@ pub fn check_golden(name: &str, width: u32, height: u32, rgb: &[u8], min_psnr: f
             actual.display()
         );
     }
-}
-
-/// The bytes of the valid `.qbk` file `good` with one field value's lowest mantissa bit
-/// flipped: the archive stays valid, its payload checksum fails.
-pub fn with_one_value_flipped(good: &[u8]) -> Vec<u8> {
-    let view = format::BrickFileView::from_bytes(std::path::Path::new("good.qbk"), good)
-        .expect("a valid file");
-    let values = &view.file().fields[0].values;
-    let probe = values[values.len() / 2].to_native().to_le_bytes();
-    let at = good
-        .windows(4)
-        .position(|w| w == probe)
-        .expect("the value's bytes are in the file");
-    let mut flipped = good.to_vec();
-    flipped[at] ^= 1;
-    flipped
 }
