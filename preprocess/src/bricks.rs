@@ -18,7 +18,7 @@
 
 use rayon::prelude::*;
 
-use crate::cells::{CellSet, BLOCK_CELLS};
+use crate::cells::{BlockMasks, CellSet, BLOCK_CELLS};
 use crate::grid::leaf_offset;
 
 /// A brick in the integer cell-index space of its grid: a concept of its own, not a
@@ -90,19 +90,16 @@ pub(crate) fn make_bricks(sets: &[CellSet], max: u32) -> Vec<BrickBox> {
 
 fn bricks_of(s: usize, set: &CellSet, max: u32) -> Vec<BrickBox> {
     let mut free = set.leaf.clone();
-    let is_free = |free: &Vec<[u64; 8]>, ijk: [i32; 3]| -> bool {
-        set.slot(ijk).is_some_and(|sl| {
-            let (b, n) = (sl / BLOCK_CELLS, sl % BLOCK_CELLS);
-            (free[b][n >> 6] >> (n & 63)) & 1 == 1
-        })
+    let is_free = |free: &BlockMasks, ijk: [i32; 3]| -> bool {
+        set.slot(ijk)
+            .is_some_and(|sl| free.bit(sl / BLOCK_CELLS, sl % BLOCK_CELLS))
     };
     let max = max as i64;
     let inside = |c: i32, d: i64| (c as i64 + d) <= i32::MAX as i64;
     let anchor = tile_anchor(set);
     let mut out = Vec::new();
     for_each_leaf_zyx(set, |c, slot| {
-        let (b, n) = (slot / BLOCK_CELLS, slot % BLOCK_CELLS);
-        if (free[b][n >> 6] >> (n & 63)) & 1 == 0 {
+        if !free.bit(slot / BLOCK_CELLS, slot % BLOCK_CELLS) {
             return;
         }
         // Cells left in the tile of `c` along each axis.
@@ -113,7 +110,7 @@ fn bricks_of(s: usize, set: &CellSet, max: u32) -> Vec<BrickBox> {
         while nx < room[0] && inside(c[0], nx) && is_free(&free, [c[0] + nx as i32, c[1], c[2]]) {
             nx += 1;
         }
-        let row_free = |free: &Vec<[u64; 8]>, y: i32, z: i32| {
+        let row_free = |free: &BlockMasks, y: i32, z: i32| {
             (0..nx).all(|x| is_free(free, [c[0] + x as i32, y, z]))
         };
         // Grow along y by whole rows.
@@ -137,8 +134,7 @@ fn bricks_of(s: usize, set: &CellSet, max: u32) -> Vec<BrickBox> {
         };
         b.for_each_cell(set, |_, _, slot| {
             if let Some(sl) = slot {
-                let (bb, n) = (sl / BLOCK_CELLS, sl % BLOCK_CELLS);
-                free[bb][n >> 6] &= !(1u64 << (n & 63));
+                free.remove(sl / BLOCK_CELLS, sl % BLOCK_CELLS);
             }
         });
         out.push(b);
@@ -151,7 +147,7 @@ fn bricks_of(s: usize, set: &CellSet, max: u32) -> Vec<BrickBox> {
 /// size is tiled from its own corner, as greedy bricking from that corner would cut it.
 fn tile_anchor(set: &CellSet) -> [i64; 3] {
     let mut lo = [i64::MAX; 3];
-    for (o, m) in set.blocks.iter().zip(&set.active) {
+    for (o, m) in set.blocks.iter().zip(set.active.iter()) {
         if *m == [0; 8] {
             continue;
         }
@@ -188,7 +184,7 @@ fn for_each_leaf_zyx(set: &CellSet, mut visit: impl FnMut([i32; 3], usize)) {
                 let run_end = run + blocks[run..slab_end].partition_point(|o| o[1] == oy);
                 for y in 0..8 {
                     for (b, o) in blocks.iter().enumerate().take(run_end).skip(run) {
-                        let leaf = &set.leaf[b];
+                        let leaf = set.leaf.get(b);
                         for x in 0..8 {
                             let n = leaf_offset(x, y, z);
                             if (leaf[n >> 6] >> (n & 63)) & 1 == 1 {

@@ -424,10 +424,10 @@ const CASES: &[Case] = &[
         "qbricks-lab: w.qbk: --reference-step: step: expected a finite number ≥ 0.001 (cell widths), found 1e-30"),
     // Issue 32, 2. A 9 kB file holding one active 640³ tile: refused by the bake's memory
     // estimate (it aborted with SIGABRT at 6.5 GB). Under the cases' `ulimit -v` the
-    // address space counts: 0.9 GiB held, and 5 GiB of cell and field values mapped from
+    // address space counts: 0.85 GiB held, and 5 GiB of cell and field values mapped from
     // scratch files.
     case(BAKE, &["bake", "tile640.vdb", "-o", "t.qbk"], 2,
-        "qbricks-bake: tile640.vdb: the bake of 262144000 input cells (grid \"vel\") needs about 5890 MiB, more than the limit of")
+        "qbricks-bake: tile640.vdb: the bake of 262144000 input cells (grid \"vel\") needs about 5831 MiB, more than the limit of")
         .absent(&["t.qbk"]),
     // Issue 27: `probe --plane` writes through the same policy: never over its input (also
     // through a link), into streams, through links; refused requests leave no file; the

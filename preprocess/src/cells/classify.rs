@@ -18,13 +18,13 @@
 
 use rayon::prelude::*;
 
-use super::{bit, CellSet, BLOCK_CELLS};
+use super::{bit, BlockMasks, CellSet, BLOCK_CELLS};
 
 /// Marks as non-leaf every active cell whose box is fully covered by active cells of
 /// grids with a smaller cell width. Runs in parallel over blocks; the result does not
 /// depend on the thread count.
 pub(crate) fn classify_leaves(sets: &mut [CellSet]) {
-    let leaves: Vec<Vec<[u64; 8]>> = (0..sets.len())
+    let leaves: Vec<BlockMasks> = (0..sets.len())
         .map(|s| {
             let me = &sets[s];
             let finer: Vec<&CellSet> = sets
@@ -34,10 +34,20 @@ pub(crate) fn classify_leaves(sets: &mut [CellSet]) {
             if finer.is_empty() {
                 return me.active.clone();
             }
-            (0..me.blocks.len())
-                .into_par_iter()
-                .map(|b| block_leaves(me, b, &finer))
-                .collect()
+            // A chunk of blocks at a time, so that only a chunk's masks are ever held at
+            // 64 bytes a block.
+            let mut leaf = me.active.clone();
+            let n = me.blocks.len();
+            for first in (0..n).step_by(CLASSIFY_CHUNK) {
+                let chunk: Vec<[u64; 8]> = (first..(first + CLASSIFY_CHUNK).min(n))
+                    .into_par_iter()
+                    .map(|b| block_leaves(me, b, &finer))
+                    .collect();
+                for (b, m) in (first..).zip(chunk) {
+                    leaf.set(b, m);
+                }
+            }
+            leaf
         })
         .collect();
     for (set, leaf) in sets.iter_mut().zip(leaves) {
@@ -45,13 +55,16 @@ pub(crate) fn classify_leaves(sets: &mut [CellSet]) {
     }
 }
 
+/// Blocks classified at once (4 MiB of their masks).
+const CLASSIFY_CHUNK: usize = 1 << 16;
+
 /// Largest box of finer cells (in 8³ blocks) that the whole-block tests look at; beyond it
 /// (a finer grid hundreds of times finer) the block is tested cell by cell.
 const MAX_BOX_BLOCKS: i64 = 4096;
 
 /// Leaf mask of block `b` of `me` (see the module docs).
 fn block_leaves(me: &CellSet, b: usize, finer: &[&CellSet]) -> [u64; 8] {
-    let mask = me.active[b];
+    let mask = *me.active.get(b);
     if mask == [0; 8] {
         return mask;
     }
@@ -291,7 +304,7 @@ mod tests {
                     .iter()
                     .filter(|o| o.width < me.width * (1.0 - 1e-9))
                     .collect();
-                let mut leaf = me.active.clone();
+                let mut leaf = me.active.to_vec();
                 for slot in me.active_slots() {
                     let c = me.centre(me.ijk(slot));
                     if finer.is_empty() || !in_finer(&finer, c) {
@@ -363,7 +376,7 @@ mod tests {
             let expect = classify_reference(&sets);
             classify_leaves(&mut sets);
             for (s, e) in sets.iter().zip(&expect) {
-                prop_assert_eq!(&s.leaf, e);
+                prop_assert_eq!(&s.leaf.to_vec(), e);
             }
         }
     }
@@ -432,5 +445,42 @@ mod tests {
         let mut sets = vec![f2, c2];
         classify_leaves(&mut sets);
         assert_eq!(sets[1].leaf_count(), 2);
+    }
+
+    /// A coarse grid's blocks are wholly active, and under a finer grid wholly covered or
+    /// not at all except along its edge: only the blocks the edge cuts hold a mask pattern
+    /// of their own (64 bytes; the others 4).
+    #[test]
+    fn only_blocks_partly_set_hold_a_mask_pattern() {
+        let cube = |lo: i32, hi: i32| -> Vec<[i32; 3]> {
+            (lo..hi)
+                .flat_map(|z| (lo..hi).flat_map(move |y| (lo..hi).map(move |x| [x, y, z])))
+                .collect()
+        };
+        // Coarse cell i (width 2) spans [2i - 1, 2i + 1]; fine cell j (width 1, centre
+        // j + 0.5) spans [j, j + 1].
+        let coarse = grid("coarse", 2.0, 0.0, &cube(0, 32));
+        for (fine_cells, covered, own) in [
+            // Coarse cells 8..16 ([15, 31]): one whole block covered, none cut.
+            (cube(15, 31), 512, 0),
+            // Coarse cells 4..12 ([7, 23]): the eight blocks about (8, 8, 8) cut.
+            (cube(7, 23), 512, 8),
+        ] {
+            let (f, _) =
+                CellSet::from_grid(grid("fine", 1.0, 0.5, &fine_cells), 0, |v| v).expect("small");
+            let (c, _) = CellSet::from_grid(coarse.clone(), 1, |v| v).expect("small");
+            let mut sets = vec![f, c];
+            classify_leaves(&mut sets);
+            let c = &sets[1];
+            assert_eq!(c.active_count(), 32 * 32 * 32);
+            assert_eq!(
+                c.active.own_patterns(),
+                0,
+                "every coarse block is wholly active"
+            );
+            assert_eq!(c.leaf_count(), 32 * 32 * 32 - covered);
+            assert_eq!(c.leaf.own_patterns(), own);
+            assert_eq!(sets[0].leaf.own_patterns(), sets[0].active.own_patterns());
+        }
     }
 }

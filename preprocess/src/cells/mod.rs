@@ -1,25 +1,26 @@
 //! Cells of the input grids on their index lattices, and leaf-cell classification.
 //!
 //! A [`CellSet`] holds one grid's active cells as 8³ blocks (the VDB leaf layout) with an
-//! active mask and a leaf mask, so that neighbour lookups are one block-index probe
-//! ([`index`]) and a bit test.
+//! active mask and a leaf mask ([`masks`]: a whole block shares one pattern), so that
+//! neighbour lookups are one block-index probe ([`index`]) and a bit test.
 //! Values live beside it in a plain `Vec` indexed by the same slot (`block * 512 + offset`).
 //!
 //! A cell is a *leaf cell* when its box is not fully covered by active cells of finer grids
 //! (smaller voxel size); [`classify_leaves`] finds them.
 
 use bytemuck::Pod;
-use files::limits;
 
 use crate::error::BakeError;
 use crate::grid::{leaf_offset, Grid, Leaf, LeafTopology, Transform, LEAF_VOXELS};
 
 mod classify;
 mod index;
+mod masks;
 mod values;
 
 pub(crate) use classify::classify_leaves;
 use index::BlockIndex;
+pub(crate) use masks::BlockMasks;
 pub(crate) use values::{window_values, Keep, SlotValues, SlotView, Slots, Widen};
 
 /// Cells per block (one VDB leaf).
@@ -85,10 +86,10 @@ pub(crate) struct CellSet {
     pub blocks: Vec<[i32; 3]>,
     index: BlockIndex,
     /// Active mask per block (bit `n` = offset `n`, see [`leaf_offset`]).
-    pub active: Vec<[u64; 8]>,
+    pub active: BlockMasks,
     /// Leaf mask per block (active and not covered by finer cells); equals `active` until
     /// [`classify_leaves`] runs.
-    pub leaf: Vec<[u64; 8]>,
+    pub leaf: BlockMasks,
 }
 
 impl CellSet {
@@ -153,12 +154,12 @@ impl CellSet {
         blocks.dedup();
         let index = BlockIndex::new(&blocks);
         let what = format!("the cells of grid \"{}\"", grid.name);
-        let mut active: Vec<[u64; 8]> = limits::vec_of(&what, blocks.len())?;
+        let mut active = BlockMasks::new(&what, blocks.len())?;
         let mut slots: Slots<T> = Slots::zeroed(&what, blocks.len() * BLOCK_CELLS, keep)?;
-        let put = |active: &mut [[u64; 8]], values: &mut [T], ijk: [i32; 3], v: T| {
+        let put = |active: &mut BlockMasks, values: &mut [T], ijk: [i32; 3], v: T| {
             if let Some(b) = index.get(block_origin(ijk)) {
                 let n = offset_in_block(ijk);
-                active[b as usize][n >> 6] |= 1 << (n & 63);
+                active.insert(b as usize, n);
                 values[b as usize * BLOCK_CELLS + n] = v;
             }
         };
@@ -209,6 +210,7 @@ impl CellSet {
                 };
                 let b = b as usize;
                 let out = &mut values[b * BLOCK_CELLS..(b + 1) * BLOCK_CELLS];
+                let mut mask = *active.get(b);
                 for (w, &word) in leaf.active.iter().enumerate() {
                     let mut bits = word;
                     while bits != 0 {
@@ -216,8 +218,9 @@ impl CellSet {
                         bits &= bits - 1;
                         out[n] = conv(leaf.values[n]);
                     }
-                    active[b][w] |= word;
+                    mask[w] |= word;
                 }
+                active.set(b, mask);
             }
             if freed >= RELEASE_BYTES {
                 crate::heap::return_freed();
@@ -299,12 +302,12 @@ impl CellSet {
 
     #[inline]
     pub(crate) fn is_active(&self, slot: usize) -> bool {
-        bit(&self.active[slot / BLOCK_CELLS], slot % BLOCK_CELLS)
+        self.active.bit(slot / BLOCK_CELLS, slot % BLOCK_CELLS)
     }
 
     #[inline]
     pub(crate) fn is_leaf(&self, slot: usize) -> bool {
-        bit(&self.leaf[slot / BLOCK_CELLS], slot % BLOCK_CELLS)
+        self.leaf.bit(slot / BLOCK_CELLS, slot % BLOCK_CELLS)
     }
 
     /// Index coordinate of a slot.
@@ -376,7 +379,7 @@ impl CellSet {
                     // Block coordinates come from i32 >> 3, so `* 8` fits in i32.
                     let origin = [bx, by, bz].map(|c| (c * 8) as i32);
                     let part = box_part(origin, lo, hi);
-                    let mask = self.index.get(origin).map(|b| &self.active[b as usize]);
+                    let mask = self.index.get(origin).map(|b| self.active.get(b as usize));
                     if !visit(mask, &part) {
                         return Some(false);
                     }
@@ -388,19 +391,11 @@ impl CellSet {
 
     #[cfg(test)]
     pub(crate) fn active_count(&self) -> u64 {
-        self.active
-            .iter()
-            .flatten()
-            .map(|w| w.count_ones() as u64)
-            .sum()
+        self.active.count()
     }
 
     pub(crate) fn leaf_count(&self) -> u64 {
-        self.leaf
-            .iter()
-            .flatten()
-            .map(|w| w.count_ones() as u64)
-            .sum()
+        self.leaf.count()
     }
 
     /// Active slots in slot order.
