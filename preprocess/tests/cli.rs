@@ -357,3 +357,93 @@ fn a_bake_within_a_memory_budget_stays_under_it_and_writes_the_same_file() {
     );
     assert!(!dir.path().join("small.qbk").exists());
 }
+
+/// The estimate counts about one brick a wholly active block, but whole blocks apart from
+/// each other, off the tiles bricks are cut from (one voxel at -4 anchors the tiles there),
+/// make eight each. A budget the estimate accepts is then checked again once the bricks
+/// are made: refused before the fields are derived, naming a budget that does, within
+/// which the bake stays (and writes the unbudgeted file).
+#[test]
+fn a_bake_making_more_bricks_than_estimated_is_refused_once_they_are_made() {
+    use qbricks_preprocess::grid::{AnyGrid, Grid, Leaf};
+    use qbricks_preprocess::vdb::write::{write_vdb, Compression};
+    let dir = tempfile::tempdir().expect("tempdir");
+    let vdb = dir.path().join("apart.vdb");
+    let whole = abc_grid("vel", 0.1, 0, 8).leaves.remove(0);
+    let mut leaves = Vec::new();
+    for x in 0..24 {
+        for y in 0..24 {
+            for z in 0..24 {
+                leaves.push(Leaf {
+                    origin: [x, y, z].map(|c| 16 * c),
+                    ..whole.clone()
+                });
+            }
+        }
+    }
+    let mut lone = Leaf {
+        origin: [-8; 3],
+        active: [0; 8],
+        ..whole.clone()
+    };
+    let n = qbricks_preprocess::grid::leaf_offset(4, 4, 4);
+    lone.active[n >> 6] |= 1 << (n & 63);
+    leaves.push(lone);
+    let grid = Grid {
+        leaves,
+        ..abc_grid("vel", 0.1, 0, 0)
+    };
+    write_vdb(&vdb, &[AnyGrid::Vec3s(grid)], Compression::Zip).expect("write");
+    let path = |name: &str| dir.path().join(name);
+    let bake = |out: &str, memory: &str| {
+        let out = run(&[
+            "bake",
+            vdb.to_str().expect("utf-8"),
+            "-o",
+            path(out).to_str().expect("utf-8"),
+            "--memory",
+            memory,
+            "--json",
+        ]);
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stderr).to_string(),
+        )
+    };
+    let least = |err: &str| -> u64 {
+        let m = err
+            .split("give --memory ")
+            .nth(1)
+            .and_then(|t| t.split('M').next())
+            .unwrap_or_else(|| panic!("no least budget named: {err}"));
+        m.parse().expect("MiB")
+    };
+    // The estimate's least, from the blocks.
+    let (code, err) = bake("a.qbk", "16M");
+    assert_eq!(code, Some(2), "{err}");
+    let early = least(&err);
+    // Accepted by the estimate, refused once the 110 593 bricks are made.
+    let (code, err) = bake("b.qbk", &format!("{early}M"));
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.starts_with("qbricks-bake: ")
+            && err.contains("the bake of 7077889 input cells (grid \"vel\") needs about ")
+            && err.contains(&format!("more than the --memory budget of {early} MiB")),
+        "{err}"
+    );
+    assert!(!path("b.qbk").exists());
+    let late = least(&err);
+    assert!(late > early, "{early}M, then {late}M");
+    // Within what it names the bake runs, and stays under it and the fixed overhead.
+    let peak = bake_peak(&vdb, &path("c.qbk"), &["--memory", &format!("{late}M")]);
+    eprintln!(
+        "least {early}M from the blocks, {late}M from the bricks: peak {} MiB",
+        peak >> 20
+    );
+    assert!(peak <= (late << 20) + (16 << 20), "{} MiB", peak >> 20);
+    let free = path("free.qbk");
+    bake_peak(&vdb, &free, &[]);
+    assert!(std::fs::read(&free).expect("free") == std::fs::read(path("c.qbk")).expect("c"));
+    let view = BrickFileView::open(&free).expect("open");
+    assert_eq!(view.file().bricks.len(), 24 * 24 * 24 * 8 + 1);
+}

@@ -408,6 +408,12 @@ fn run(
 
     stage("bricking");
     let bricks = brick(sets, opts.max_brick);
+    let opts = &BakeOptions {
+        spill: selection
+            .footprints
+            .check_bricks(bricks.boxes.len() as u64, &opts.spill, opts)?,
+        ..opts.clone()
+    };
 
     stage("deriving fields");
     let derived = derive_fields(&cells, &bricks, opts, peers)?;
@@ -489,6 +495,8 @@ struct Selection {
     grids: Vec<BakeGrid>,
     /// Where the bake keeps its values (as asked, or to keep within its memory budget).
     spill: Spill,
+    /// What its memory estimate was made from (checked again once the bricks are made).
+    footprints: memory::Footprints,
     /// Level of each grid (0 = finest) and cell width of each level.
     levels: Vec<u32>,
     widths: Vec<f64>,
@@ -546,7 +554,7 @@ fn select_input(grids: Vec<BakeGrid>, opts: &BakeOptions) -> Result<Selection, B
     if input_cells == 0 {
         return Err(BakeError::Empty);
     }
-    let spill = check_bake_memory(&grids, &extra_grids, opts, input_cells)?;
+    let (spill, footprints) = check_bake_memory(&grids, &extra_grids, opts, input_cells)?;
     let source_grids: Vec<SourceGrid> = grids
         .iter()
         .zip(&levels)
@@ -559,6 +567,7 @@ fn select_input(grids: Vec<BakeGrid>, opts: &BakeOptions) -> Result<Selection, B
     Ok(Selection {
         grids,
         spill,
+        footprints,
         levels,
         widths,
         input_cells,
@@ -697,6 +706,7 @@ fn keep(opts: &BakeOptions) -> Keep<'_> {
         dir: opts.spill.dir.as_deref(),
         above: opts.spill.above,
         window: opts.spill.window,
+        bounded: opts.memory.is_some(),
     }
 }
 

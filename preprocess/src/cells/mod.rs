@@ -156,6 +156,10 @@ impl CellSet {
         let what = format!("the cells of grid \"{}\"", grid.name);
         let mut active = BlockMasks::new(&what, blocks.len())?;
         let mut slots: Slots<T> = Slots::zeroed(&what, blocks.len() * BLOCK_CELLS, keep)?;
+        // The leaves come in the file's order and go to their blocks' places, all over the
+        // values: within a budget, no readahead while they are written (passes after read
+        // in order).
+        slots.read_ahead(!keep.bounded);
         let put = |active: &mut BlockMasks, values: &mut [T], ijk: [i32; 3], v: T| {
             if let Some(b) = index.get(block_origin(ijk)) {
                 let n = offset_in_block(ijk);
@@ -242,6 +246,7 @@ impl CellSet {
             active,
         };
         slots.release(0..usize::MAX);
+        slots.read_ahead(true);
         Ok((set, slots))
     }
 

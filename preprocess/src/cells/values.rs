@@ -49,6 +49,11 @@ pub(crate) struct Keep<'a> {
     pub above: u64,
     /// Bytes written or read before the pages of values on disk are let go.
     pub window: u64,
+    /// The bake keeps within a budget (`--memory`): a pass that writes values on disk all
+    /// over them does so without readahead, which would map far more than a window
+    /// between two releases (see `ScratchValues::read_ahead`); without a budget it is
+    /// faster with.
+    pub bounded: bool,
 }
 
 #[cfg(test)]
@@ -58,6 +63,7 @@ impl Keep<'_> {
         dir: None,
         above: u64::MAX,
         window: u64::MAX,
+        bounded: false,
     };
 }
 
@@ -118,6 +124,14 @@ impl<T: Pod> Slots<T> {
         match self {
             Slots::Memory(v) => v,
             Slots::Mapped(m) => m.as_mut_slice(),
+        }
+    }
+
+    /// Whether faults on mapped values read ahead (see
+    /// [`files::scratch::ScratchValues::read_ahead`]); nothing for values in memory.
+    pub(crate) fn read_ahead(&self, on: bool) {
+        if let Slots::Mapped(m) = self {
+            m.read_ahead(on);
         }
     }
 
