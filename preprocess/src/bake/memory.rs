@@ -620,7 +620,7 @@ impl Footprints {
     /// `spill`, or it with the structure on disk, whichever fits `budget` with the bricks
     /// `made` (the first that does).
     fn fitting(&self, made: &[(GridFootprint, u64)], spill: &Spill, budget: u64) -> Option<Spill> {
-        [spill.clone(), spill.clone().with_structure_on_disk()]
+        after_bricks(spill)
             .into_iter()
             .find(|s| bake_bytes(made, &self.extras, self.fields, s) <= budget)
     }
@@ -647,7 +647,7 @@ impl Footprints {
         // values held are bounded, so this ends.
         for _ in 0..64 {
             let need = match spill_within(&self.grids, &self.extras, self.fields, least) {
-                Ok((spill, _)) => [spill.clone(), spill.with_structure_on_disk()]
+                Ok((spill, _)) => after_bricks(&spill)
                     .iter()
                     .map(|s| bake_bytes(&made, &self.extras, self.fields, s))
                     .min()
@@ -661,6 +661,13 @@ impl Footprints {
         }
         least
     }
+}
+
+/// Where a bake whose bricks are made may keep its values from there on, in the order
+/// [`Footprints::check_bricks`] tries them: as chosen before, or with the regions and
+/// KD-tree on disk too (they are not made yet).
+fn after_bricks(spill: &Spill) -> [Spill; 2] {
+    [spill.clone(), spill.clone().with_structure_on_disk()]
 }
 
 #[cfg(test)]
