@@ -263,9 +263,21 @@ pub fn locate_cell<T: KdTree + ?Sized>(
     max: [f64; 3],
     shift: [f64; 3],
 ) -> Option<(u32, [f64; 3], [f64; 3])> {
-    let mut lo: [f64; 3] = std::array::from_fn(|a| min[a] - shift[a]);
-    let mut hi: [f64; 3] = std::array::from_fn(|a| max[a] - shift[a]);
-    let mut n = tree.root();
+    let lo: [f64; 3] = std::array::from_fn(|a| min[a] - shift[a]);
+    let hi: [f64; 3] = std::array::from_fn(|a| max[a] - shift[a]);
+    locate_cell_from(tree, tree.root(), p, lo, hi, shift)
+}
+
+/// [`locate_cell`] from the node `n` down, whose cell is `lo..hi` (already shifted).
+#[inline]
+fn locate_cell_from<T: KdTree + ?Sized>(
+    tree: &T,
+    mut n: u32,
+    p: [f64; 3],
+    mut lo: [f64; 3],
+    mut hi: [f64; 3],
+    shift: [f64; 3],
+) -> Option<(u32, [f64; 3], [f64; 3])> {
     for _ in 0..=tree.node_count() {
         match tree.node(n)? {
             Node::Inner {
@@ -378,6 +390,40 @@ impl Descent {
             }
         }
         self.leaf
+    }
+
+    /// [`locate_cell`] of `q` in the tree this descent was taken in (`min..max` the
+    /// file's bounds, as [`locate_cell`] takes them): the region and its box, for a caller
+    /// that keeps the boxes of the regions it found to test the next points against.
+    pub fn locate_cell<T: KdTree + ?Sized>(
+        &self,
+        tree: &T,
+        q: [f64; 3],
+        min: [f64; 3],
+        max: [f64; 3],
+        shift: [f64; 3],
+    ) -> Option<(u32, [f64; 3], [f64; 3])> {
+        if !self.whole {
+            return locate_cell(tree, q, min, max, shift);
+        }
+        let mut lo: [f64; 3] = std::array::from_fn(|a| min[a] - shift[a]);
+        let mut hi: [f64; 3] = std::array::from_fn(|a| max[a] - shift[a]);
+        for i in 0..self.len {
+            // As `locate_cell` cuts, one side on one axis.
+            let a = usize::from(self.axis[i]);
+            let s = self.split[i];
+            let cut = s.max(lo[a]).min(hi[a]);
+            let go_left = q[a] < s;
+            if go_left {
+                hi[a] = cut;
+            } else {
+                lo[a] = cut;
+            }
+            if go_left != self.left[i] {
+                return locate_cell_from(tree, self.other[i], q, lo, hi, shift);
+            }
+        }
+        self.leaf.map(|r| (r, lo, hi))
     }
 }
 

@@ -169,6 +169,15 @@ proptest! {
                         kd::locate(&tree, local(q), shift),
                         "from {:?} to {:?}", p, q
                     );
+                    // With the box: the cell a descent from the root cuts, bit for bit.
+                    let bits = |c: Option<(u32, [f64; 3], [f64; 3])>| {
+                        c.map(|(r, lo, hi)| (r, lo.map(f64::to_bits), hi.map(f64::to_bits)))
+                    };
+                    prop_assert_eq!(
+                        bits(near.locate_cell(&tree, local(q), b.min, b.max, shift)),
+                        bits(kd::locate_cell(&tree, local(q), b.min, b.max, shift)),
+                        "cell from {:?} to {:?}", p, q
+                    );
                 }
             }
         }
@@ -400,6 +409,11 @@ fn deep_tree_spills_the_stack_and_stays_correct() {
         assert_eq!(
             near.locate(&tree, [x, 0.5, 0.5], [0.0; 3]),
             kd::locate(&tree, [x, 0.5, 0.5], [0.0; 3])
+        );
+        let b = query::bounds(f);
+        assert_eq!(
+            near.locate_cell(&tree, [x, 0.5, 0.5], b.min, b.max, [0.0; 3]),
+            kd::locate_cell(&tree, [x, 0.5, 0.5], b.min, b.max, [0.0; 3])
         );
     }
     assert_eq!(query::region_at(f, [99.5, 0.5, 0.5]), Some(99));

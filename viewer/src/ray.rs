@@ -17,6 +17,7 @@ use crate::sampling::{Event, Stats, Strategy, Tracer};
 use crate::scene::Scene;
 use crate::shading::{phong, Light};
 use crate::transfer::Mode;
+use crate::volume::NearRegions;
 
 pub use crate::shading::Shading;
 
@@ -80,6 +81,8 @@ pub struct RayCaster<'s> {
     /// traces a group of pixels, whose frustum gives a start below it, or none when it
     /// misses every triangle's box ([`RayCaster::set_mesh_start`]).
     mesh_start: Option<u32>,
+    /// Regions the shading normals of this caster's hits found their neighbour points in.
+    near: NearRegions,
 }
 
 /// What a camera ray met first: the iso-surface (iso mode) or a mesh. The overlays hide
@@ -133,6 +136,7 @@ impl<'s> RayCaster<'s> {
             rays: 0,
             first: FirstSurface::NONE,
             mesh_start: Some(0),
+            near: NearRegions::default(),
         }
     }
 
@@ -658,7 +662,7 @@ impl<'s> RayCaster<'s> {
         let e = eval.unwrap_or_default();
         let gradient = match scene.shading {
             Shading::Smooth => vol
-                .shading_gradient_near(hit.region, hit.p, scene.params.field)
+                .shading_gradient_near(hit.region, hit.p, scene.params.field, &mut self.near)
                 .unwrap_or(e.grad),
             Shading::Analytic => e.grad,
         };

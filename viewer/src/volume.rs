@@ -105,6 +105,52 @@ impl RegionBox {
     }
 }
 
+/// How many region boxes a [`NearRegions`] keeps.
+const NEAR_REGIONS: usize = 8;
+
+/// The last few regions, with their whole boxes, that points beside a shading normal's
+/// hit were found in. The hits of neighbouring pixels are a fraction of a cell apart, so
+/// their neighbour points mostly fall in the same few regions, and a box test replaces
+/// the descent of the tree that finding one from the hit's descent costs (regions are a
+/// few cells wide, so most of the six points lie outside the hit's own region). A box
+/// is the region's leaf cell: a point it holds descends to that region, so the regions
+/// found are the ones a descent finds.
+#[derive(Debug, Clone)]
+pub(crate) struct NearRegions {
+    boxes: [RegionBox; NEAR_REGIONS],
+    len: usize,
+    next: usize,
+}
+
+impl Default for NearRegions {
+    fn default() -> Self {
+        NearRegions {
+            boxes: [RegionBox::unknown(0); NEAR_REGIONS],
+            len: 0,
+            next: 0,
+        }
+    }
+}
+
+impl NearRegions {
+    /// The region of a kept box holding `q`.
+    #[inline]
+    pub(crate) fn find(&self, q: &[f64; 3]) -> Option<u32> {
+        self.boxes[..self.len]
+            .iter()
+            .find(|b| b.holds(q))
+            .map(|b| b.region)
+    }
+
+    /// Keeps `b`, in place of the one kept longest once full.
+    #[inline]
+    pub(crate) fn keep(&mut self, b: RegionBox) {
+        self.boxes[self.next] = b;
+        self.next = (self.next + 1) % NEAR_REGIONS;
+        self.len = (self.len + 1).min(NEAR_REGIONS);
+    }
+}
+
 /// A region in the local frame.
 #[derive(Debug, Clone, Copy)]
 pub struct RegionN {
@@ -751,7 +797,7 @@ impl<'a> Volume<'a> {
         (0..3).all(|a| p[a] >= self.bounds_min[a] && p[a] < self.bounds_max[a])
     }
 
-    /// The KD descent of the local point `p`, for [`Volume::region_near`].
+    /// The KD descent of the local point `p`, for [`Volume::region_near_kept`].
     pub(crate) fn descent(&self, p: [f64; 3]) -> Descent {
         match self.locate_tree() {
             Some(packed) => Descent::of(packed, p, self.frame),
@@ -759,16 +805,32 @@ impl<'a> Volume<'a> {
         }
     }
 
-    /// [`Volume::region_at`] of `q`, found from the descent of a point near it (see
-    /// [`Descent`]).
-    pub(crate) fn region_near(&self, near: &Descent, q: [f64; 3]) -> Option<u32> {
+    /// [`Volume::region_at`] of `q`, looked up first in the boxes `kept` holds, else
+    /// found from the descent `near` of the point `p` near it (made on first need; see
+    /// [`Descent`]); a region found by descent is kept there with its box.
+    pub(crate) fn region_near_kept(
+        &self,
+        near: &mut Option<Descent>,
+        p: [f64; 3],
+        q: [f64; 3],
+        kept: &mut NearRegions,
+    ) -> Option<u32> {
         if !self.inside(&q) {
             return None;
         }
-        match self.locate_tree() {
-            Some(packed) => near.locate(packed, q, self.frame),
-            None => near.locate(&self.archived_tree(), q, self.frame),
+        if let Some(r) = kept.find(&q) {
+            return Some(r);
         }
+        let near = near.get_or_insert_with(|| self.descent(p));
+        let b = &self.file.bounds;
+        let lo: [f64; 3] = std::array::from_fn(|a| b.min[a].to_native());
+        let hi: [f64; 3] = std::array::from_fn(|a| b.max[a].to_native());
+        let (region, min, max) = match self.locate_tree() {
+            Some(packed) => near.locate_cell(packed, q, lo, hi, self.frame),
+            None => near.locate_cell(&self.archived_tree(), q, lo, hi, self.frame),
+        }?;
+        kept.keep(RegionBox { region, min, max });
+        Some(region)
     }
 
     /// Value of field `f`, cell `idx` (in range for every cell of a checked brick).
@@ -806,6 +868,63 @@ mod tests {
             }
         }
         assert_eq!(vol.step_width(u32::MAX), vol.finest_w);
+    }
+
+    /// A shading gradient whose neighbour points are looked up in the regions kept from
+    /// earlier points is the one found by descent alone, bit for bit: along rows of
+    /// points a fraction of a cell apart (as neighbouring pixels' hits are), on cell faces
+    /// and the fine level's boundary, beside the data's faces and at random points, on a
+    /// file of many small regions over two levels. The kept boxes must answer most
+    /// lookups, or the test would not test them.
+    #[test]
+    fn shading_gradients_from_kept_regions_are_the_descents() {
+        let noise = |p: [f64; 3]| ((p[0] * 3.1).sin() + (p[1] * 1.7).cos() * p[2]).fract();
+        let offset = [0.5, -3.0, 2.0];
+        let file = testvol::nested(8, offset, &[("n", &noise)], 3);
+        let view = testvol::open(&file).expect("opens");
+        let vol = Volume::new(&view).expect("volume");
+        let lo = vol.to_local(offset);
+        let mut points = Vec::new();
+        // Rows of points 0.037 cells apart, along each axis, through both levels.
+        for a in 0..3 {
+            for row in 0..6 {
+                let mut p = lo;
+                p[(a + 1) % 3] += 1.3 + 2.45 * row as f64;
+                p[(a + 2) % 3] += [4.0, 7.77, 12.0, 0.02, 15.99, 9.5][row];
+                for k in 0..440 {
+                    let mut q = p;
+                    q[a] = lo[a] + 0.037 * k as f64;
+                    points.push(q);
+                }
+            }
+        }
+        let mut seed = 5u64;
+        for _ in 0..500 {
+            points.push(std::array::from_fn(|a| {
+                seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1);
+                lo[a] - 0.5 + 17.0 * ((seed >> 11) as f64 / (1u64 << 53) as f64)
+            }));
+        }
+        let mut kept = NearRegions::default();
+        let (mut from_kept, mut lookups) = (0, 0);
+        for p in points {
+            for a in 0..3 {
+                for s in [-1.0, 1.0] {
+                    let mut q = p;
+                    q[a] += s * vol.finest_w;
+                    lookups += 1;
+                    from_kept += usize::from(vol.inside(&q) && kept.find(&q).is_some());
+                }
+            }
+            let alone = vol.shading_gradient(p, 0).map(|g| g.map(f64::to_bits));
+            let hint = vol.region_box_at(p);
+            let near = vol.shading_gradient_near(hint, p, 0, &mut kept);
+            assert_eq!(near.map(|g| g.map(f64::to_bits)), alone, "at {p:?}");
+        }
+        assert!(
+            from_kept * 2 > lookups,
+            "only {from_kept} of {lookups} neighbour points were in kept regions"
+        );
     }
 
     /// The region table filled on several threads, stretch by stretch, is the one walk's

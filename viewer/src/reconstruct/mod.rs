@@ -15,7 +15,7 @@ pub(crate) use cubic::{Cubic, DualBrick};
 use tent::brick_axes;
 pub(crate) use tent::floor_i64;
 
-use crate::volume::{RegionBox, Volume};
+use crate::volume::{NearRegions, RegionBox, Volume};
 
 /// Below this weight sum a point is treated as outside the data (outer support boundary).
 pub(crate) const MIN_WEIGHT: f64 = 1e-9;
@@ -133,17 +133,20 @@ impl Volume<'_> {
     /// A side that leaves the data falls back to a one-sided difference; `None` when
     /// neither side of any axis is inside.
     pub fn shading_gradient(&self, p: [f64; 3], f: usize) -> Option<[f64; 3]> {
-        self.shading_gradient_near(None, p, f)
+        self.shading_gradient_near(None, p, f, &mut NearRegions::default())
     }
 
     /// [`Self::shading_gradient`] with the region the caller found `p` in and a box
     /// within it (a ray hit knows them), which saves a KD descent when the box holds `p`;
-    /// any other hint is ignored. Neighbour points in the box need no descent either.
+    /// any other hint is ignored. Neighbour points in the box need no descent either, nor
+    /// those in a region `kept` holds (the caller's earlier hits nearby); the regions of
+    /// the others are kept there.
     pub(crate) fn shading_gradient_near(
         &self,
         region: Option<RegionBox>,
         p: [f64; 3],
         f: usize,
+        kept: &mut NearRegions,
     ) -> Option<[f64; 3]> {
         let b0 = match region {
             Some(h) if (h.region as usize) < self.region_count() && h.holds(&p) => h,
@@ -157,8 +160,7 @@ impl Volume<'_> {
             let r = if b0.holds(&q) {
                 r0
             } else {
-                let near = descent.get_or_insert_with(|| self.descent(p));
-                self.region_near(near, q)? as usize
+                self.region_near_kept(&mut descent, p, q, kept)? as usize
             };
             self.eval_value(r, q, f)
         };
