@@ -355,14 +355,19 @@ impl<'s> RayCaster<'s> {
         let scene = self.scene;
         let o = scene.vol.to_local(ray.origin.to_array());
         let d = ray.dir.to_array();
-        let (main, shadow, more) = (&mut self.main, &mut self.shadow, &mut self.more);
+        let (main, shadow, more, near) = (
+            &mut self.main,
+            &mut self.shadow,
+            &mut self.more,
+            &mut self.near,
+        );
         main.dvr_runs(
             o,
             d,
             bounds.t_lo,
             bounds.t_max,
             jit,
-            &mut |p, e| shade_sample(scene, shadow, more, false, ray, p, e),
+            &mut |p, e| shade_sample(scene, (shadow, more, near), false, ray, p, e),
             runs,
         );
     }
@@ -401,9 +406,14 @@ impl<'s> RayCaster<'s> {
         let o = scene.vol.to_local(ray.origin.to_array());
         let d = ray.dir.to_array();
         let shadows = scene.state.shadows;
-        let (main, shadow, more) = (&mut self.main, &mut self.shadow, &mut self.more);
+        let (main, shadow, more, near) = (
+            &mut self.main,
+            &mut self.shadow,
+            &mut self.more,
+            &mut self.near,
+        );
         main.dvr(o, d, t0, t1, jit, &mut |p, e| {
-            shade_sample(scene, shadow, more, shadows, ray, p, e)
+            shade_sample(scene, (shadow, more, near), shadows, ray, p, e)
         })
     }
 
@@ -884,8 +894,7 @@ pub(crate) fn base_colour(scene: &Scene, colour: Option<f64>) -> Vec3 {
 /// Colour of a visible dvr sample at local `p`.
 fn shade_sample(
     scene: &Scene,
-    shadow: &mut Tracer,
-    more: &mut [(Tracer, Tracer)],
+    (shadow, more, near): (&mut Tracer, &mut [(Tracer, Tracer)], &mut NearRegions),
     shadows: bool,
     ray: &Ray,
     p: &[f64; 3],
@@ -901,7 +910,7 @@ fn shade_sample(
         Shading::Smooth => facing(
             scene
                 .vol
-                .shading_gradient(*p, scene.params.field)
+                .shading_gradient_near(None, *p, scene.params.field, near)
                 .unwrap_or(e.grad),
             ray.dir,
         ),

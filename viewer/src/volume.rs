@@ -133,13 +133,10 @@ impl Default for NearRegions {
 }
 
 impl NearRegions {
-    /// The region of a kept box holding `q`.
+    /// A kept box holding `q`.
     #[inline]
-    pub(crate) fn find(&self, q: &[f64; 3]) -> Option<u32> {
-        self.boxes[..self.len]
-            .iter()
-            .find(|b| b.holds(q))
-            .map(|b| b.region)
+    pub(crate) fn find_box(&self, q: &[f64; 3]) -> Option<RegionBox> {
+        self.boxes[..self.len].iter().find(|b| b.holds(q)).copied()
     }
 
     /// Keeps `b`, in place of the one kept longest once full.
@@ -767,6 +764,20 @@ impl<'a> Volume<'a> {
         found.map(|(region, min, max)| RegionBox { region, min, max })
     }
 
+    /// [`Volume::region_box_at`] of `p`, looked up first in the boxes `kept` holds; a
+    /// region found by descent is kept there with its box.
+    pub(crate) fn region_box_kept(&self, p: [f64; 3], kept: &mut NearRegions) -> Option<RegionBox> {
+        if !self.inside(&p) {
+            return None;
+        }
+        if let Some(b) = kept.find_box(&p) {
+            return Some(b);
+        }
+        let b = self.region_box_at(p)?;
+        kept.keep(b);
+        Some(b)
+    }
+
     /// The file's own tree, for a file without fields (which packs none); empty when the
     /// tree fails its check ([`Volume::kd_checked`]).
     fn archived_tree(&self) -> format::kd::Stored<'a, format::ArchivedKdNode> {
@@ -818,8 +829,8 @@ impl<'a> Volume<'a> {
         if !self.inside(&q) {
             return None;
         }
-        if let Some(r) = kept.find(&q) {
-            return Some(r);
+        if let Some(b) = kept.find_box(&q) {
+            return Some(b.region);
         }
         let near = near.get_or_insert_with(|| self.descent(p));
         let b = &self.file.bounds;
@@ -905,25 +916,39 @@ mod tests {
                 lo[a] - 0.5 + 17.0 * ((seed >> 11) as f64 / (1u64 << 53) as f64)
             }));
         }
-        let mut kept = NearRegions::default();
-        let (mut from_kept, mut lookups) = (0, 0);
-        for p in points {
+        // With a hint (a hit's region), and without one (a dvr sample's point, whose own
+        // region is looked up in the kept boxes too).
+        let (mut kept, mut kept_unhinted) = (NearRegions::default(), NearRegions::default());
+        let (mut from_kept, mut lookups, mut p_kept) = (0, 0, 0);
+        for &p in &points {
             for a in 0..3 {
                 for s in [-1.0, 1.0] {
                     let mut q = p;
                     q[a] += s * vol.finest_w;
                     lookups += 1;
-                    from_kept += usize::from(vol.inside(&q) && kept.find(&q).is_some());
+                    from_kept += usize::from(vol.inside(&q) && kept.find_box(&q).is_some());
                 }
             }
+            p_kept += usize::from(kept_unhinted.find_box(&p).is_some());
             let alone = vol.shading_gradient(p, 0).map(|g| g.map(f64::to_bits));
             let hint = vol.region_box_at(p);
             let near = vol.shading_gradient_near(hint, p, 0, &mut kept);
             assert_eq!(near.map(|g| g.map(f64::to_bits)), alone, "at {p:?}");
+            let unhinted = vol.shading_gradient_near(None, p, 0, &mut kept_unhinted);
+            assert_eq!(
+                unhinted.map(|g| g.map(f64::to_bits)),
+                alone,
+                "at {p:?}, no hint"
+            );
         }
         assert!(
             from_kept * 2 > lookups,
             "only {from_kept} of {lookups} neighbour points were in kept regions"
+        );
+        assert!(
+            p_kept * 2 > points.len(),
+            "only {p_kept} of {} points were in kept regions",
+            points.len()
         );
     }
 

@@ -139,8 +139,8 @@ impl Volume<'_> {
     /// [`Self::shading_gradient`] with the region the caller found `p` in and a box
     /// within it (a ray hit knows them), which saves a KD descent when the box holds `p`;
     /// any other hint is ignored. Neighbour points in the box need no descent either, nor
-    /// those in a region `kept` holds (the caller's earlier hits nearby); the regions of
-    /// the others are kept there.
+    /// those in a region `kept` holds (the caller's earlier points nearby), nor `p` itself
+    /// there when no hint holds it; the regions of the others are kept there.
     pub(crate) fn shading_gradient_near(
         &self,
         region: Option<RegionBox>,
@@ -150,7 +150,7 @@ impl Volume<'_> {
     ) -> Option<[f64; 3]> {
         let b0 = match region {
             Some(h) if (h.region as usize) < self.region_count() && h.holds(&p) => h,
-            _ => self.region_box_at(p)?,
+            _ => self.region_box_kept(p, kept)?,
         };
         let r0 = b0.region as usize;
         let h = self.finest_w;
