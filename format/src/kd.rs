@@ -286,20 +286,28 @@ fn locate_cell_from<T: KdTree + ?Sized>(
                 left,
                 right,
             } => {
-                // As `cut_cell` cuts, one side on one axis.
                 let a = axis.min(2);
                 let s = split - shift[a];
-                let cut = s.max(lo[a]).min(hi[a]);
-                if p[a] < s {
-                    (n, hi[a]) = (left, cut);
-                } else {
-                    (n, lo[a]) = (right, cut);
-                }
+                let go_left = p[a] < s;
+                keep_side(&mut lo, &mut hi, a, s, go_left);
+                n = if go_left { left } else { right };
             }
             Node::Leaf(r) => return r.map(|r| (r, lo, hi)),
         }
     }
     None
+}
+
+/// The cell `lo..hi` cut by the (shifted) split `s` on axis `a`, keeping the left side
+/// or the right: one side of [`cut_cell`], clamped to the cell as it clamps.
+#[inline(always)]
+fn keep_side(lo: &mut [f64; 3], hi: &mut [f64; 3], a: usize, s: f64, left: bool) {
+    let cut = s.max(lo[a]).min(hi[a]);
+    if left {
+        hi[a] = cut;
+    } else {
+        lo[a] = cut;
+    }
 }
 
 /// How many steps of a descent a [`Descent`] keeps.
@@ -409,16 +417,10 @@ impl Descent {
         let mut lo: [f64; 3] = std::array::from_fn(|a| min[a] - shift[a]);
         let mut hi: [f64; 3] = std::array::from_fn(|a| max[a] - shift[a]);
         for i in 0..self.len {
-            // As `locate_cell` cuts, one side on one axis.
             let a = usize::from(self.axis[i]);
             let s = self.split[i];
-            let cut = s.max(lo[a]).min(hi[a]);
             let go_left = q[a] < s;
-            if go_left {
-                hi[a] = cut;
-            } else {
-                lo[a] = cut;
-            }
+            keep_side(&mut lo, &mut hi, a, s, go_left);
             if go_left != self.left[i] {
                 return locate_cell_from(tree, self.other[i], q, lo, hi, shift);
             }
