@@ -315,9 +315,9 @@ const DESCENT_STEPS: usize = 64;
 
 /// The way one point went down the tree ([`Descent::of`]). A point near it (a shading
 /// normal's neighbour points, a cell away) goes the same way down to the first split
-/// that lies between the two, and [`Descent::locate`] starts its descent there instead of
-/// at the root: a few comparisons on numbers already read instead of a full descent
-/// through memory, with the same result as [`locate`].
+/// that lies between the two, and [`Descent::locate_cell`] starts its descent there
+/// instead of at the root: a few comparisons on numbers already read instead of a full
+/// descent through memory, with the same result as [`locate_cell`].
 #[derive(Debug, Clone)]
 pub struct Descent {
     /// Per step: the split minus the shift, the axis, whether the point went left, and
@@ -378,26 +378,6 @@ impl Descent {
             }
         }
         d
-    }
-
-    /// [`locate`] of `q` in the tree this descent was taken in.
-    #[inline]
-    pub fn locate<T: KdTree + ?Sized>(
-        &self,
-        tree: &T,
-        q: [f64; 3],
-        shift: [f64; 3],
-    ) -> Option<u32> {
-        if !self.whole {
-            return locate(tree, q, shift);
-        }
-        for i in 0..self.len {
-            let go_left = q[usize::from(self.axis[i])] < self.split[i];
-            if go_left != self.left[i] {
-                return locate_from(tree, self.other[i], q, shift);
-            }
-        }
-        self.leaf
     }
 
     /// [`locate_cell`] of `q` in the tree this descent was taken in (`min..max` the

@@ -148,7 +148,11 @@ proptest! {
             for _ in 0..50 {
                 let p = random_point(&mut rng, &b);
                 let near = kd::Descent::of(&tree, local(p), shift);
-                prop_assert_eq!(near.locate(&tree, local(p), shift), kd::locate(&tree, local(p), shift));
+                let region = |c: Option<(u32, [f64; 3], [f64; 3])>| c.map(|c| c.0);
+                prop_assert_eq!(
+                    region(near.locate_cell(&tree, local(p), b.min, b.max, shift)),
+                    kd::locate(&tree, local(p), shift)
+                );
                 let mut others = vec![random_point(&mut rng, &b)];
                 for a in 0..3 {
                     for h in [1e-9, 0.01, 0.3, 2.0] {
@@ -165,7 +169,7 @@ proptest! {
                 }
                 for q in others {
                     prop_assert_eq!(
-                        near.locate(&tree, local(q), shift),
+                        region(near.locate_cell(&tree, local(q), b.min, b.max, shift)),
                         kd::locate(&tree, local(q), shift),
                         "from {:?} to {:?}", p, q
                     );
@@ -406,11 +410,12 @@ fn deep_tree_spills_the_stack_and_stays_correct() {
     let tree = kd::file_tree(f);
     let near = kd::Descent::of(&tree, [99.5, 0.5, 0.5], [0.0; 3]);
     for x in [99.5, 98.9, 0.2, 64.5, 63.5] {
+        let b = query::bounds(f);
         assert_eq!(
-            near.locate(&tree, [x, 0.5, 0.5], [0.0; 3]),
+            near.locate_cell(&tree, [x, 0.5, 0.5], b.min, b.max, [0.0; 3])
+                .map(|c| c.0),
             kd::locate(&tree, [x, 0.5, 0.5], [0.0; 3])
         );
-        let b = query::bounds(f);
         assert_eq!(
             near.locate_cell(&tree, [x, 0.5, 0.5], b.min, b.max, [0.0; 3]),
             kd::locate_cell(&tree, [x, 0.5, 0.5], b.min, b.max, [0.0; 3])

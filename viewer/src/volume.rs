@@ -754,14 +754,22 @@ impl<'a> Volume<'a> {
         if !self.inside(&p) {
             return None;
         }
-        let b = &self.file.bounds;
-        let lo: [f64; 3] = std::array::from_fn(|a| b.min[a].to_native());
-        let hi: [f64; 3] = std::array::from_fn(|a| b.max[a].to_native());
+        let (lo, hi) = self.file_bounds();
         let found = match self.locate_tree() {
             Some(packed) => format::kd::locate_cell(packed, p, lo, hi, self.frame),
             None => format::kd::locate_cell(&self.archived_tree(), p, lo, hi, self.frame),
         };
         found.map(|(region, min, max)| RegionBox { region, min, max })
+    }
+
+    /// The file's bounds as stored (world units): the root cell the tree's cells are cut
+    /// from.
+    fn file_bounds(&self) -> ([f64; 3], [f64; 3]) {
+        let b = &self.file.bounds;
+        (
+            std::array::from_fn(|a| b.min[a].to_native()),
+            std::array::from_fn(|a| b.max[a].to_native()),
+        )
     }
 
     /// [`Volume::region_box_at`] of `p`, looked up first in the boxes `kept` holds; a
@@ -833,9 +841,7 @@ impl<'a> Volume<'a> {
             return Some(b.region);
         }
         let near = near.get_or_insert_with(|| self.descent(p));
-        let b = &self.file.bounds;
-        let lo: [f64; 3] = std::array::from_fn(|a| b.min[a].to_native());
-        let hi: [f64; 3] = std::array::from_fn(|a| b.max[a].to_native());
+        let (lo, hi) = self.file_bounds();
         let (region, min, max) = match self.locate_tree() {
             Some(packed) => near.locate_cell(packed, q, lo, hi, self.frame),
             None => near.locate_cell(&self.archived_tree(), q, lo, hi, self.frame),
